@@ -1,0 +1,35 @@
+"""surfnorm: depth images to surface-normal maps.
+
+D2NT (Feng et al., ICRA 2023) with its DAG filter and MNR refinement, and the
+estimators the paper compares against, behind one front door::
+
+    import surfnorm
+    normals = surfnorm.estimate(depth, K, method="d2nt_v3")   # (H, W, 3) float32
+    surfnorm.methods()                                        # registered names
+    surfnorm.refine(normals, depth)                           # MNR on any normal map
+
+Importing surfnorm compiles nothing and imports neither torch nor dask.
+"""
+
+from __future__ import annotations
+
+from . import metrics
+from ._api import estimate, refine
+from .camera import Intrinsics
+from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
+from .methods import methods
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "estimate",
+    "refine",
+    "methods",
+    "metrics",
+    "Intrinsics",
+    "SurfnormError",
+    "InputError",
+    "DataFileError",
+    "MissingDependencyError",
+    "__version__",
+]

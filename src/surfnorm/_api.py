@@ -1,0 +1,141 @@
+"""The front door: :func:`estimate`, :func:`refine`, and batches of frames."""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from ._validate import as_depth, as_mask, as_normals, check_choice, check_fill, valid_pixels
+from .camera import Intrinsics
+from .errors import InputError
+from .gradients import DLF_NAMES
+from .methods import resolve
+
+__all__ = ["estimate", "refine"]
+
+
+def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
+    if n is None:
+        return Intrinsics.from_matrix(K)
+    if isinstance(K, Intrinsics):
+        return [K] * n
+    arr = np.asarray(K) if not isinstance(K, (list, tuple)) or not K or not isinstance(K[0], Intrinsics) else None
+    if arr is None:
+        if len(K) != n:
+            raise InputError(f"K: expected one intrinsics for all {n} frames or one per frame, got {len(K)}")
+        return list(K)
+    if arr.ndim == 3:
+        if arr.shape[0] != n:
+            raise InputError(f"K: expected shape (3, 3) or ({n}, 3, 3) for {n} frames, got shape {arr.shape}")
+        return [Intrinsics.from_matrix(k, name=f"K[{i}]") for i, k in enumerate(arr)]
+    return [Intrinsics.from_matrix(arr)] * n
+
+
+def _run(method, refined, options, z, valid, cam):
+    out = np.empty(z.shape + (3,), dtype=np.float32)
+    mnr_dlf = options.pop("mnr_dlf", None)
+    if method.mnr or refined:
+        from .refine import mnr
+
+        raw = method.run(z, valid, cam, np.empty_like(out), **options)
+        if method.mnr and refined:  # e.g. d2nt_v3+mnr: refine twice
+            raw = mnr(z, valid, raw, np.empty_like(out), dlf=mnr_dlf, fill=options["fill"])
+        return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"])
+    return method.run(z, valid, cam, out, **options)
+
+
+def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None, **options) -> np.ndarray:
+    """Estimate surface normals from a depth image (or a stack of them).
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W) or (N, H, W)
+        Depth along the optical axis (any unit; float or integer). Pixels with
+        depth 0, negative, NaN or inf are invalid and never used.
+    K : array_like of shape (3, 3) or (N, 3, 3), or Intrinsics
+        Intrinsic matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], 0-based pixel centres.
+    method : str
+        A name from :func:`surfnorm.methods`, optionally followed by ``+mnr``.
+    mask : ndarray of bool, shape of ``depth``, optional
+        False where depth must not be used (in addition to invalid values).
+    threads : int, optional
+        Threads for a stack of frames (default: all cores). Ignored for one frame.
+    **options
+        The method's options (see ``surfnorm.methods()[name].options``), e.g.
+        ``dlf``, ``tau``, ``truncate``, ``mnr_dlf``, ``fill``.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W, 3) or (N, H, W, 3)
+        Unit normals in the camera frame (x right, y down, z forward), facing
+        the camera (n_z < 0 on a fronto-parallel wall). Pixels without a valid
+        normal hold ``fill`` (default 0.0) in all three components.
+
+    Raises
+    ------
+    InputError (a ValueError)
+        Bad depth, K, mask, method name or option; the message names which.
+
+    Examples
+    --------
+    >>> import numpy as np, surfnorm
+    >>> K = [[500.0, 0, 31.5], [0, 500.0, 23.5], [0, 0, 1]]
+    >>> n = surfnorm.estimate(np.full((48, 64), 2.0), K, method="d2nt_basic")
+    >>> n.shape, n[24, 32].round(6).tolist()
+    ((48, 64, 3), [0.0, 0.0, -1.0])
+    """
+    method_obj, refined, clean = resolve(method, options)
+    z = as_depth(depth)
+    user_mask = as_mask(mask, z.shape)
+    if z.ndim == 2:
+        cam = _intrinsics_list(K, None)
+        return _run(method_obj, refined, dict(clean), z, valid_pixels(z, user_mask), cam)
+    cams = _intrinsics_list(K, z.shape[0])
+    valid = valid_pixels(z, user_mask)
+    out = np.empty(z.shape + (3,), dtype=np.float32)
+
+    def one(i):
+        out[i] = _run(method_obj, refined, dict(clean), z[i], valid[i], cams[i])
+
+    workers = threads if threads is not None else (os.cpu_count() or 1)
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise InputError(f"threads: expected a positive integer, got {threads!r}")
+    if workers == 1 or z.shape[0] == 1:
+        for i in range(z.shape[0]):
+            one(i)
+    else:
+        with ThreadPoolExecutor(max_workers=min(workers, z.shape[0])) as pool:
+            list(pool.map(one, range(z.shape[0])))
+    return out
+
+
+def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) -> np.ndarray:
+    """MNR (MRF-based normal refinement, Sec. III-C) on any normal map.
+
+    Each pixel takes the normal of the smoothest pixel (smallest |Laplacian of
+    depth| under ``dlf``) among its 4-neighbours and itself; see
+    :mod:`surfnorm.refine`.
+
+    Parameters
+    ----------
+    normals : ndarray of shape (H, W, 3)
+        Normals from any estimator; zero or non-finite vectors count as missing.
+    depth : ndarray of shape (H, W)
+        The depth they were estimated from.
+    mask : ndarray of bool, optional
+        False where depth must not be used.
+    dlf : {"1d", "alpha", "beta", "gamma"}
+        Discrete Laplace filter for the smoothness (default alpha, as the authors' code).
+    fill : float
+        Value for pixels without a valid normal.
+    """
+    from .refine import mnr
+
+    z = as_depth(depth, batch=False)
+    n = as_normals(normals, z.shape)
+    check_choice("dlf", dlf, DLF_NAMES)
+    fill = check_fill(fill)
+    valid = valid_pixels(z, as_mask(mask, z.shape))
+    return mnr(z, valid, n, np.empty_like(n), dlf=dlf, fill=fill)

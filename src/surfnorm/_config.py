@@ -1,0 +1,22 @@
+"""Numba settings shared by every kernel, in one place.
+
+``cache=True`` writes compiled machine code next to the sources, so a fresh
+process only loads it; ``nogil=True`` lets threads run kernels side by side
+(used for batches). ``fastmath`` stays off: the kernels must give the same
+numbers as the naive references and the authors' code, and NaN/inf checks
+must not be optimised away.
+"""
+
+from __future__ import annotations
+
+import numba
+
+NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+
+def njit(*args, **kwargs):
+    """``numba.njit`` with the project's settings (compiled lazily, on first call)."""
+    options = {**NJIT, **kwargs}
+    if args and callable(args[0]):
+        return numba.njit(**options)(args[0])
+    return numba.njit(*args, **options)

@@ -1,0 +1,112 @@
+"""Input checks: the only place where errors about user input are raised.
+
+Kernels below the front door trust what comes out of here: depth is a
+C-contiguous float32 array, ``valid`` a C-contiguous bool array of the same
+shape, intrinsics are finite with positive focal lengths.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "check_choice", "check_positive", "check_bool"]
+
+MIN_SIZE = 3
+
+
+def _describe(arr: np.ndarray) -> str:
+    return f"an array of shape {arr.shape} and dtype {arr.dtype}"
+
+
+def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
+    """Return depth as C-contiguous float32, shape (H, W) or (N, H, W) when ``batch``.
+
+    Integer depth (16-bit sensor images, millimetres) is accepted and converted;
+    booleans, complex numbers and objects are refused. Invalid values (0,
+    negative, NaN, inf) are kept here and masked by :func:`valid_pixels`.
+    """
+    if depth is None:
+        raise InputError(f"{name}: expected a 2-D array of depth values, got None")
+    try:
+        arr = np.asarray(depth)
+    except Exception as exc:
+        raise InputError(f"{name}: expected a 2-D array of depth values, got {type(depth).__name__}") from exc
+    if arr.dtype == bool:
+        raise InputError(f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}; a boolean array is a mask, pass it as mask=")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise InputError(f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}")
+    ndims = (2, 3) if batch else (2,)
+    if arr.ndim not in ndims:
+        want = "a 2-D array (H, W) or a stack (N, H, W)" if batch else "a 2-D array (H, W)"
+        raise InputError(f"{name}: expected {want}, got {_describe(arr)}")
+    if arr.shape[-2] < MIN_SIZE or arr.shape[-1] < MIN_SIZE:
+        raise InputError(f"{name}: expected at least {MIN_SIZE}x{MIN_SIZE} pixels, got shape {arr.shape}")
+    if arr.ndim == 3 and arr.shape[0] == 0:
+        raise InputError(f"{name}: expected at least one frame in the stack, got shape {arr.shape}")
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def as_mask(mask, shape: tuple, *, name: str = "mask") -> np.ndarray | None:
+    """Return the user mask (True = use this pixel) as C-contiguous bool of ``shape``, or None."""
+    if mask is None:
+        return None
+    arr = np.asarray(mask)
+    if not (arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise InputError(f"{name}: expected a boolean array (True where depth is usable), got {_describe(arr)}")
+    if arr.shape != tuple(shape):
+        if arr.shape == tuple(shape[-2:]) and len(shape) == 3:
+            arr = np.broadcast_to(arr, shape)
+        else:
+            raise InputError(f"{name}: expected shape {tuple(shape)} to match depth, got shape {arr.shape}")
+    if arr.dtype != bool:
+        if not np.all(np.isfinite(arr)):
+            raise InputError(f"{name}: expected a boolean array, got non-finite values in {_describe(arr)}")
+        arr = arr != 0
+    return np.ascontiguousarray(arr)
+
+
+def valid_pixels(depth: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """Pixels whose depth may be used: finite, strictly positive and inside the user mask."""
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(depth) & (depth > 0)
+    if mask is not None:
+        valid &= mask
+    return np.ascontiguousarray(valid)
+
+
+def as_normals(normals, shape: tuple, *, name: str = "normals") -> np.ndarray:
+    """Return a normal map as C-contiguous float32 of shape ``shape + (3,)``."""
+    arr = np.asarray(normals)
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise InputError(f"{name}: expected a float array of shape {tuple(shape) + (3,)}, got {_describe(arr)}")
+    if arr.shape != tuple(shape) + (3,):
+        raise InputError(f"{name}: expected shape {tuple(shape) + (3,)} to match depth, got shape {arr.shape}")
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def check_choice(name: str, value, choices) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise InputError(f"{name}: expected one of {', '.join(repr(c) for c in choices)}, got {value!r}")
+    return value
+
+
+def check_positive(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
+        raise InputError(f"{name}: expected a positive finite number, got {value!r}")
+    return float(value)
+
+
+def check_bool(name: str, value) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name}: expected True or False, got {value!r}")
+    return bool(value)
+
+
+def check_fill(value) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InputError(f"fill: expected a number (0.0 or nan) written into every component of a pixel without a valid normal, got {value!r}")
+    return float(value)

@@ -1,0 +1,71 @@
+"""Pinhole camera intrinsics (paper eq. 3).
+
+Pixel coordinates are 0-based pixel centres, as in OpenCV and Open3D: the
+centre of the top-left pixel is (u, v) = (0, 0). The 3F2N dataset writes a
+1-based principal point; its reader converts it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["Intrinsics"]
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Focal lengths ``fx``, ``fy`` and principal point ``cx``, ``cy`` in pixels (0-based)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def __post_init__(self):
+        for name in ("fx", "fy", "cx", "cy"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise InputError(f"intrinsics.{name}: expected a real number, got {type(value).__name__} {value!r}")
+            if not math.isfinite(float(value)):
+                raise InputError(f"intrinsics.{name}: expected a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        for name in ("fx", "fy"):
+            if getattr(self, name) <= 0:
+                raise InputError(f"intrinsics.{name}: expected a positive focal length in pixels, got {getattr(self, name)!r}")
+
+    @classmethod
+    def from_matrix(cls, K, *, name: str = "K") -> "Intrinsics":
+        """Read fx, fy, cx, cy from a 3x3 matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``."""
+        if isinstance(K, Intrinsics):
+            return K
+        try:
+            arr = np.asarray(K)
+        except Exception as exc:  # pragma: no cover - exotic objects
+            raise InputError(f"{name}: expected a 3x3 intrinsic matrix, got {type(K).__name__}") from exc
+        if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)) or arr.dtype == bool:
+            raise InputError(f"{name}: expected a 3x3 matrix of real numbers, got dtype {arr.dtype}")
+        if arr.shape != (3, 3):
+            raise InputError(f"{name}: expected a 3x3 intrinsic matrix, got shape {arr.shape}")
+        arr = arr.astype(np.float64)
+        if not np.all(np.isfinite(arr)):
+            raise InputError(f"{name}: expected finite entries, got {arr.tolist()}")
+        fx, fy, cx, cy = arr[0, 0], arr[1, 1], arr[0, 2], arr[1, 2]
+        if fx <= 0 or fy <= 0:
+            raise InputError(f"{name}: expected positive focal lengths K[0,0] and K[1,1], got fx={fx:g}, fy={fy:g}")
+        if arr[0, 1] != 0 or arr[1, 0] != 0 or arr[2, 0] != 0 or arr[2, 1] != 0 or arr[2, 2] != 1:
+            raise InputError(f"{name}: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew), got {arr.tolist()}")
+        return cls(fx, fy, cx, cy)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 3x3 matrix K (float64)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def flipped_lr(self, width: int) -> "Intrinsics":
+        """Intrinsics of the image mirrored left-right (u -> width - 1 - u)."""
+        return Intrinsics(self.fx, self.fy, width - 1 - self.cx, self.cy)

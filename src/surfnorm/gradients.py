@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from ._config import njit
+from ._config import njit, pixel
 
 __all__ = ["DLF_NAMES", "BORDERS", "dlf_code", "fd_gradients", "dag_gradients"]
 
@@ -51,24 +51,28 @@ def dlf_code(name: str) -> int:
     return DLF_NAMES.index(name)
 
 
-@njit
+@pixel
 def usable(valid, v, u):
     """True if (v, u) lies inside the image and its depth may be used."""
+    # Written as plain ifs: Numba compiles a chained ``0 <= v < H and ...`` 20x slower.
     H, W = valid.shape
-    return 0 <= v < H and 0 <= u < W and valid[v, u]
+    if v < 0 or v >= H or u < 0 or u >= W:
+        return False
+    return valid[v, u]
 
 
-@njit
+@pixel
 def neighbour_difference(z, valid, v, u, dv, du):
     """z_q - z_p for the neighbour q = p + (dv, du), mirrored to p - (dv, du) if q is missing."""
+    diff = np.float32(0.0)
     if usable(valid, v + dv, u + du):
-        return z[v + dv, u + du] - z[v, u]
-    if usable(valid, v - dv, u - du):
-        return z[v - dv, u - du] - z[v, u]
-    return np.float32(0.0)
+        diff = z[v + dv, u + du] - z[v, u]
+    elif usable(valid, v - dv, u - du):
+        diff = z[v - dv, u - du] - z[v, u]
+    return diff
 
 
-@njit
+@pixel
 def smoothness(z, valid, v, u, dlf, axis):
     """Local smoothness s_p = |nabla^2 z_p| (eq. 11) of the valid pixel p = (v, u).
 
@@ -98,7 +102,7 @@ def smoothness(z, valid, v, u, dlf, axis):
 SOFTMIN_EPS = np.float32(1e-8)
 
 
-@njit
+@pixel
 def truncated_softmin(s_1, s_2, tau, truncate):
     """Weights (lambda_1, lambda_2) of two neighbours with smoothness s_1, s_2.
 
@@ -116,19 +120,21 @@ def truncated_softmin(s_1, s_2, tau, truncate):
     if truncate:
         ratio = np.float32(math.exp(1.0 / tau))
         if lambda_1 / (lambda_2 + SOFTMIN_EPS) > ratio:
-            return np.float32(1.0), np.float32(0.0)
-        if lambda_2 / (lambda_1 + SOFTMIN_EPS) > ratio:
-            return np.float32(0.0), np.float32(1.0)
+            lambda_1, lambda_2 = np.float32(1.0), np.float32(0.0)
+        elif lambda_2 / (lambda_1 + SOFTMIN_EPS) > ratio:
+            lambda_1, lambda_2 = np.float32(0.0), np.float32(1.0)
     return lambda_1, lambda_2
 
 
-@njit
+@pixel
 def inside(valid, v, u):
     H, W = valid.shape
-    return 0 <= v < H and 0 <= u < W
+    if v < 0 or v >= H or u < 0 or u >= W:
+        return False
+    return True
 
 
-@njit
+@pixel
 def stencil(valid, v, u, dv, du, reflect):
     """The two samples of a difference along (dv, du) at p = (v, u), and their distance.
 
@@ -140,33 +146,34 @@ def stencil(valid, v, u, dv, du, reflect):
     """
     has_b = usable(valid, v - dv, u - du)
     has_f = usable(valid, v + dv, u + du)
+    vb, ub, vf, uf, dist = v, u, v, u, 0
     if has_b and has_f:
-        return v - dv, u - du, v + dv, u + du, 2
-    if reflect:
-        if has_f and not inside(valid, v - dv, u - du):
-            return v + dv, u + du, v + dv, u + du, 2
-        if has_b and not inside(valid, v + dv, u + du):
-            return v - dv, u - du, v - dv, u - du, 2
-    if has_f:
-        return v, u, v + dv, u + du, 1
-    if has_b:
-        return v - dv, u - du, v, u, 1
-    return v, u, v, u, 0
+        vb, ub, vf, uf, dist = v - dv, u - du, v + dv, u + du, 2
+    elif has_f:
+        if reflect and not inside(valid, v - dv, u - du):
+            vb, ub, vf, uf, dist = v + dv, u + du, v + dv, u + du, 2
+        else:
+            vb, ub, vf, uf, dist = v, u, v + dv, u + du, 1
+    elif has_b:
+        if reflect and not inside(valid, v + dv, u + du):
+            vb, ub, vf, uf, dist = v - dv, u - du, v - dv, u - du, 2
+        else:
+            vb, ub, vf, uf, dist = v - dv, u - du, v, u, 1
+    # (one return statement: Numba compiles several tuple returns in a hot helper far slower)
+    return vb, ub, vf, uf, dist
 
 
-@njit
+@pixel
 def fd_gradient(z, valid, v, u, dv, du, reflect):
     """Finite-difference gradient along (dv, du): Delta = [-1, 0, 1] / 2, one-sided at gaps.
 
     Returns (gradient, ok); ok is False when neither neighbour is usable.
     """
     vb, ub, vf, uf, dist = stencil(valid, v, u, dv, du, reflect)
-    if dist == 0:
-        return np.float32(0.0), False
-    return (z[vf, uf] - z[vb, ub]) / np.float32(dist), True
+    return (z[vf, uf] - z[vb, ub]) / np.float32(max(dist, 1)), dist > 0
 
 
-@njit
+@pixel
 def dag_gradient(z, valid, v, u, dv, du, dlf, axis, tau, truncate):
     """DAG gradient along (dv, du): lambda_b Delta_b z + lambda_f Delta_f z (eq. 10, 12-14).
 
@@ -177,60 +184,53 @@ def dag_gradient(z, valid, v, u, dv, du, dlf, axis, tau, truncate):
     """
     has_b = usable(valid, v - dv, u - du)
     has_f = usable(valid, v + dv, u + du)
+    lambda_b = np.float32(1.0) if has_b else np.float32(0.0)
+    lambda_f = np.float32(1.0) if has_f else np.float32(0.0)
     if has_b and has_f:
-        delta_b = z[v, u] - z[v - dv, u - du]
-        delta_f = z[v + dv, u + du] - z[v, u]
         s_b = smoothness(z, valid, v - dv, u - du, dlf, axis)
         s_f = smoothness(z, valid, v + dv, u + du, dlf, axis)
         lambda_b, lambda_f = truncated_softmin(s_b, s_f, tau, truncate)
-        return lambda_b * delta_b + lambda_f * delta_f, True
-    if has_f:
-        return z[v + dv, u + du] - z[v, u], True
-    if has_b:
-        return z[v, u] - z[v - dv, u - du], True
-    return np.float32(0.0), False
+    z_p = z[v, u]
+    delta_b = z_p - z[v - dv, u - du] if has_b else np.float32(0.0)
+    delta_f = z[v + dv, u + du] - z_p if has_f else np.float32(0.0)
+    return lambda_b * delta_b + lambda_f * delta_f, has_b or has_f
 
 
 @njit
-def gradients(z, valid, v, u, mode, dlf, tau, truncate, reflect):
-    """(z_u, z_v, ok) at (v, u): mode 0 finite differences, mode 1 DAG.
-
-    (The DAG filter is one-sided at the image border in either border mode:
-    the softmin weight of a missing side is 0, as in the authors' code.)
-    """
-    if mode == 0:
-        z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
-        z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
-    else:
-        z_u, ok_u = dag_gradient(z, valid, v, u, 0, 1, dlf, 0, tau, truncate)
-        z_v, ok_v = dag_gradient(z, valid, v, u, 1, 0, dlf, 1, tau, truncate)
-    return z_u, z_v, ok_u and ok_v
-
-
-@njit
-def _gradient_map_kernel(z, valid, mode, dlf, tau, truncate, reflect, out):
+def _fd_map_kernel(z, valid, reflect, out):
     H, W = z.shape
     for v in range(H):
         for u in range(W):
+            z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
+            z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
+            ok = valid[v, u] and ok_u and ok_v
+            out[0, v, u] = z_u if ok else np.nan
+            out[1, v, u] = z_v if ok else np.nan
+
+
+@njit
+def _dag_map_kernel(z, valid, dlf, tau, truncate, out):
+    H, W = z.shape
+    for v in range(H):
+        for u in range(W):
+            ok = False
             if valid[v, u]:
-                z_u, z_v, ok = gradients(z, valid, v, u, mode, dlf, tau, truncate, reflect)
-                if ok:
-                    out[0, v, u] = z_u
-                    out[1, v, u] = z_v
-                    continue
-            out[0, v, u] = np.nan
-            out[1, v, u] = np.nan
+                z_u, ok_u = dag_gradient(z, valid, v, u, 0, 1, dlf, 0, tau, truncate)
+                z_v, ok_v = dag_gradient(z, valid, v, u, 1, 0, dlf, 1, tau, truncate)
+                ok = ok_u and ok_v
+            out[0, v, u] = z_u if ok else np.nan
+            out[1, v, u] = z_v if ok else np.nan
 
 
 def fd_gradients(z: np.ndarray, valid: np.ndarray, *, border: str = "one-sided") -> np.ndarray:
     """Finite-difference depth gradients, shape (2, H, W): (z_u, z_v), NaN where undefined."""
     out = np.empty((2,) + z.shape, dtype=np.float32)
-    _gradient_map_kernel(z, valid, 0, 0, np.float32(1.0), True, border == "reflect", out)
+    _fd_map_kernel(z, valid, border == "reflect", out)
     return out
 
 
 def dag_gradients(z: np.ndarray, valid: np.ndarray, *, dlf: str = "1d", tau: float = 1.0, truncate: bool = True) -> np.ndarray:
     """DAG depth gradients (eq. 10-14), shape (2, H, W): (z_u, z_v), NaN where undefined."""
     out = np.empty((2,) + z.shape, dtype=np.float32)
-    _gradient_map_kernel(z, valid, 1, dlf_code(dlf), np.float32(tau), truncate, False, out)
+    _dag_map_kernel(z, valid, dlf_code(dlf), np.float32(tau), bool(truncate), out)
     return out

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._config import njit
+from ._config import njit, pixel
 from .gradients import dlf_code, smoothness, usable
 
 __all__ = ["mnr"]
@@ -29,7 +29,7 @@ __all__ = ["mnr"]
 _NEIGHBOURS = ((0, -1, 0), (0, 1, 0), (-1, 0, 1), (1, 0, 1))
 
 
-@njit
+@pixel
 def mnr_choice(z, valid, has_normal, v, u, dlf):
     """The pixel (v', u') whose normal p = (v, u) takes: the smoothest of its 4-neighbours and itself."""
     best_v, best_u = v, u
@@ -46,7 +46,7 @@ def mnr_choice(z, valid, has_normal, v, u, dlf):
     else:
         s_p = smoothness(z, valid, v, u, dlf, 0)
     if s_p < best_s:
-        return v, u
+        best_v, best_u = v, u
     return best_v, best_u
 
 

@@ -27,3 +27,24 @@ register(Method("cp2tv", "depth-to-normal",
                 "cross product of two finite-difference tangent vectors",
                 lambda z, valid, cam, out, *, border, fill: cp2tv(z, valid, cam, out, border=border, fill=fill),
                 BORDER_OPTIONS))
+
+# --- 3F2N and SNE-RoadSeg (three_filters.py) -------------------------------------------------
+
+from .three_filters import sne_roadseg as _sne_roadseg, three_filters as _three_filters  # noqa: E402
+
+THREE_F2N_PAPER = "Fan et al., Three-Filters-to-Normal: An Accurate and Ultrafast Surface Normal Estimator, RA-L 2021"
+
+register(Method("3f2n_mean", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
+                "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours",
+                lambda z, valid, cam, out, *, border, fill: _three_filters(z, valid, cam, out, third="mean", border=border, fill=fill),
+                BORDER_OPTIONS))
+register(Method("3f2n_median", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
+                "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours",
+                lambda z, valid, cam, out, *, border, fill: _three_filters(z, valid, cam, out, third="median", border=border, fill=fill),
+                BORDER_OPTIONS))
+register(Method("sne_roadseg", "depth-to-normal",
+                "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
+                "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
+                "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
+                lambda z, valid, cam, out, *, border, fill: _sne_roadseg(z, valid, cam, out, border=border, fill=fill),
+                BORDER_OPTIONS))

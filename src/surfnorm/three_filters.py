@@ -200,6 +200,88 @@ def fill_pixel(out, v, u, fill):
     out[v, u, 2] = fill
 
 
+@pixel
+def all_nine_valid(valid, v, u):
+    """True if (v, u) and its 8 neighbours lie inside the image and are valid (the fast path)."""
+    H, W = valid.shape
+    ok = False
+    if v >= 1 and v < H - 1 and u >= 1 and u < W - 1:
+        ok = (valid[v - 1, u - 1] and valid[v - 1, u] and valid[v - 1, u + 1] and valid[v, u - 1]
+              and valid[v, u] and valid[v, u + 1] and valid[v + 1, u - 1] and valid[v + 1, u] and valid[v + 1, u + 1])
+    return ok
+
+
+@pixel
+def nz_or_inf(z_q, uq_c, vq_c, g_u, g_v, zx_p, zy_p, z_p):
+    """n_z,q of eq. 10 (as :func:`candidate_nz`), +inf where dZ == 0 (no candidate)."""
+    d_z = z_p - z_q
+    nz = -(g_u * (zx_p - uq_c * z_q) + g_v * (zy_p - vq_c * z_q)) / d_z
+    return nz if d_z != 0.0 else np.inf
+
+
+@pixel
+def sort8(a0, a1, a2, a3, a4, a5, a6, a7):
+    """The 8 values in ascending order: an optimal 19-comparator sorting network, branch-free min/max."""
+    a0, a2 = min(a0, a2), max(a0, a2)
+    a1, a3 = min(a1, a3), max(a1, a3)
+    a4, a6 = min(a4, a6), max(a4, a6)
+    a5, a7 = min(a5, a7), max(a5, a7)
+    a0, a4 = min(a0, a4), max(a0, a4)
+    a1, a5 = min(a1, a5), max(a1, a5)
+    a2, a6 = min(a2, a6), max(a2, a6)
+    a3, a7 = min(a3, a7), max(a3, a7)
+    a0, a1 = min(a0, a1), max(a0, a1)
+    a2, a3 = min(a2, a3), max(a2, a3)
+    a4, a5 = min(a4, a5), max(a4, a5)
+    a6, a7 = min(a6, a7), max(a6, a7)
+    a2, a4 = min(a2, a4), max(a2, a4)
+    a3, a5 = min(a3, a5), max(a3, a5)
+    a1, a4 = min(a1, a4), max(a1, a4)
+    a3, a6 = min(a3, a6), max(a3, a6)
+    a1, a2 = min(a1, a2), max(a1, a2)
+    a3, a4 = min(a3, a4), max(a3, a4)
+    a5, a6 = min(a5, a6), max(a5, a6)
+    return a0, a1, a2, a3, a4, a5, a6, a7
+
+
+@pixel
+def interior_median_nz(z, v, u, g_u, g_v, c_x, c_y, buf):
+    """:func:`median_nz` where all 9 pixels are valid and inside: no checks, a sorting network."""
+    z_p = np.float64(z[v, u])
+    u_c = u - c_x
+    v_c = v - c_y
+    zx_p = u_c * z_p
+    zy_p = v_c * z_p
+    s0, s1, s2, s3, s4, s5, s6, s7 = sort8(
+        nz_or_inf(np.float64(z[v - 1, u - 1]), u_c - 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v - 1, u]), u_c, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v - 1, u + 1]), u_c + 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v, u - 1]), u_c - 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v, u + 1]), u_c + 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v + 1, u - 1]), u_c - 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v + 1, u]), u_c, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v + 1, u + 1]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p))
+    buf[0] = s0
+    buf[1] = s1
+    buf[2] = s2
+    buf[3] = s3
+    buf[4] = s4
+    buf[5] = s5
+    buf[6] = s6
+    buf[7] = s7
+    count = 8
+    while count > 0 and buf[count - 1] == np.inf:  # the dropped candidates (dZ == 0) sort last
+        count -= 1
+    med = (buf[max(count - 1, 0) // 2] + buf[count // 2]) / 2.0
+    return med, count
+
+
+@pixel
+def interior_gradient(z, v, u, dv, du):
+    """Central difference of 1/Z / 2 where both neighbours are valid (as :func:`inverse_depth_gradient`)."""
+    return (1.0 / np.float64(z[v + dv, u + du]) - 1.0 / np.float64(z[v - dv, u - du])) / 2
+
+
 @njit
 def _tf2n_median_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
     """3F2N with the median filter: gradients of 1/Z -> eq. 10 per neighbour -> median -> unit, one pass."""
@@ -207,6 +289,14 @@ def _tf2n_median_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
     buf = np.empty(8)
     for v in range(H):
         for u in range(W):
+            if all_nine_valid(valid, v, u):
+                g_u = interior_gradient(z, v, u, 0, 1)
+                g_v = interior_gradient(z, v, u, 1, 0)
+                n_z, count = interior_median_nz(z, v, u, g_u, g_v, c_x, c_y, buf)
+                n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
+                n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
+                write_unit(out, v, u, n_x, n_y, n_z, fill)
+                continue
             ok = False
             if valid[v, u]:
                 g_u, ok_u = inverse_depth_gradient(z, valid, v, u, 0, 1, reflect)

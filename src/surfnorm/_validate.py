@@ -13,7 +13,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "check_choice", "check_positive", "check_bool"]
+__all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "check_choice", "check_positive", "check_bool",
+           "check_iterations"]
 
 MIN_SIZE = 3
 
@@ -104,6 +105,15 @@ def check_bool(name: str, value) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise InputError(f"{name}: expected True or False, got {value!r}")
     return bool(value)
+
+
+def check_iterations(name: str, value) -> int | None:
+    """A number of passes: a non-negative integer, or None for "until stable"."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 0:
+        raise InputError(f"{name}: expected a non-negative integer number of passes, or None to run until stable, got {value!r}")
+    return int(value)
 
 
 def check_fill(value) -> float:

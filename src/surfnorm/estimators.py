@@ -27,3 +27,48 @@ register(Method("cp2tv", "depth-to-normal",
                 "cross product of two finite-difference tangent vectors",
                 lambda z, valid, cam, out, *, border, fill: cp2tv(z, valid, cam, out, border=border, fill=fill),
                 BORDER_OPTIONS))
+
+# --- 3F2N and SNE-RoadSeg (three_filters.py) -------------------------------------------------
+
+from .three_filters import sne_roadseg as _sne_roadseg, three_filters as _three_filters  # noqa: E402
+
+THREE_F2N_PAPER = "Fan et al., Three-Filters-to-Normal: An Accurate and Ultrafast Surface Normal Estimator, RA-L 2021"
+
+register(Method("3f2n_mean", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
+                "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours",
+                lambda z, valid, cam, out, *, border, fill: _three_filters(z, valid, cam, out, third="mean", border=border, fill=fill),
+                BORDER_OPTIONS))
+register(Method("3f2n_median", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
+                "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours",
+                lambda z, valid, cam, out, *, border, fill: _three_filters(z, valid, cam, out, third="median", border=border, fill=fill),
+                BORDER_OPTIONS))
+register(Method("sne_roadseg", "depth-to-normal",
+                "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
+                "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
+                "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
+                lambda z, valid, cam, out, *, border, fill: _sne_roadseg(z, valid, cam, out, border=border, fill=fill),
+                BORDER_OPTIONS))
+
+# --- SDA-SNE (sda.py) ----------------------------------------------------------------------------
+
+from ._validate import check_choice as _check_choice, check_iterations as _check_iterations  # noqa: E402
+from .methods import Option  # noqa: E402
+from .sda import BASES as _SDA_BASES, MAX_ITERATIONS as _SDA_MAX_ITERATIONS, sda_sne as _sda_sne  # noqa: E402
+
+SDA_OPTIONS = {
+    "iterations": Option(3, _check_iterations,
+                         "passes of the dynamic programming (authors' demo: 3); None runs until no pixel changes, "
+                         f"at most {_SDA_MAX_ITERATIONS} passes"),
+    "base": Option("cp2tv", lambda name, value: _check_choice(name, value, _SDA_BASES),
+                   "how gradients become normals: cp2tv (on depth, the paper's SDA-SNE) or 3f2n "
+                   "(SDA on inverse depth, then 3F2N's median filter, as the authors' demo offers)"),
+    **BORDER_OPTIONS,
+}
+
+register(Method("sda_sne", "energy minimisation",
+                "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
+                "Dynamic Programming, 3DV 2022",
+                "depth gradients chosen by multi-directional dynamic programming, then CP2TV",
+                lambda z, valid, cam, out, *, iterations, base, border, fill:
+                    _sda_sne(z, valid, cam, out, iterations=iterations, base=base, border=border, fill=fill),
+                SDA_OPTIONS))

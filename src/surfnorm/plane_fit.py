@@ -36,7 +36,8 @@ The eigenvector is the null vector of (A - lambda I): the largest cross
 product of two of its rows. Arithmetic is float64 (the point offsets q - p are
 small differences of large coordinates); the output is float32.
 
-Normals face the camera (n . p_i < 0). Invalid neighbours are left out; a
+Normals face the camera (n . p_i < 0). Invalid neighbours are left out (their
+depth is never read: the point cloud holds 0 there, weighted 0); a
 pixel gets the fill value when it is invalid itself, when fewer than 3 points
 (p_i included) are valid in its window, or when they fix no plane (all on a
 line).
@@ -57,60 +58,67 @@ _NEWTON_TOL = 1e-14
 
 
 @njit
-def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, P):
-    """P[v, u] = z K^-1 [u, v, 1]^T (eq. 3) in float64; zero where depth is invalid (never read)."""
+def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, pad, P, P_valid):
+    """P[:, v + pad, u + pad] = z K^-1 [u, v, 1]^T (eq. 3) in float64, in a border of ``pad`` invalid pixels.
+
+    Where depth is invalid (and in the border) P is 0 and P_valid False; z is not read there.
+    """
     H, W = z.shape
+    P[:, :, :] = 0.0
+    P_valid[:, :] = False
     for v in range(H):
         y_ray = (v - c_y) / f_y
         for u in range(W):
             if valid[v, u]:
                 d = np.float64(z[v, u])
-                P[v, u, 0] = d * ((u - c_x) / f_x)
-                P[v, u, 1] = d * y_ray
-                P[v, u, 2] = d
-            else:
-                P[v, u, 0] = 0.0
-                P[v, u, 1] = 0.0
-                P[v, u, 2] = 0.0
+                P[0, v + pad, u + pad] = d * ((u - c_x) / f_x)
+                P[1, v + pad, u + pad] = d * y_ray
+                P[2, v + pad, u + pad] = d
+                P_valid[v + pad, u + pad] = True
 
 
-def point_cloud(z, valid, cam) -> np.ndarray:
-    """The organised point cloud (H, W, 3) float64 of validated depth ``z`` (zeros where invalid)."""
-    P = np.empty(z.shape + (3,), dtype=np.float64)
-    _point_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), P)
-    return P
+def point_cloud(z, valid, cam, pad=0):
+    """The organised point cloud of validated depth ``z``: P (3, H + 2 pad, W + 2 pad), P_valid (H + 2 pad, W + 2 pad).
+
+    P holds x, y, z planes (contiguous rows, so that row loops vectorise) in float64; it is zero
+    where depth is invalid and in the border of ``pad`` pixels, which lets the kernels visit a
+    neighbourhood without bounds checks.
+    """
+    H, W = z.shape
+    P = np.empty((3, H + 2 * pad, W + 2 * pad), dtype=np.float64)
+    P_valid = np.empty((H + 2 * pad, W + 2 * pad), dtype=np.bool_)
+    _point_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), pad, P, P_valid)
+    return P, P_valid
 
 
 @pixel
 def window_moments(P, valid, v, u, h):
     """Moments of the offsets r = q - p of the valid points q in the window of half-width h around p.
 
-    Returns (m, sum r_x, sum r_y, sum r_z, sum r_x r_x, r_x r_y, r_x r_z, r_y r_y, r_y r_z, r_z r_z);
-    m counts p itself (whose offset is 0).
+    (v, u) index the padded cloud (border >= h). Returns (m, sum r_x, sum r_y, sum r_z,
+    sum r_x r_x, r_x r_y, r_x r_z, r_y r_y, r_y r_z, r_z r_z); m counts p itself (whose offset is 0).
+    Invalid points are weighted 0 rather than branched around (several times faster).
     """
-    H, W = valid.shape
-    p_x, p_y, p_z = P[v, u, 0], P[v, u, 1], P[v, u, 2]
-    v_lo, v_hi = max(v - h, 0), min(v + h + 1, H)
-    u_lo, u_hi = max(u - h, 0), min(u + h + 1, W)
-    m = 0
+    p_x, p_y, p_z = P[0, v, u], P[1, v, u], P[2, v, u]
+    m = 0.0
     s_x = s_y = s_z = 0.0
     s_xx = s_xy = s_xz = s_yy = s_yz = s_zz = 0.0
-    for q_v in range(v_lo, v_hi):
-        for q_u in range(u_lo, u_hi):
-            if valid[q_v, q_u]:
-                r_x = P[q_v, q_u, 0] - p_x
-                r_y = P[q_v, q_u, 1] - p_y
-                r_z = P[q_v, q_u, 2] - p_z
-                m += 1
-                s_x += r_x
-                s_y += r_y
-                s_z += r_z
-                s_xx += r_x * r_x
-                s_xy += r_x * r_y
-                s_xz += r_x * r_z
-                s_yy += r_y * r_y
-                s_yz += r_y * r_z
-                s_zz += r_z * r_z
+    for q_v in range(v - h, v + h + 1):
+        for q_u in range(u - h, u + h + 1):
+            w = 1.0 if valid[q_v, q_u] else 0.0
+            r_x = (P[0, q_v, q_u] - p_x) * w
+            r_y = (P[1, q_v, q_u] - p_y) * w
+            r_z = (P[2, q_v, q_u] - p_z) * w
+            m += w
+            s_x += r_x
+            s_y += r_y
+            s_z += r_z
+            s_xx += r_x * r_x
+            s_xy += r_x * r_y
+            s_xz += r_x * r_z
+            s_yy += r_y * r_y
+            s_yz += r_y * r_z
+            s_zz += r_z * r_z
     return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
 
 
@@ -220,9 +228,10 @@ def plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
 
 @njit
 def _plane_pca_kernel(P, valid, h, fill, out):
-    H, W = valid.shape
-    for v in range(H):
-        for u in range(W):
+    H, W = out.shape[:2]
+    for o_v in range(H):
+        for o_u in range(W):
+            v, u = o_v + h, o_u + h  # p in the padded cloud
             ok = False
             n_x = n_y = n_z = 0.0
             if valid[v, u]:
@@ -231,14 +240,15 @@ def _plane_pca_kernel(P, valid, h, fill, out):
                     s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
                     sigma = smallest_eigenvalue(s_00, s_01, s_02, s_11, s_12, s_22)
                     n_x, n_y, n_z, ok = null_vector(s_00 - sigma, s_01, s_02, s_11 - sigma, s_12, s_22 - sigma)
-            write_facing(out, v, u, n_x, n_y, n_z, ok, P[v, u, 0], P[v, u, 1], P[v, u, 2], fill)
+            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
 @njit
 def _vector_svd_kernel(P, valid, h, fill, out):
-    H, W = valid.shape
-    for v in range(H):
-        for u in range(W):
+    H, W = out.shape[:2]
+    for o_v in range(H):
+        for o_u in range(W):
+            v, u = o_v + h, o_u + h  # p in the padded cloud
             ok = False
             n_x = n_y = n_z = 0.0
             if valid[v, u]:
@@ -246,33 +256,36 @@ def _vector_svd_kernel(P, valid, h, fill, out):
                 if m >= 3:  # p and at least two vectors q - p
                     sigma = smallest_eigenvalue(s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
                     n_x, n_y, n_z, ok = null_vector(s_xx - sigma, s_xy, s_xz, s_yy - sigma, s_yz, s_zz - sigma)
-            write_facing(out, v, u, n_x, n_y, n_z, ok, P[v, u, 0], P[v, u, 1], P[v, u, 2], fill)
+            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
 @njit
 def _plane_svd_kernel(P, valid, h, fill, out):
-    H, W = valid.shape
-    for v in range(H):
-        for u in range(W):
+    H, W = out.shape[:2]
+    for o_v in range(H):
+        for o_u in range(W):
+            v, u = o_v + h, o_u + h  # p in the padded cloud
             ok = False
             n_x = n_y = n_z = 0.0
             if valid[v, u]:
                 m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
                 if m >= 3:
                     s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
-                    c_x = P[v, u, 0] + s_x / m  # centroid
-                    c_y = P[v, u, 1] + s_y / m
-                    c_z = P[v, u, 2] + s_z / m
-                    lam = plane_svd_lambda(np.float64(m), c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
+                    c_x = P[0, v, u] + s_x / m  # centroid
+                    c_y = P[1, v, u] + s_y / m
+                    c_z = P[2, v, u] + s_z / m
+                    lam = plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
                     mu = m * lam / (m - lam)
                     n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
                                                     s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
                                                     s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
-            write_facing(out, v, u, n_x, n_y, n_z, ok, P[v, u, 0], P[v, u, 1], P[v, u, 2], fill)
+            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
 def _run(kernel, z, valid, cam, out, window, fill):
-    kernel(point_cloud(z, valid, cam), valid, int(window) // 2, np.float32(fill), out)
+    h = int(window) // 2
+    P, P_valid = point_cloud(z, valid, cam, pad=h)
+    kernel(P, P_valid, h, np.float32(fill), out)
     return out
 
 

@@ -134,3 +134,17 @@ def test_window_option_is_refused():
 def test_bad_fill_is_refused():
     with pytest.raises(InputError, match=r"fill: expected a number .*, got 'zero'"):
         surfnorm.estimate(smooth_depth(0), K, method="area_weighted", fill="zero")
+
+
+def test_angle_polynomial_matches_arctan2():
+    from surfnorm.averaging import angle_from
+
+    rng = np.random.default_rng(0)
+    s = np.abs(rng.normal(size=4000)) * 10.0 ** rng.uniform(-8, 8, 4000)
+    c = rng.normal(size=4000) * 10.0 ** rng.uniform(-8, 8, 4000)
+    edge = [(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (1.0, 1.0), (1.0, -1.0), (np.tan(np.pi / 8), 1.0), (3.0, -1e-300)]
+    s = np.r_[s, [a for a, _ in edge]]
+    c = np.r_[c, [b for _, b in edge]]
+    got = np.array([angle_from(a, b) for a, b in zip(s, c)])
+    assert np.abs(got - np.arctan2(s, c)).max() < 1e-12
+    assert angle_from(0.0, 0.0) == 0.0  # no triangle: a finite weight that multiplies a zero normal

@@ -180,3 +180,29 @@ def test_bad_window_is_refused(window):
 def test_averaging_option_on_plane_fit_is_refused():
     with pytest.raises(InputError, match=r"options of method 'plane_svd': expected some of fill, window, got unknown option\(s\) dlf"):
         surfnorm.estimate(smooth_depth(0), K, method="plane_svd", dlf="1d")
+
+
+def test_newton_eigenvalue_matches_eigvalsh():
+    from surfnorm.plane_fit import smallest_eigenvalue
+
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        # scatter matrices of 3..9 points, from round clouds to nearly flat and nearly collinear ones
+        pts = rng.normal(size=(rng.integers(3, 10), 3)) * rng.uniform(1e-4, 1.0, 3)
+        A = (pts - pts.mean(axis=0)).T @ (pts - pts.mean(axis=0))
+        got = smallest_eigenvalue(A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
+        assert abs(got - np.linalg.eigvalsh(A)[0]) <= 1e-12 * np.linalg.eigvalsh(A)[2]
+
+
+def test_plane_svd_eigenvalue_is_smallest_of_the_4x4():
+    from surfnorm.plane_fit import plane_svd_lambda
+
+    rng = np.random.default_rng(2)
+    for _ in range(300):
+        pts = rng.normal(size=(rng.integers(3, 10), 3)) * rng.uniform(1e-3, 1.0, 3) + rng.uniform(-3, 3, 3)
+        A = np.hstack([pts, np.ones((len(pts), 1))])
+        c = pts.mean(axis=0)
+        S = (pts - c).T @ (pts - c)
+        got = plane_svd_lambda(float(len(pts)), *c, S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2])
+        lam = np.linalg.eigvalsh(A.T @ A)
+        assert abs(got - lam[0]) <= 1e-10 * lam[3]

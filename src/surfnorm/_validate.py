@@ -14,7 +14,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "check_choice", "check_positive", "check_bool",
-           "check_iterations"]
+           "check_iterations", "check_window"]
 
 MIN_SIZE = 3
 
@@ -120,3 +120,11 @@ def check_fill(value) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InputError(f"fill: expected a number (0.0 or nan) written into every component of a pixel without a valid normal, got {value!r}")
     return float(value)
+
+
+def check_window(name: str, value) -> int:
+    """A square pixel neighbourhood's side: an odd integer >= 3 (the window is centred on the pixel)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 3 or value % 2 == 0:
+        raise InputError(f"{name}: expected an odd integer >= 3 (pixels per side of the square neighbourhood "
+                         f"centred on each pixel), got {value!r}")
+    return int(value)

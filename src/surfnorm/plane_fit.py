@@ -1,0 +1,304 @@
+"""Plane fitting on the organised point cloud: PlaneSVD, PlanePCA, VectorSVD.
+
+The energy-minimisation estimators of Table I of Feng et al. (D2NT, ICRA
+2023), after the comparisons of Klasing et al. (ICRA 2009) and Jordan &
+Mordohai (2014). Each pixel p_i is back-projected to the 3D point
+p_i = z K^-1 [u, v, 1]^T (eq. 3); its neighbours Q_i = {q_i1 .. q_ik} are the
+valid points of the k x k pixel window around it (``window``, 3 by default),
+and Q_i^+ = Q_i with p_i itself. The normal minimises (eq. 1):
+
+* PlaneSVD (Wang et al. 2001; Klasing et al. 2009):
+  min || [Q_i^+, 1] b_i ||_2 over b_i = [n_i; d_i] with ||b_i|| = 1, the plane
+  n . x + d = 0 with its offset. b_i is the smallest eigenvector of the 4x4
+  matrix M = [Q^+, 1]^T [Q^+, 1] (the smallest right singular vector of
+  [Q^+, 1]). Writing M with the centroid c and the scatter matrix
+  S = sum (q - c)(q - c)^T of the m = |Q^+| points, its characteristic
+  polynomial is
+
+      det(M - lambda I) = (m - lambda) det(S - lambda I) - m lambda c^T adj(S - lambda I) c,
+
+  and n_i is the null vector of S - lambda I - (m lambda / (m - lambda)) c c^T
+  at its smallest root. Because b is normalised with d in it, the fit is not
+  the same as PlanePCA: it depends on where the camera is and on the unit of
+  depth; the two agree exactly on planes and nearly on smooth surfaces.
+* PlanePCA (Klasing et al. 2009): min || [Q_i^+ - p_bar] n_i || with the
+  centroid p_bar; n_i is the smallest eigenvector of S.
+* VectorSVD (Jordan & Mordohai 2014): min || [Q_i - 1 p_i^T] n_i ||, the
+  smallest right singular vector of the matrix of the vectors q - p_i, i.e.
+  the smallest eigenvector of sum (q - p_i)(q - p_i)^T.
+
+The smallest eigenvalue (of the 3x3 matrix, or of the 4x4 one of PlaneSVD
+through the quartic above) comes from Newton's method on the characteristic
+polynomial started at 0, which rises monotonically to the smallest root
+because every root is real and >= 0; on smooth surfaces it converges in 2-4
+steps and needs no acos or cos (the trigonometric closed form was 4x slower).
+The eigenvector is the null vector of (A - lambda I): the largest cross
+product of two of its rows. Arithmetic is float64 (the point offsets q - p are
+small differences of large coordinates); the output is float32.
+
+Normals face the camera (n . p_i < 0). Invalid neighbours are left out (their
+depth is never read: the point cloud holds 0 there, weighted 0); a
+pixel gets the fill value when it is invalid itself, when fewer than 3 points
+(p_i included) are valid in its window, or when they fix no plane (all on a
+line).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._config import njit, pixel
+
+__all__ = ["plane_svd", "plane_pca", "vector_svd", "point_cloud"]
+
+_NEWTON_STEPS = 64
+_NEWTON_TOL = 1e-14
+
+
+@njit
+def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, pad, P, P_valid):
+    """P[:, v + pad, u + pad] = z K^-1 [u, v, 1]^T (eq. 3) in float64, in a border of ``pad`` invalid pixels.
+
+    Where depth is invalid (and in the border) P is 0 and P_valid False; z is not read there.
+    """
+    H, W = z.shape
+    P[:, :, :] = 0.0
+    P_valid[:, :] = False
+    for v in range(H):
+        y_ray = (v - c_y) / f_y
+        for u in range(W):
+            if valid[v, u]:
+                d = np.float64(z[v, u])
+                P[0, v + pad, u + pad] = d * ((u - c_x) / f_x)
+                P[1, v + pad, u + pad] = d * y_ray
+                P[2, v + pad, u + pad] = d
+                P_valid[v + pad, u + pad] = True
+
+
+def point_cloud(z, valid, cam, pad=0):
+    """The organised point cloud of validated depth ``z``: P (3, H + 2 pad, W + 2 pad), P_valid (H + 2 pad, W + 2 pad).
+
+    P holds x, y, z planes (contiguous rows, so that row loops vectorise) in float64; it is zero
+    where depth is invalid and in the border of ``pad`` pixels, which lets the kernels visit a
+    neighbourhood without bounds checks.
+    """
+    H, W = z.shape
+    P = np.empty((3, H + 2 * pad, W + 2 * pad), dtype=np.float64)
+    P_valid = np.empty((H + 2 * pad, W + 2 * pad), dtype=np.bool_)
+    _point_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), pad, P, P_valid)
+    return P, P_valid
+
+
+@pixel
+def window_moments(P, valid, v, u, h):
+    """Moments of the offsets r = q - p of the valid points q in the window of half-width h around p.
+
+    (v, u) index the padded cloud (border >= h). Returns (m, sum r_x, sum r_y, sum r_z,
+    sum r_x r_x, r_x r_y, r_x r_z, r_y r_y, r_y r_z, r_z r_z); m counts p itself (whose offset is 0).
+    Invalid points are weighted 0 rather than branched around (several times faster).
+    """
+    p_x, p_y, p_z = P[0, v, u], P[1, v, u], P[2, v, u]
+    m = 0.0
+    s_x = s_y = s_z = 0.0
+    s_xx = s_xy = s_xz = s_yy = s_yz = s_zz = 0.0
+    for q_v in range(v - h, v + h + 1):
+        for q_u in range(u - h, u + h + 1):
+            w = 1.0 if valid[q_v, q_u] else 0.0
+            r_x = (P[0, q_v, q_u] - p_x) * w
+            r_y = (P[1, q_v, q_u] - p_y) * w
+            r_z = (P[2, q_v, q_u] - p_z) * w
+            m += w
+            s_x += r_x
+            s_y += r_y
+            s_z += r_z
+            s_xx += r_x * r_x
+            s_xy += r_x * r_y
+            s_xz += r_x * r_z
+            s_yy += r_y * r_y
+            s_yz += r_y * r_z
+            s_zz += r_z * r_z
+    return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
+
+
+@pixel
+def smallest_eigenvalue(a_00, a_01, a_02, a_11, a_12, a_22):
+    """Smallest eigenvalue of the symmetric positive semi-definite 3x3 matrix A.
+
+    Newton's method on the characteristic polynomial f(l) = det(A - l I) = t_3 - t_2 l + t_1 l^2 - l^3,
+    from l = 0: all roots are real and >= 0, so f > 0 and f' < 0 left of the smallest root and
+    every step is positive and lands short of it (monotone convergence, quadratic once close).
+    Cheaper than the trigonometric closed form (no acos, cos) and as accurate.
+    """
+    t_1 = a_00 + a_11 + a_22
+    t_2 = a_00 * a_11 - a_01 * a_01 + a_00 * a_22 - a_02 * a_02 + a_11 * a_22 - a_12 * a_12
+    t_3 = (a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02)
+           + a_02 * (a_01 * a_12 - a_11 * a_02))
+    lam = 0.0
+    for _ in range(_NEWTON_STEPS):
+        f = t_3 + lam * (-t_2 + lam * (t_1 - lam))
+        f_prime = -t_2 + lam * (2.0 * t_1 - 3.0 * lam)
+        step = -f / f_prime if f_prime < 0.0 else 0.0
+        if not step > _NEWTON_TOL * lam:  # converged, or rounding says so (also stops on NaN)
+            break
+        lam += step
+    return lam
+
+
+@pixel
+def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
+    """Unit null vector of the (near-)singular symmetric 3x3 matrix B: the longest cross product of two rows.
+
+    Returns (n_x, n_y, n_z, ok); ok is False when B has rank below 2 (no unique direction).
+    """
+    # rows (b_00, b_01, b_02), (b_01, b_11, b_12), (b_02, b_12, b_22)
+    x_a, y_a, z_a = b_01 * b_12 - b_02 * b_11, b_02 * b_01 - b_00 * b_12, b_00 * b_11 - b_01 * b_01  # row0 x row1
+    x_b, y_b, z_b = b_01 * b_22 - b_02 * b_12, b_02 * b_02 - b_00 * b_22, b_00 * b_12 - b_01 * b_02  # row0 x row2
+    x_c, y_c, z_c = b_11 * b_22 - b_12 * b_12, b_12 * b_02 - b_01 * b_22, b_01 * b_12 - b_11 * b_02  # row1 x row2
+    l_a = x_a * x_a + y_a * y_a + z_a * z_a
+    l_b = x_b * x_b + y_b * y_b + z_b * z_b
+    l_c = x_c * x_c + y_c * y_c + z_c * z_c
+    n_x, n_y, n_z, l = x_a, y_a, z_a, l_a
+    if l_b > l:
+        n_x, n_y, n_z, l = x_b, y_b, z_b, l_b
+    if l_c > l:
+        n_x, n_y, n_z, l = x_c, y_c, z_c, l_c
+    ok = l > 0.0 and math.isfinite(l)
+    norm = math.sqrt(l) if ok else 1.0
+    return n_x / norm, n_y / norm, n_z / norm, ok
+
+
+@pixel
+def write_facing(out, v, u, n_x, n_y, n_z, ok, p_x, p_y, p_z, fill):
+    """Store the unit normal at (v, u), turned to face the camera (n . p < 0), or the fill value."""
+    if ok:
+        if n_x * p_x + n_y * p_y + n_z * p_z > 0.0:
+            n_x, n_y, n_z = -n_x, -n_y, -n_z
+        out[v, u, 0] = n_x
+        out[v, u, 1] = n_y
+        out[v, u, 2] = n_z
+    else:
+        out[v, u, 0] = fill
+        out[v, u, 1] = fill
+        out[v, u, 2] = fill
+
+
+@pixel
+def scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
+    """S = sum (q - c)(q - c)^T about the centroid c, from the moments of the offsets r = q - p."""
+    return (s_xx - s_x * s_x / m, s_xy - s_x * s_y / m, s_xz - s_x * s_z / m,
+            s_yy - s_y * s_y / m, s_yz - s_y * s_z / m, s_zz - s_z * s_z / m)
+
+
+@pixel
+def plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
+    """Smallest eigenvalue of M = [Q^+, 1]^T [Q^+, 1] by Newton's method on its characteristic polynomial.
+
+    f(l) = (m - l) D(l) - m l G(l) with D(l) = det(S - l I) = t_3 - t_2 l + t_1 l^2 - l^3 and
+    G(l) = c^T adj(S - l I) c = g_0 + g_1 l + g_2 l^2. From l = 0 (f(0) = m det S >= 0) Newton's
+    steps are positive and never pass the smallest root.
+    """
+    t_1 = s_00 + s_11 + s_22
+    t_2 = s_00 * s_11 - s_01 * s_01 + s_00 * s_22 - s_02 * s_02 + s_11 * s_22 - s_12 * s_12
+    a_00, a_11, a_22 = s_11 * s_22 - s_12 * s_12, s_00 * s_22 - s_02 * s_02, s_00 * s_11 - s_01 * s_01  # adj(S)
+    a_01, a_02, a_12 = s_02 * s_12 - s_01 * s_22, s_01 * s_12 - s_02 * s_11, s_01 * s_02 - s_00 * s_12
+    t_3 = s_00 * a_00 + s_01 * a_01 + s_02 * a_02
+    g_0 = (a_00 * c_x * c_x + a_11 * c_y * c_y + a_22 * c_z * c_z
+           + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z))
+    c_c = c_x * c_x + c_y * c_y + c_z * c_z
+    c_s_c = (s_00 * c_x * c_x + s_11 * c_y * c_y + s_22 * c_z * c_z
+             + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z))
+    g_1 = c_s_c - t_1 * c_c
+    g_2 = c_c
+    lam = 0.0
+    for _ in range(_NEWTON_STEPS):
+        d = t_3 + lam * (-t_2 + lam * (t_1 - lam))
+        d_prime = -t_2 + lam * (2.0 * t_1 - 3.0 * lam)
+        g = g_0 + lam * (g_1 + lam * g_2)
+        g_prime = g_1 + 2.0 * lam * g_2
+        f = (m - lam) * d - m * lam * g
+        f_prime = -d + (m - lam) * d_prime - m * g - m * lam * g_prime
+        step = -f / f_prime if f_prime < 0.0 else 0.0
+        if not step > _NEWTON_TOL * lam:  # converged, or rounding says so (also stops on NaN)
+            break
+        lam += step
+    return lam
+
+
+@njit
+def _plane_pca_kernel(P, valid, h, fill, out):
+    H, W = out.shape[:2]
+    for o_v in range(H):
+        for o_u in range(W):
+            v, u = o_v + h, o_u + h  # p in the padded cloud
+            ok = False
+            n_x = n_y = n_z = 0.0
+            if valid[v, u]:
+                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
+                if m >= 3:
+                    s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+                    sigma = smallest_eigenvalue(s_00, s_01, s_02, s_11, s_12, s_22)
+                    n_x, n_y, n_z, ok = null_vector(s_00 - sigma, s_01, s_02, s_11 - sigma, s_12, s_22 - sigma)
+            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
+
+
+@njit
+def _vector_svd_kernel(P, valid, h, fill, out):
+    H, W = out.shape[:2]
+    for o_v in range(H):
+        for o_u in range(W):
+            v, u = o_v + h, o_u + h  # p in the padded cloud
+            ok = False
+            n_x = n_y = n_z = 0.0
+            if valid[v, u]:
+                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
+                if m >= 3:  # p and at least two vectors q - p
+                    sigma = smallest_eigenvalue(s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+                    n_x, n_y, n_z, ok = null_vector(s_xx - sigma, s_xy, s_xz, s_yy - sigma, s_yz, s_zz - sigma)
+            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
+
+
+@njit
+def _plane_svd_kernel(P, valid, h, fill, out):
+    H, W = out.shape[:2]
+    for o_v in range(H):
+        for o_u in range(W):
+            v, u = o_v + h, o_u + h  # p in the padded cloud
+            ok = False
+            n_x = n_y = n_z = 0.0
+            if valid[v, u]:
+                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
+                if m >= 3:
+                    s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+                    c_x = P[0, v, u] + s_x / m  # centroid
+                    c_y = P[1, v, u] + s_y / m
+                    c_z = P[2, v, u] + s_z / m
+                    lam = plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
+                    mu = m * lam / (m - lam)
+                    n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
+                                                    s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
+                                                    s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
+
+
+def _run(kernel, z, valid, cam, out, window, fill):
+    h = int(window) // 2
+    P, P_valid = point_cloud(z, valid, cam, pad=h)
+    kernel(P, P_valid, h, np.float32(fill), out)
+    return out
+
+
+def plane_svd(z, valid, cam, out, *, window=3, fill=0.0):
+    """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch."""
+    return _run(_plane_svd_kernel, z, valid, cam, out, window, fill)
+
+
+def plane_pca(z, valid, cam, out, *, window=3, fill=0.0):
+    """PlanePCA (Table I): smallest eigenvector of the covariance of Q^+ about its centroid."""
+    return _run(_plane_pca_kernel, z, valid, cam, out, window, fill)
+
+
+def vector_svd(z, valid, cam, out, *, window=3, fill=0.0):
+    """VectorSVD (Table I): smallest right singular vector of the matrix of the vectors q - p."""
+    return _run(_vector_svd_kernel, z, valid, cam, out, window, fill)

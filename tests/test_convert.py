@@ -126,7 +126,7 @@ def test_outputs_inside_the_input_folder_are_not_inputs(tmp_path):
 
 
 def test_unlistable_input_folder_and_unwritable_output(tmp_path, monkeypatch):
-    import surfnorm.convert as mod
+    mod = sys.modules["surfnorm.convert"]  # (surfnorm.convert is the function)
 
     depth_png(tmp_path / "a.png", 0)
     real = os.access
@@ -216,6 +216,10 @@ def test_options_reach_the_estimator(tmp_path):
             scale_invariant=True)
     np.testing.assert_array_equal(np.load(tmp_path / "o/d.npy"),
                                   expected_normals(src, method="d2nt_v2", dlf="gamma", fill=np.nan, scale_invariant=True))
+
+
+def test_front_door_function():
+    assert surfnorm.convert is convert and callable(surfnorm.convert)
 
 
 def test_dask_client_is_handed_the_tasks(tmp_path, monkeypatch):

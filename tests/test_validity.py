@@ -78,7 +78,7 @@ def raw_normals(method, z, mask, cam, scale_invariant=False):
     if scale_invariant:
         zz = relative_depth(zz, valid)
         valid = valid_pixels(zz, valid)
-    return base.run(zz, valid, cam, np.empty(zz.shape + (3,), np.float32), **options)
+    return base.run(zz, valid, Intrinsics.from_matrix(cam), np.empty(zz.shape + (3,), np.float32), **options)
 
 
 def assert_same_or_mnr_candidate(method, got, expected, raw, atol):

@@ -110,3 +110,9 @@ def check_fill(value) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InputError(f"fill: expected a number (0.0 or nan) written into every component of a pixel without a valid normal, got {value!r}")
     return float(value)
+
+
+def check_positive_int(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise InputError(f"{name}: expected a positive whole number, got {value!r}")
+    return int(value)

@@ -1,0 +1,261 @@
+"""Run ``convert`` on a Dask cluster: shards of files, streamed results, nothing lost when a worker dies.
+
+``surfnorm.convert(..., client=client)`` and ``surfnorm convert ... --cluster
+ADDRESS`` / ``--local-cluster N`` come here. Dask is an optional extra
+(``pip install "surfnorm[dask]"``); this module is imported only when a
+cluster is asked for, and ``import surfnorm`` never imports it.
+
+How the work is cut
+-------------------
+The files are cut into shards of ``shard_size`` consecutive tasks; each shard
+is one Dask task that calls :func:`surfnorm.convert.convert_file` on its files
+in turn, on whichever worker the scheduler picks. Results come back shard by
+shard as shards finish (``as_completed``), and every file's result goes to the
+same ``on_result`` callback as on the local path, so the progress bar moves
+as work completes. See :func:`default_shard_size` for the trade-off.
+
+Why a dead worker loses nothing
+-------------------------------
+* When a worker process dies (killed, out of memory, a crash in a native
+  library) the scheduler reschedules the shards it was running or holding on
+  the other workers (and on the worker the nanny restarts). Dask allows a
+  task ``distributed.scheduler.allowed-failures`` such deaths (default 3)
+  before it gives up with ``KilledWorker``; when it does, the shard's files are
+  tried again one file per task, one such task at a time, so that a single
+  file that kills every worker that reads it (a frame too large for the
+  worker's memory, a file that crashes a native decoder) ends up as one error
+  naming that file, and the rest of its shard is converted.
+* A retried shard is idempotent, by three properties of ``convert_file``:
+  (1) outputs are written to a temporary file and renamed over the target, so
+  an output path holds either nothing or a complete file; (2) an output that
+  already exists is skipped, so the files the dead attempt finished are not
+  redone; (3) the bytes written are a deterministic function of the input
+  and the settings, so even when two attempts of one shard overlap (a worker
+  the scheduler gave up on that is still running), both renames put the same
+  bytes in place: no file is ever written twice with different content.
+* A process killed between creating its temporary file and the rename leaves
+  that temporary file behind (its ``finally`` never runs). After converting its
+  files, every shard removes leftover temporary files of its own outputs
+  (:func:`remove_stale_temps`), so the retry of a killed shard cleans up after
+  the attempt that died, and a re-run cleans up after a killed run.
+
+Inputs and outputs are read and written by the workers, not by the client:
+the paths must name the same files on every worker (a shared filesystem).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import uuid
+from collections import deque
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Callable, Iterator, Sequence
+
+from .errors import InputError, MissingDependencyError
+
+__all__ = ["run_on_dask", "default_shard_size", "cluster_client", "remove_stale_temps", "INSTALL_HINT"]
+
+INSTALL_HINT = 'pip install "surfnorm[dask]"'
+
+#: Shards per worker thread that the default aims for: enough that a slow
+#: shard does not leave the others idle at the end, and that progress moves.
+SHARDS_PER_THREAD = 4
+#: Smallest default shard: a Dask task costs about a millisecond of scheduler
+#: and network time; 8 files of even a small frame take tens of milliseconds.
+MIN_SHARD = 8
+#: Largest default shard: bounds the work redone when a worker dies and the
+#: time between progress updates.
+MAX_SHARD = 64
+
+
+def _require_distributed():
+    """Import ``distributed`` or say how to install it."""
+    try:
+        import distributed
+    except ImportError as exc:
+        raise MissingDependencyError(
+            f"running on a Dask cluster needs dask.distributed, which is not installed; install it with: {INSTALL_HINT}"
+        ) from exc
+    return distributed
+
+
+def default_shard_size(n_tasks: int, n_threads: int) -> int:
+    """The shard size used when none is given.
+
+    Aim for ``SHARDS_PER_THREAD`` shards per worker thread (load balance at the
+    end of the run, a moving progress bar, little work redone when a worker
+    dies), but never fewer than ``MIN_SHARD`` files per shard (so that Dask's
+    per-task cost, about a millisecond, stays small next to the work: one
+    480x640 frame takes tens of milliseconds to read, estimate and write) and
+    never more than ``MAX_SHARD`` (a dead worker costs at most that many files
+    of work, and progress updates at least that often).
+    """
+    per_thread = math.ceil(n_tasks / (SHARDS_PER_THREAD * max(1, n_threads)))
+    return max(MIN_SHARD, min(MAX_SHARD, per_thread))
+
+
+def remove_stale_temps(output: Path) -> int:
+    """Remove temporary files that a killed writer of ``output`` left behind; return how many.
+
+    The pattern is the one :func:`surfnorm.io._atomic.atomic_write` uses
+    (``.<name>.<random>.tmp<suffix>`` beside the target).
+    """
+    output = Path(output)
+    removed = 0
+    for tmp in output.parent.glob(f".{output.name}.*.tmp{output.suffix}"):
+        try:
+            tmp.unlink()
+            removed += 1
+        except FileNotFoundError:  # removed by an overlapping attempt
+            pass
+    return removed
+
+
+def _sweep(outputs) -> None:
+    for output in outputs:
+        try:
+            remove_stale_temps(output)
+        except OSError:  # an unreadable output folder was already reported by convert_file
+            pass
+
+
+def _convert_shard(tasks, settings):
+    """One Dask task: convert ``tasks`` in order, then sweep their stale temporaries."""
+    # the module, looked up at call time (``surfnorm.convert`` the attribute is the function)
+    convert = importlib.import_module("surfnorm.convert")
+
+    results = [convert.convert_file(task, settings) for task in tasks]
+    _sweep([task.output for task in tasks])
+    return results
+
+
+def _shards(tasks: Sequence, size: int) -> list[list]:
+    return [list(tasks[i:i + size]) for i in range(0, len(tasks), size)]
+
+
+def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int | None = None) -> list:
+    """Convert ``tasks`` on the Dask cluster behind ``client``; return their results in task order.
+
+    Parameters
+    ----------
+    tasks : sequence of ConvertTask
+        From :func:`surfnorm.convert.plan_tasks`; the paths must be visible to
+        every worker.
+    settings : ConvertSettings
+        Sent to the workers with every shard.
+    client : distributed.Client
+        Connected to the scheduler that runs the work.
+    on_result : callable
+        Called in this process with each file's ``FileResult`` as its shard
+        finishes (the progress callback of the local path).
+    shard_size : int, optional
+        Files per Dask task; :func:`default_shard_size` when omitted.
+
+    Returns
+    -------
+    list of FileResult
+        One per task, in the order of ``tasks``. A file whose shard kept
+        killing workers is an ``"error"`` result naming the worker deaths.
+    """
+    distributed = _require_distributed()
+    from ._validate import check_positive_int
+    from .convert import FileResult
+
+    tasks = list(tasks)
+    if shard_size is None:
+        shard_size = default_shard_size(len(tasks), sum(client.nthreads().values()))
+    else:
+        shard_size = check_positive_int("shard_size", shard_size)
+    if not tasks:
+        return []
+
+    run_id = uuid.uuid4().hex[:12]
+    position = {id(task): i for i, task in enumerate(tasks)}
+    results: list = [None] * len(tasks)
+    shard_of = {}   # future key -> its tasks
+    suspects = deque()  # files of shards that kept killing workers, to be tried one at a time
+    lane = None     # key of the one suspect in flight
+    lost = []       # outputs of files that killed every worker that tried them
+    counter = 0
+
+    def submit(shard):
+        nonlocal counter
+        counter += 1
+        future = client.submit(_convert_shard, shard, settings, key=f"surfnorm-convert-{run_id}-{counter}", pure=False)
+        shard_of[future.key] = shard
+        return future
+
+    pending = distributed.as_completed([submit(shard) for shard in _shards(tasks, shard_size)])
+    for future in pending:
+        shard = shard_of.pop(future.key)
+        alone = future.key == lane
+        if alone:
+            lane = None
+        try:
+            shard_results = future.result()
+        except distributed.KilledWorker as exc:
+            if not alone:
+                # Workers died each time they ran this shard: one of its files may crash or exhaust
+                # every worker. Try its files one task at a time, never two suspects together, so
+                # that a file is blamed only for deaths while it ran as the only suspect.
+                suspects.extend(shard)
+                shard_results = []
+            else:
+                lost.append(shard[0].output)
+                shard_results = [FileResult(shard[0].input, shard[0].output, "error",
+                                            f"{shard[0].input}: the worker process died each time it converted this "
+                                            f"file (out of memory, or a crash in a native library?): {exc}")]
+        except Exception as exc:
+            if future.status != "error":  # cancelled, or the client lost the scheduler: not the files' fault
+                raise
+            shard_results = [FileResult(task.input, task.output, "error",
+                                        f"{task.input}: the shard failed on a worker: {type(exc).__name__}: {exc}")
+                             for task in shard]
+        finally:
+            future.release()
+        for task, result in zip(shard, shard_results):
+            results[position[id(task)]] = result
+            on_result(result)
+        if lane is None and suspects:
+            suspect = submit([suspects.popleft()])
+            lane = suspect.key
+            pending.add(suspect)
+    if lost:  # the attempts that died on these files left temporaries that no shard swept
+        client.submit(_sweep, lost, key=f"surfnorm-sweep-{run_id}", pure=False).result()
+    return results
+
+
+@contextmanager
+def cluster_client(address: str | None = None, *, local_workers: int | None = None,
+                   timeout: float | None = None) -> Iterator:
+    """A ``distributed.Client`` for the CLI: to the scheduler at ``address``, or to a new LocalCluster.
+
+    ``local_workers`` starts a LocalCluster of that many single-threaded worker
+    processes on this machine (closed again on exit). Exactly one of the two
+    must be given.
+    """
+    from ._validate import check_positive_int
+
+    distributed = _require_distributed()
+    if (address is None) == (local_workers is None):
+        raise InputError(f"cluster_client: expected exactly one of address= and local_workers=, got address={address!r}, local_workers={local_workers!r}")
+    cluster = None
+    if address is not None:
+        try:
+            kwargs = {} if timeout is None else {"timeout": timeout}  # else distributed.comm.timeouts.connect
+            client = distributed.Client(address, **kwargs)
+        except (OSError, TimeoutError) as exc:
+            raise ConnectionError(f"cluster address {address!r}: no Dask scheduler answered there ({exc})") from exc
+    else:
+        n = check_positive_int("local_workers", local_workers)
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           dashboard_address=None)
+        client = distributed.Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

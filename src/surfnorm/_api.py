@@ -7,7 +7,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ._validate import as_depth, as_mask, as_normals, check_choice, check_fill, valid_pixels
+from ._validate import as_depth, as_mask, as_normals, check_bool, check_choice, check_fill, valid_pixels
 from .camera import Intrinsics
 from .errors import InputError
 from .gradients import DLF_NAMES
@@ -46,7 +46,8 @@ def _run(method, refined, options, z, valid, cam):
     return method.run(z, valid, cam, out, **options)
 
 
-def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None, **options) -> np.ndarray:
+def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None,
+             scale_invariant: bool = False, disparity: bool = False, **options) -> np.ndarray:
     """Estimate surface normals from a depth image (or a stack of them).
 
     Parameters
@@ -62,6 +63,14 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
         False where depth must not be used (in addition to invalid values).
     threads : int, optional
         Threads for a stack of frames (default: all cores). Ignored for one frame.
+    scale_invariant : bool
+        False (default, paper-faithful): the DAG softmin threshold ``tau`` is in
+        depth units. True: each frame is rescaled to a median valid depth of
+        ``surfnorm.units.REFERENCE_DEPTH`` (100) first, so normals do not depend
+        on the unit of depth; see :mod:`surfnorm.units`.
+    disparity : bool
+        ``depth`` holds disparity (or inverse depth up to scale); it is inverted
+        and handled as in the scale-invariant mode. See :mod:`surfnorm.units`.
     **options
         The method's options (see ``surfnorm.methods()[name].options``), e.g.
         ``dlf``, ``tau``, ``truncate``, ``mnr_dlf``, ``fill``.
@@ -89,11 +98,16 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     method_obj, refined, clean = resolve(method, options)
     z = as_depth(depth)
     user_mask = as_mask(mask, z.shape)
+    valid = valid_pixels(z, user_mask)
+    if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
+        from .units import relative_depth
+
+        z = relative_depth(z, valid, disparity=disparity)
+        valid = valid_pixels(z, valid)  # a value that over/underflows float32 when rescaled is not used
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        return _run(method_obj, refined, dict(clean), z, valid_pixels(z, user_mask), cam)
+        return _run(method_obj, refined, dict(clean), z, valid, cam)
     cams = _intrinsics_list(K, z.shape[0])
-    valid = valid_pixels(z, user_mask)
     out = np.empty(z.shape + (3,), dtype=np.float32)
 
     def one(i):

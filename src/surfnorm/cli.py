@@ -31,49 +31,65 @@ def method_names() -> list[str]:
     return list(methods())
 
 
-def _intrinsics(params: Optional[Path], fx, fy, cx, cy):
-    from .camera import Intrinsics
-    from .io.threef2n import read_params
+INTRINSICS_HELP = "Camera intrinsics file: JSON/YAML (fx, fy, cx, cy or K), ROS camera_info YAML, OpenCV YAML, 3F2N params.txt."
+FORMAT_HELP = "Output format: npy (float32), png16 (lossless, 3F2N encoding) or png8 (picture)."
 
-    if params is not None:
-        return read_params(params)
-    if None in (fx, fy, cx, cy):
-        fail("intrinsics: expected --params FILE or all of --fx --fy --cx --cy")
-    return Intrinsics(fx, fy, cx, cy)
+
+def _intrinsics(intrinsics: Optional[Path], fx, fy, cx, cy, depth_path: Optional[Path] = None):
+    """The camera from --intrinsics or --fx --fy --cx --cy; a 3F2N file falls back to its params.txt."""
+    from .io.intrinsics import resolve_intrinsics
+
+    cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
+    if cam is None and depth_path is not None and (depth_path.parent.parent / "params.txt").is_file():
+        cam = resolve_intrinsics(depth_path.parent.parent / "params.txt")
+    if cam is None:
+        fail("intrinsics: expected --intrinsics FILE or all of --fx --fy --cx --cy")
+    return cam
+
+
+def _check_format(fmt: str) -> str:
+    from .io.normals import NORMAL_FORMATS
+
+    if fmt not in NORMAL_FORMATS:
+        fail(f"--format: expected one of {', '.join(NORMAL_FORMATS)}, got {fmt!r}")
+    return fmt
 
 
 @app.command()
 def estimate(
-    depth: Path = typer.Argument(..., help="Depth file (.bin, .npy, .npz, 16-bit .png, float .tif)."),
+    depth: Path = typer.Argument(..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png, float .tif)."),
     output: Path = typer.Argument(..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."),
     method: str = typer.Option("d2nt_v3", "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
-    params: Optional[Path] = typer.Option(None, help="3F2N params.txt with fx fy u0 v0 (1-based)."),
+    intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP),
     fx: Optional[float] = typer.Option(None, help="Focal length x, pixels."),
     fy: Optional[float] = typer.Option(None, help="Focal length y, pixels."),
     cx: Optional[float] = typer.Option(None, help="Principal point x, pixels, 0-based."),
     cy: Optional[float] = typer.Option(None, help="Principal point y, pixels, 0-based."),
-    depth_scale: Optional[float] = typer.Option(None, help="Divide integer depth by this (1000 for mm, 5000 for TUM)."),
+    depth_scale: Optional[float] = typer.Option(None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."),
+    mask: Optional[Path] = typer.Option(None, help="Mask image or .npy: non-zero where depth may be used."),
+    scale_invariant: bool = typer.Option(False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."),
+    disparity: bool = typer.Option(False, "--disparity", help="The input holds disparity (inverse depth up to scale)."),
+    fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
 ):
     """Estimate the normals of one depth image."""
-    import numpy as np
-
     from . import estimate as estimate_
-    from .io._atomic import atomic_write
-    from .io.depth import read_depth
-    from .io.pictures import normal_to_rgb8, write_rgb8
+    from .io.depth import read_depth, read_mask
+    from .io.normals import FORMAT_SUFFIX, write_normals
 
+    written = []
     try:
-        cam = _intrinsics(params, fx, fy, cx, cy)
+        formats = [_check_format(fmt)] if fmt is not None else ["npy", "png8"]
+        cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
         z = read_depth(depth, depth_scale=depth_scale)
-        normals = estimate_(z, cam, method=method)
+        user_mask = read_mask(mask) if mask is not None else None
+        normals = estimate_(z, cam, method=method, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity)
         if output.is_dir():
             fail(f"output: expected a file prefix, got the directory {output}")
-        npy = output.with_name(output.name + ".npy")
-        atomic_write(npy, lambda tmp: np.save(open(tmp, "wb"), normals))
-        write_rgb8(output.with_name(output.name + ".png"), normal_to_rgb8(normals))
+        for f in formats:
+            written.append(write_normals(output.with_name(output.name + FORMAT_SUFFIX[f]), normals, fmt=f))
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
-    console.print(f"wrote {npy} and {output.with_name(output.name + '.png')}")
+    console.print(f"wrote {' and '.join(map(str, written))}", highlight=False)
 
 
 @app.command("methods")
@@ -121,6 +137,63 @@ def demo(
         table.add_row(name, *cells, f"{ms:.1f}")
     console.print(table)
     console.print(f"normal maps and error maps (PNG) written to {out}/")
+
+
+@app.command()
+def convert(
+    inputs: str = typer.Argument(..., metavar="INPUT", help="A depth file, a folder (searched recursively) or a quoted glob pattern."),
+    output_dir: Path = typer.Argument(..., help="Folder for the normal files (created if missing); sub-folders mirror INPUT."),
+    method: str = typer.Option("d2nt_v3", "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
+    depth_scale: Optional[float] = typer.Option(None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."),
+    intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k",
+                                              help=INTRINSICS_HELP + " Default: each 3F2N file's params.txt."),
+    fx: Optional[float] = typer.Option(None, help="Focal length x, pixels."),
+    fy: Optional[float] = typer.Option(None, help="Focal length y, pixels."),
+    cx: Optional[float] = typer.Option(None, help="Principal point x, pixels, 0-based."),
+    cy: Optional[float] = typer.Option(None, help="Principal point y, pixels, 0-based."),
+    fmt: str = typer.Option("npy", "--format", "-f", help=FORMAT_HELP),
+    jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel processes."),
+    scale_invariant: bool = typer.Option(False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs that exist (default: skip them, so a re-run resumes)."),
+):
+    """Convert many depth files to normal files, in parallel; a re-run skips finished outputs.
+
+    Exit status: 0 when every file was written or skipped, 1 when some file failed
+    (each is named), 2 for a usage error.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from .convert import convert as convert_, plan_tasks
+
+    _check_format(fmt)
+    if jobs < 1:
+        fail(f"--jobs: expected a positive integer, got {jobs}")
+    try:
+        from .io.intrinsics import resolve_intrinsics
+
+        cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
+        columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+        with Progress(*columns, console=err_console, transient=True) as bar:
+            task = bar.add_task("convert", total=None)
+
+            def advance(result):
+                if result.status == "error":
+                    bar.console.print(f"[bold red]failed:[/] {result.message}", highlight=False, soft_wrap=True)
+                bar.advance(task)
+
+            bar.update(task, total=len(plan_tasks(inputs, output_dir, fmt)))
+            summary = convert_(inputs, output_dir, method=method, fmt=fmt, depth_scale=depth_scale, intrinsics=cam,
+                               jobs=jobs, overwrite=overwrite, progress=advance, scale_invariant=scale_invariant)
+    except KeyboardInterrupt:
+        fail("interrupted: finished outputs are complete; run the same command again to do the rest", 130)
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    console.print(f"{summary.written} written, {summary.skipped} skipped (output existed), {len(summary.errors)} failed "
+                  f"-> {output_dir}", highlight=False)
+    if summary.errors:
+        for r in summary.errors:
+            err_console.print(f"[bold red]error:[/] {r.message}", highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
 
 
 def main():  # pragma: no cover

@@ -13,6 +13,7 @@ Levels are Easy, Medium and Hard. Depth files may also be gzip-compressed
 from __future__ import annotations
 
 import gzip
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,8 +56,8 @@ def read_params(path) -> Intrinsics:
         fx, fy, u0, v0 = (float(x) for x in fields[:4])
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read 3F2N params.txt ({exc.strerror or exc})") from exc
-    except ValueError as exc:
-        raise DataFileError(f"{path}: expected 'fx fy u0 v0 count' numbers, got {path.read_text()[:80]!r}") from exc
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise DataFileError(f"{path}: expected 'fx fy u0 v0 count' numbers, got {path.read_bytes()[:80]!r}") from exc
     return Intrinsics(fx, fy, u0 - 1.0, v0 - 1.0)
 
 
@@ -67,8 +68,8 @@ def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
         raw = gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_bytes()
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read depth file ({exc.strerror or exc})") from exc
-    except (EOFError, gzip.BadGzipFile) as exc:
-        raise DataFileError(f"{path}: corrupt gzip stream ({exc})") from exc
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise DataFileError(f"{path}: truncated or corrupt gzip stream ({exc})") from exc
     expected = shape[0] * shape[1] * 4
     if len(raw) != expected:
         raise DataFileError(f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}), got {len(raw)}")

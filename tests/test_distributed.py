@@ -131,7 +131,7 @@ def wait_for_marker(real, task, settings, *, victim, marker, seconds):
 def client():
     if distributed is None:  # pragma: no cover
         pytest.skip('dask.distributed is not installed (pip install "surfnorm[dask]")')
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
     c = distributed.Client(cluster)
     yield c
     c.close()
@@ -147,7 +147,7 @@ def inputs(tmp_path_factory):
 def local_outputs(inputs, tmp_path_factory):
     """The local path's outputs: the reference every cluster run must match byte for byte."""
     out = tmp_path_factory.mktemp("local")
-    results = convert(inputs, out, **OPTIONS)
+    results = convert(inputs, out, **OPTIONS).results
     assert sorted(r.status for r in results) == ["written"] * N_FILES
     return out
 
@@ -182,7 +182,7 @@ def assert_same_bytes(out: Path, reference: Path, inputs):
 @needs_dask
 def test_cluster_outputs_identical_to_local(client, inputs, local_outputs, tmp_path):
     seen = []
-    results = convert(inputs, tmp_path, client=client, progress=seen.append, **OPTIONS)
+    results = convert(inputs, tmp_path, client=client, progress=seen.append, **OPTIONS).results
     assert_same_bytes(tmp_path, local_outputs, inputs)
     assert sorted(r.status for r in results) == ["written"] * N_FILES
     assert sorted(r.input.name for r in seen) == sorted(p.name for p in inputs)  # every file reported once
@@ -192,7 +192,7 @@ def test_cluster_outputs_identical_to_local(client, inputs, local_outputs, tmp_p
 def test_rerun_skips_finished_outputs(client, inputs, local_outputs, tmp_path):
     convert(inputs[:30], tmp_path, client=client, **OPTIONS)
     before = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
-    results = convert(inputs, tmp_path, client=client, shard_size=7, **OPTIONS)
+    results = convert(inputs, tmp_path, client=client, shard_size=7, **OPTIONS).results
     status = {r.input.name: r.status for r in results}
     assert [status[p.name] for p in inputs] == ["skipped"] * 30 + ["written"] * 70
     assert {n: (tmp_path / n).stat().st_mtime_ns for n in before} == before  # not rewritten
@@ -205,7 +205,7 @@ def test_bad_input_is_one_error_and_the_rest_go_on(client, inputs, local_outputs
     corrupt.parent.mkdir()
     corrupt.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
     out = tmp_path / "out"
-    results = convert([*inputs[:20], corrupt], out, client=client, shard_size=4, **OPTIONS)
+    results = convert([*inputs[:20], corrupt], out, client=client, shard_size=4, **OPTIONS).results
     errors = [r for r in results if r.status == "error"]
     assert [r.input for r in errors] == [corrupt]
     assert "d999.png" in errors[0].message
@@ -239,7 +239,7 @@ def test_worker_killed_mid_write_loses_nothing(client, inputs, local_outputs, pa
     out = tmp_path / "out"
     # shard 4 is d040..d049: the worker writes d040 and d041, then dies halfway through writing d042
     patched(die_mid_write, victim="d042.png", marker=str(marker))
-    results = convert(inputs, out, client=client, shard_size=10, **OPTIONS)
+    results = convert(inputs, out, client=client, shard_size=10, **OPTIONS).results
     assert marker.exists()  # a worker really died
     status = {r.input.name: r.status for r in results}
     assert len(results) == N_FILES and len(status) == N_FILES
@@ -258,7 +258,7 @@ def test_file_that_kills_every_worker_is_one_error(client, inputs, local_outputs
     out = tmp_path / "out"
     patched(die_mid_write, victim="d013.png")
     few = inputs[:20]
-    results = convert(few, out, client=client, shard_size=5, **OPTIONS)
+    results = convert(few, out, client=client, shard_size=5, **OPTIONS).results
     errors = [r for r in results if r.status == "error"]
     assert [r.input.name for r in errors] == ["d013.png"]
     assert "worker process died" in errors[0].message and "d013.png" in errors[0].message
@@ -286,36 +286,18 @@ def test_bad_shard_size(bad):
         run_on_dask([], ConvertSettings(), client=None, on_result=print, shard_size=bad)
 
 
-def test_remove_stale_temps_matches_atomic_write(tmp_path):
-    """The sweep's pattern is atomic_write's naming: capture a real temporary name and sweep a copy of it."""
-    from surfnorm.distributed import remove_stale_temps
-    from surfnorm.io._atomic import atomic_write
-
-    target = tmp_path / "a" / "frame.npy"
-    target.parent.mkdir()
-    leftovers = tmp_path / "b"
-    leftovers.mkdir()
-    atomic_write(target, lambda tmp: (tmp.write_bytes(b"x"), (leftovers / tmp.name).write_bytes(b"half")))
-    keep = ["frame.npy", ".other.npy.abc.tmp.npy", ".frame.npy.abc.tmp.png", "frame.npy.abc.tmp.npy"]
-    for name in keep:
-        (leftovers / name).write_bytes(b"keep")
-    assert len(listing(leftovers)) == 5
-    assert remove_stale_temps(leftovers / "frame.npy") == 1
-    assert listing(leftovers) == sorted(keep)
-    assert listing(target.parent) == ["frame.npy"]
-
-
-def test_missing_dask_says_how_to_install(monkeypatch, tmp_path):
+def test_missing_dask_says_how_to_install(monkeypatch, inputs, tmp_path):
     from surfnorm.distributed import cluster_client, run_on_dask
 
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
     hint = r'pip install "surfnorm\[dask\]"'
-    tasks = plan_tasks([tmp_path / "d.png"], tmp_path, "npy")
+    tasks = plan_tasks(inputs[:3], tmp_path, "npy")
     with pytest.raises(MissingDependencyError, match=hint) as info:
         run_on_dask(tasks, ConvertSettings(), client=object(), on_result=print)
     assert isinstance(info.value, ImportError)
     with pytest.raises(MissingDependencyError, match=hint):
-        convert([tmp_path / "d.png"], tmp_path / "out", client=object(), **OPTIONS)
+        convert(inputs[:3], tmp_path / "out", client=object(), **OPTIONS)
+    assert listing(tmp_path / "out") == []  # nothing was converted on the side
     with pytest.raises(MissingDependencyError, match=hint):
         with cluster_client(local_workers=2):
             pass
@@ -350,3 +332,69 @@ def test_cluster_client_unreachable_address():
     with pytest.raises(ConnectionError, match=r"cluster address 'tcp://127.0.0.1:9': no Dask scheduler answered there"):
         with cluster_client("tcp://127.0.0.1:9", timeout=1.0):
             pass
+
+
+# --- the command line -------------------------------------------------------------------------------
+
+def cli(*args):
+    from typer.testing import CliRunner
+
+    from surfnorm.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert "Traceback" not in result.output, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    return result
+
+
+CAMERA_FLAGS = ["--depth-scale", "1000", "--fx", CAM.fx, "--fy", CAM.fy, "--cx", CAM.cx, "--cy", CAM.cy]
+
+
+@needs_dask
+def test_cli_cluster_address(client, inputs, local_outputs, tmp_path):
+    out = tmp_path / "out"
+    result = cli("convert", inputs[0].parent / "d00*.png", out, *CAMERA_FLAGS,
+                 "--cluster", client.scheduler.address, "--shard-size", 3)
+    assert result.exit_code == 0, result.output
+    assert "10 written, 0 skipped (output existed), 0 failed" in result.stdout
+    assert_same_bytes(out, local_outputs, inputs[:10])
+
+
+@needs_dask
+def test_cli_local_cluster(inputs, local_outputs, tmp_path):
+    out = tmp_path / "out"
+    result = cli("convert", inputs[0].parent / "d01*.png", out, *CAMERA_FLAGS, "--local-cluster", 1)
+    assert result.exit_code == 0, result.output
+    assert_same_bytes(out, local_outputs, inputs[10:20])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--cluster", "tcp://127.0.0.1:9", "--local-cluster", 2], "--cluster and --local-cluster: expected one of them, got both"),
+    (["--local-cluster", 2, "--jobs", 2], "--jobs: a local process pool and a Dask cluster are alternatives"),
+    (["--shard-size", 8], "--shard-size: applies to a Dask run; add --cluster ADDRESS or --local-cluster N"),
+    (["--local-cluster", 2, "--shard-size", 0], "--shard-size: expected a positive integer, got 0"),
+    (["--local-cluster", 0], "local_workers: expected a positive whole number, got 0"),
+])
+def test_cli_usage_errors(inputs, tmp_path, args, message):
+    result = cli("convert", inputs[0], tmp_path / "out", *CAMERA_FLAGS, *args)
+    assert result.exit_code == 2
+    assert message in " ".join(result.stderr.split())
+
+
+@needs_dask
+def test_cli_unreachable_cluster(inputs, tmp_path):
+    import dask
+
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        result = cli("convert", inputs[0], tmp_path / "out", *CAMERA_FLAGS, "--cluster", "tcp://127.0.0.1:9")
+    assert result.exit_code == 2
+    assert "cluster address 'tcp://127.0.0.1:9': no Dask scheduler answered there" in " ".join(result.stderr.split())
+
+
+def test_cli_without_dask_says_how_to_install(monkeypatch, inputs, tmp_path):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    for option in (["--cluster", "tcp://127.0.0.1:8786"], ["--local-cluster", 2]):
+        result = cli("convert", inputs[0], tmp_path / "out", *CAMERA_FLAGS, *option)
+        assert result.exit_code == 2
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and 'pip install "surfnorm[dask]"' in lines[0], result.stderr

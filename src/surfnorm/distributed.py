@@ -34,13 +34,14 @@ Why a dead worker loses nothing
   the scheduler gave up on that is still running), both renames put the same
   bytes in place: no file is ever written twice with different content.
 * A process killed between creating its temporary file and the rename leaves
-  that temporary file behind (its ``finally`` never runs). After converting its
-  files, every shard removes leftover temporary files of its own outputs
-  (:func:`remove_stale_temps`), so the retry of a killed shard cleans up after
-  the attempt that died, and a re-run cleans up after a killed run.
+  that temporary file behind (its cleanup never runs). When all shards are
+  done, the temporary files beside the planned outputs are removed, as
+  :func:`surfnorm.convert.convert` does before a run.
 
-Inputs and outputs are read and written by the workers, not by the client:
-the paths must name the same files on every worker (a shared filesystem).
+Inputs are read and outputs written by the workers, and the client plans the
+tasks (lists input folders, creates the output folder, sweeps temporaries):
+the paths must name the same files on every worker and on the machine that
+runs ``convert`` (a shared filesystem, e.g. from a cluster's login node).
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ from typing import Callable, Iterator, Sequence
 
 from .errors import InputError, MissingDependencyError
 
-__all__ = ["run_on_dask", "default_shard_size", "cluster_client", "remove_stale_temps", "INSTALL_HINT"]
+__all__ = ["run_on_dask", "default_shard_size", "cluster_client", "INSTALL_HINT"]
 
 INSTALL_HINT = 'pip install "surfnorm[dask]"'
 
@@ -96,39 +97,11 @@ def default_shard_size(n_tasks: int, n_threads: int) -> int:
     return max(MIN_SHARD, min(MAX_SHARD, per_thread))
 
 
-def remove_stale_temps(output: Path) -> int:
-    """Remove temporary files that a killed writer of ``output`` left behind; return how many.
-
-    The pattern is the one :func:`surfnorm.io._atomic.atomic_write` uses
-    (``.<name>.<random>.tmp<suffix>`` beside the target).
-    """
-    output = Path(output)
-    removed = 0
-    for tmp in output.parent.glob(f".{output.name}.*.tmp{output.suffix}"):
-        try:
-            tmp.unlink()
-            removed += 1
-        except FileNotFoundError:  # removed by an overlapping attempt
-            pass
-    return removed
-
-
-def _sweep(outputs) -> None:
-    for output in outputs:
-        try:
-            remove_stale_temps(output)
-        except OSError:  # an unreadable output folder was already reported by convert_file
-            pass
-
-
 def _convert_shard(tasks, settings):
-    """One Dask task: convert ``tasks`` in order, then sweep their stale temporaries."""
-    # the module, looked up at call time (``surfnorm.convert`` the attribute is the function)
+    """One Dask task: convert ``tasks`` in order."""
+    # the module, looked up at call time (the attribute ``surfnorm.convert`` is the function)
     convert = importlib.import_module("surfnorm.convert")
-
-    results = [convert.convert_file(task, settings) for task in tasks]
-    _sweep([task.output for task in tasks])
-    return results
+    return [convert.convert_file(task, settings) for task in tasks]
 
 
 def _shards(tasks: Sequence, size: int) -> list[list]:
@@ -161,7 +134,7 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
     """
     distributed = _require_distributed()
     from ._validate import check_positive_int
-    from .convert import FileResult
+    from .convert import FileResult, _remove_stale_temporaries
 
     tasks = list(tasks)
     if shard_size is None:
@@ -177,7 +150,6 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
     shard_of = {}   # future key -> its tasks
     suspects = deque()  # files of shards that kept killing workers, to be tried one at a time
     lane = None     # key of the one suspect in flight
-    lost = []       # outputs of files that killed every worker that tried them
     counter = 0
 
     def submit(shard):
@@ -203,7 +175,6 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
                 suspects.extend(shard)
                 shard_results = []
             else:
-                lost.append(shard[0].output)
                 shard_results = [FileResult(shard[0].input, shard[0].output, "error",
                                             f"{shard[0].input}: the worker process died each time it converted this "
                                             f"file (out of memory, or a crash in a native library?): {exc}")]
@@ -222,8 +193,9 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
             suspect = submit([suspects.popleft()])
             lane = suspect.key
             pending.add(suspect)
-    if lost:  # the attempts that died on these files left temporaries that no shard swept
-        client.submit(_sweep, lost, key=f"surfnorm-sweep-{run_id}", pure=False).result()
+    # A worker killed between creating a temporary file and renaming it left that file behind; the
+    # outputs are complete now, so what remains beside them is debris of dead attempts.
+    _remove_stale_temporaries(tasks)
     return results
 
 
@@ -250,8 +222,9 @@ def cluster_client(address: str | None = None, *, local_workers: int | None = No
             raise ConnectionError(f"cluster address {address!r}: no Dask scheduler answered there ({exc})") from exc
     else:
         n = check_positive_int("local_workers", local_workers)
+        # ":0": any free port for the scheduler's HTTP server (8787 may be another cluster's)
         cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=None)
+                                           dashboard_address=":0")
         client = distributed.Client(cluster)
     try:
         yield client

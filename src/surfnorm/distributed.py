@@ -51,7 +51,6 @@ import math
 import uuid
 from collections import deque
 from contextlib import contextmanager
-from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from .errors import InputError, MissingDependencyError
@@ -60,14 +59,15 @@ __all__ = ["run_on_dask", "default_shard_size", "cluster_client", "INSTALL_HINT"
 
 INSTALL_HINT = 'pip install "surfnorm[dask]"'
 
-#: Shards per worker thread that the default aims for: enough that a slow
-#: shard does not leave the others idle at the end, and that progress moves.
+#: Shards per worker thread that the default aims for: enough that the end of
+#: the run stays balanced (no worker finishing a long shard while the others
+#: idle) and that the progress bar moves.
 SHARDS_PER_THREAD = 4
-#: Smallest default shard: a Dask task costs about a millisecond of scheduler
-#: and network time; 8 files of even a small frame take tens of milliseconds.
+#: Smallest default shard: a Dask task costs the scheduler about a millisecond
+#: plus a network round trip; 8 files of even a small frame take longer.
 MIN_SHARD = 8
-#: Largest default shard: bounds the work redone when a worker dies and the
-#: time between progress updates.
+#: Largest default shard: progress arrives at least every 64 files per thread,
+#: and a million files make about 16,000 tasks, which a scheduler handles well.
 MAX_SHARD = 64
 
 
@@ -83,15 +83,17 @@ def _require_distributed():
 
 
 def default_shard_size(n_tasks: int, n_threads: int) -> int:
-    """The shard size used when none is given.
+    """The shard size used when none is given: ``SHARDS_PER_THREAD`` shards per worker thread, within [8, 64].
 
-    Aim for ``SHARDS_PER_THREAD`` shards per worker thread (load balance at the
-    end of the run, a moving progress bar, little work redone when a worker
-    dies), but never fewer than ``MIN_SHARD`` files per shard (so that Dask's
-    per-task cost, about a millisecond, stays small next to the work: one
-    480x640 frame takes tens of milliseconds to read, estimate and write) and
-    never more than ``MAX_SHARD`` (a dead worker costs at most that many files
-    of work, and progress updates at least that often).
+    The trade-off: every Dask task costs the scheduler about a millisecond and
+    a round trip, so shards of many files make scheduling negligible next to
+    the work (one 480x640 frame takes tens to hundreds of milliseconds to read,
+    estimate and write). Small shards balance the end of the run, move the
+    progress bar more often, and put fewer files on a worker that may die; a
+    dead worker costs little either way: its shard is retried elsewhere and
+    skips the files it had finished, so only the file being written is redone.
+    ``n_threads`` is the cluster's worker threads when the run starts (an
+    adaptive cluster may have none yet: then shards are ``MAX_SHARD`` long).
     """
     per_thread = math.ceil(n_tasks / (SHARDS_PER_THREAD * max(1, n_threads)))
     return max(MIN_SHARD, min(MAX_SHARD, per_thread))

@@ -267,6 +267,26 @@ def test_file_that_kills_every_worker_is_one_error(client, inputs, local_outputs
     client.wait_for_workers(2, timeout=30)
 
 
+def raise_on(real, task, settings, *, victim):
+    """An exception that escapes convert_file, as a worker without surfnorm's dependencies would raise."""
+    if task.input.name == victim:
+        raise RuntimeError("simulated failure outside convert_file")
+    return real(task, settings)
+
+
+@needs_dask
+def test_exception_escaping_convert_file_is_that_files_error(client, inputs, local_outputs, patched, tmp_path):
+    patched(raise_on, victim="d006.png")
+    out = tmp_path / "out"
+    results = convert(inputs[:10], out, client=client, shard_size=5, **OPTIONS).results
+    status = [r.status for r in results]
+    # the shard d005..d009 raised after writing d005; its files were run again one per task
+    assert status == ["written"] * 5 + ["skipped", "error"] + ["written"] * 3
+    assert results[6].message == f"{inputs[6]}: failed on a worker: RuntimeError: simulated failure outside convert_file"
+    rest = [p for p in inputs[:10] if p.name != "d006.png"]
+    assert_same_bytes(out, local_outputs, rest)
+
+
 # --- shard size, temporaries, errors ---------------------------------------------------------------
 
 def test_default_shard_size():

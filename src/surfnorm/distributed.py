@@ -131,8 +131,9 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
     Returns
     -------
     list of FileResult
-        One per task, in the order of ``tasks``. A file whose shard kept
-        killing workers is an ``"error"`` result naming the worker deaths.
+        One per task, in the order of ``tasks``. A file that kept killing
+        workers, or whose conversion raised an exception that escaped
+        ``convert_file``, is an ``"error"`` result saying so.
     """
     distributed = _require_distributed()
     from ._validate import check_positive_int
@@ -183,9 +184,15 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
         except Exception as exc:
             if future.status != "error":  # cancelled, or the client lost the scheduler: not the files' fault
                 raise
-            shard_results = [FileResult(task.input, task.output, "error",
-                                        f"{task.input}: the shard failed on a worker: {type(exc).__name__}: {exc}")
-                             for task in shard]
+            if len(shard) > 1:
+                # convert_file returns its errors, so this one escaped it (a worker that cannot import
+                # a dependency, say): run the files one per task so each gets its own result
+                for task in shard:
+                    pending.add(submit([task]))
+                shard_results = []
+            else:
+                shard_results = [FileResult(shard[0].input, shard[0].output, "error",
+                                            f"{shard[0].input}: failed on a worker: {type(exc).__name__}: {exc}")]
         finally:
             future.release()
         for task, result in zip(shard, shard_results):

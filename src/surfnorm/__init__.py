@@ -7,6 +7,7 @@ estimators the paper compares against, behind one front door::
     normals = surfnorm.estimate(depth, K, method="d2nt_v3")   # (H, W, 3) float32
     surfnorm.methods()                                        # registered names
     surfnorm.refine(normals, depth)                           # MNR on any normal map
+    surfnorm.convert("scans/", "normals/", intrinsics="camera_info.yaml", depth_scale=1000, jobs=4)
 
 Importing surfnorm compiles nothing and imports neither torch nor dask.
 """
@@ -16,6 +17,7 @@ from __future__ import annotations
 from . import metrics
 from ._api import estimate, refine
 from .camera import Intrinsics
+from .convert import convert  # the function; the module stays importable as ``from surfnorm.convert import ...``
 from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
 from .methods import methods
 
@@ -24,6 +26,7 @@ __version__ = "0.1.0"
 __all__ = [
     "estimate",
     "refine",
+    "convert",
     "methods",
     "metrics",
     "Intrinsics",

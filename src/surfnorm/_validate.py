@@ -43,6 +43,9 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
     if arr.ndim not in ndims:
         want = "a 2-D array (H, W) or a stack (N, H, W)" if batch else "a 2-D array (H, W)"
         raise InputError(f"{name}: expected {want}, got {_describe(arr)}")
+    if arr.ndim == 3 and arr.shape[-1] <= 4 < arr.shape[-2]:
+        raise InputError(f"{name}: expected one depth channel, (H, W) or a stack (N, H, W), got shape {arr.shape}, "
+                         f"which looks like an image with {arr.shape[-1]} channel(s); pass depth[..., 0] if that channel is depth")
     if arr.shape[-2] < MIN_SIZE or arr.shape[-1] < MIN_SIZE:
         raise InputError(f"{name}: expected at least {MIN_SIZE}x{MIN_SIZE} pixels, got shape {arr.shape}")
     if arr.ndim == 3 and arr.shape[0] == 0:

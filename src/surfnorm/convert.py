@@ -193,8 +193,14 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
     check_choice("fmt", fmt, NORMAL_FORMATS)
     output_dir = Path(output_dir)
     out_root = output_dir.resolve()
-    # outputs of an earlier run inside the input folder (e.g. convert data data/normals) are not inputs
-    sources = [(f, r) for f, r in _sources(inputs) if out_root not in f.resolve().parents]
+    sources = _sources(inputs)
+    if isinstance(inputs, (str, os.PathLike)) and not Path(inputs).is_file():
+        roots = {r.resolve() for _, r in sources} or {Path(os.fspath(inputs)).resolve()}
+        if out_root in roots:
+            raise InputError(f"output_dir: expected a folder other than the input folder {os.fspath(inputs)}, got {output_dir}; "
+                             "its outputs would be read as inputs by the next run")
+        # outputs of an earlier run inside the input folder (e.g. convert data data/normals) are not inputs
+        sources = [(f, r) for f, r in sources if out_root not in f.resolve().parents]
     if not sources:
         raise InputError(f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}")
     tasks, seen = [], {}

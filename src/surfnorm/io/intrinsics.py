@@ -12,7 +12,7 @@ file                what is read
 ``.yaml``/``.yml``  the same keys, or a ROS ``camera_info``: ``camera_matrix:
                     {rows: 3, cols: 3, data: [...]}`` (camera_calibration) or
                     ``K: [...]`` / ``k: [...]`` (the message, ROS 1 / ROS 2);
-                    OpenCV FileStorage files (``%YAML:1.0``) with a matrix named
+                    OpenCV FileStorage files (``!!opencv-matrix``) with a matrix named
                     ``camera_matrix``, ``K`` or ``cameraMatrix``
 ``.txt``            4 or 5 numbers: the 3F2N ``params.txt`` (``fx fy u0 v0
                     [count]``, 1-based principal point, converted); 9 numbers:
@@ -121,7 +121,7 @@ def _read_opencv_yaml(path: Path) -> Intrinsics:
 
 
 def _read_yaml(path: Path, text: str) -> Intrinsics:
-    if text.lstrip().startswith("%YAML:1.0"):
+    if text.lstrip().startswith("%YAML:1.0") or "!!opencv-matrix" in text:
         return _read_opencv_yaml(path)
     try:
         import yaml

@@ -1,0 +1,111 @@
+"""Depth units: the scale-invariant mode (metres vs millimetres) and disparity input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import surfnorm
+from surfnorm.errors import InputError
+from surfnorm.io import disparity_to_depth
+from surfnorm.noise import SensorNoise, add_noise
+from surfnorm.units import REFERENCE_DEPTH
+from tests.surfaces import angle_deg, camera, sphere
+from tests.test_validity import assert_same_or_mnr_candidate, mnr_recipe, raw_normals
+
+METHODS = list(surfnorm.methods())
+K = camera(64, 48)
+
+
+def sensor_millimetres(seed=0):
+    """A sphere in front of a wall as a 16-bit millimetre sensor gives it: noise, 1 mm steps, holes at the rim."""
+    z, _, hit = sphere(K, 48, 64, centre=(0.0, 0.0, 1.5), radius=0.4)
+    z = np.where(hit, z, 2.5)
+    noisy = add_noise(z, SensorNoise(dropout=0.02), seed=seed)
+    return np.rint(noisy.astype(np.float64) * 1000).astype(np.uint16)
+
+
+@pytest.mark.parametrize("method", METHODS + ["cp2tv+mnr"])
+def test_metres_and_millimetres_give_the_same_normals(method):
+    mm = sensor_millimetres()
+    metres = (mm / 1000.0).astype(np.float32)
+    a = surfnorm.estimate(mm, K, method=method, scale_invariant=True, fill=np.nan)
+    b = surfnorm.estimate(metres, K, method=method, scale_invariant=True, fill=np.nan)
+    assert_same_or_mnr_candidate(method, b, a, raw_normals(method, mm, None, K, True), 1e-4)
+    if method in ("d2nt_basic", "d2nt_v2", "cp2tv"):
+        np.testing.assert_allclose(b, a, atol=1e-4, equal_nan=True)
+
+
+def test_the_paper_faithful_default_depends_on_the_unit():
+    mm = sensor_millimetres()
+    a = surfnorm.estimate(mm, K, method="d2nt_v2", fill=np.nan)
+    b = surfnorm.estimate((mm / 1000.0).astype(np.float32), K, method="d2nt_v2", fill=np.nan)
+    both = ~np.isnan(a[..., 0]) & ~np.isnan(b[..., 0])
+    differ = np.abs(a - b)[both].max(-1) > 1e-3
+    assert differ.mean() > 0.05  # the absolute DAG threshold: what the scale-invariant mode removes
+
+
+def test_the_two_modes_agree_at_the_reference_depth():
+    z = sensor_millimetres().astype(np.float64)
+    valid = z > 0
+    z = (z * (REFERENCE_DEPTH / np.median(z[valid]))).astype(np.float32)
+    assert np.median(z[valid]) == np.float32(REFERENCE_DEPTH)
+    for method in METHODS:
+        np.testing.assert_array_equal(surfnorm.estimate(z, K, method=method, scale_invariant=True),
+                                      surfnorm.estimate(z, K, method=method), err_msg=method)
+
+
+def test_the_reference_is_per_frame_and_after_the_mask():
+    mm = sensor_millimetres().astype(np.float32)
+    stack = np.stack([mm, mm / 1000])
+    n = surfnorm.estimate(stack, K, method="d2nt_v2", scale_invariant=True)
+    np.testing.assert_allclose(n[1], n[0], atol=1e-4)
+    np.testing.assert_array_equal(n[0], surfnorm.estimate(mm, K, method="d2nt_v2", scale_invariant=True))
+    # a far background changes the median, and so the result, unless it is masked out
+    mask = mm < 2000
+    far = np.where(mask, mm, 9000).astype(np.float32)
+    masked = surfnorm.estimate(far, K, method="d2nt_v2", scale_invariant=True, mask=mask)
+    np.testing.assert_array_equal(masked, surfnorm.estimate(mm, K, method="d2nt_v2", scale_invariant=True, mask=mask))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_disparity_input(method):
+    z, gt, hit = sphere(K, 48, 64, centre=(0.0, 0.0, 1.5), radius=0.4)
+    fx, baseline = K[0, 0], 0.05
+    d = np.where(hit, fx * baseline / np.where(hit, z, 1), 0.0).astype(np.float32)
+    n = surfnorm.estimate(d, K, method=method, disparity=True, fill=np.nan)
+    # the same as the metric depth in the scale-invariant mode, whatever the (unknown) baseline
+    depth = disparity_to_depth(d, baseline, fx)
+    np.testing.assert_allclose(n, surfnorm.estimate(depth, K, method=method, scale_invariant=True, fill=np.nan),
+                               atol=1e-4, equal_nan=True)
+    np.testing.assert_allclose(n, surfnorm.estimate(d * 7.5, K, method=method, disparity=True, fill=np.nan),
+                               atol=1e-4, equal_nan=True)
+    inner = hit & (gt[..., 2] < -0.9)  # the part of the sphere that faces the camera
+    assert inner.sum() > 100
+    # MNR copies a neighbour's normal: on this 12-pixel-radius sphere that is a one-pixel (about 3 degree) step
+    assert np.median(angle_deg(n[inner], gt[inner])) < (4.0 if mnr_recipe(method) else 0.5)
+
+
+def test_disparity_to_depth():
+    d = np.array([[10.0, 0.0, -1.0, np.nan, np.inf, 40.0]])
+    z = disparity_to_depth(d, 0.1, 500.0)
+    np.testing.assert_allclose(z, [[5.0, 0, 0, 0, 0, 1.25]])
+    assert z.dtype == np.float32
+    with pytest.raises(InputError, match=r"baseline: expected a positive finite number, got 0"):
+        disparity_to_depth(d, 0, 500.0)
+    with pytest.raises(InputError, match=r"fx: expected a positive finite number, got -5"):
+        disparity_to_depth(d, 0.1, -5)
+
+
+def test_all_invalid_in_the_scale_invariant_mode():
+    n = surfnorm.estimate(np.zeros((5, 5)), K, scale_invariant=True, fill=np.nan)
+    assert np.isnan(n).all()
+
+
+def test_extreme_dynamic_range_never_uses_an_overflowed_value():
+    z = np.full((6, 6), 1e-30, np.float32)
+    z[:, 3:] = 1e30
+    n = surfnorm.estimate(z, K, method="d2nt_basic", scale_invariant=True, fill=np.nan)
+    ok = ~np.isnan(n[..., 0])
+    assert np.isfinite(n[ok]).all()
+    np.testing.assert_allclose(np.linalg.norm(n[ok], axis=-1), 1, atol=1e-5)

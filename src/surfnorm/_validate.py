@@ -131,3 +131,9 @@ def check_window(name: str, value) -> int:
         raise InputError(f"{name}: expected an odd integer >= 3 (pixels per side of the square neighbourhood "
                          f"centred on each pixel), got {value!r}")
     return int(value)
+
+
+def check_positive_int(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise InputError(f"{name}: expected a positive whole number, got {value!r}")
+    return int(value)

@@ -10,6 +10,7 @@ from typing import Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from .errors import SurfnormError
@@ -21,7 +22,7 @@ err_console = Console(stderr=True)
 
 
 def fail(message: str, code: int = 2):
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
 
 
@@ -155,12 +156,18 @@ def convert(
     jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel processes."),
     scale_invariant: bool = typer.Option(False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs that exist (default: skip them, so a re-run resumes)."),
+    cluster: Optional[str] = typer.Option(None, "--cluster", metavar="ADDRESS",
+                                          help="Run on the Dask scheduler at ADDRESS (tcp://host:8786); every worker must see INPUT and OUTPUT_DIR at the same paths."),
+    local_cluster: Optional[int] = typer.Option(None, "--local-cluster", metavar="N", help="Run on a Dask LocalCluster of N worker processes."),
+    shard_size: Optional[int] = typer.Option(None, "--shard-size", help="Files per Dask task (default: about 4 per worker thread, 8 to 64 files)."),
 ):
     """Convert many depth files to normal files, in parallel; a re-run skips finished outputs.
 
     Exit status: 0 when every file was written or skipped, 1 when some file failed
     (each is named), 2 for a usage error.
     """
+    from contextlib import nullcontext
+
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from .convert import convert as convert_, plan_tasks
@@ -168,12 +175,24 @@ def convert(
     _check_format(fmt)
     if jobs < 1:
         fail(f"--jobs: expected a positive integer, got {jobs}")
+    on_dask = cluster is not None or local_cluster is not None
+    if cluster is not None and local_cluster is not None:
+        fail("--cluster and --local-cluster: expected one of them, got both")
+    if on_dask and jobs != 1:
+        fail("--jobs: a local process pool and a Dask cluster are alternatives; drop --jobs or the cluster option")
+    if shard_size is not None and not on_dask:
+        fail("--shard-size: applies to a Dask run; add --cluster ADDRESS or --local-cluster N")
+    if shard_size is not None and shard_size < 1:
+        fail(f"--shard-size: expected a positive integer, got {shard_size}")
     try:
         from .io.intrinsics import resolve_intrinsics
 
         cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
         columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-        with Progress(*columns, console=err_console, transient=True) as bar:
+        if on_dask:
+            from .distributed import cluster_client
+        dask_client = cluster_client(cluster, local_workers=local_cluster) if on_dask else nullcontext()
+        with dask_client as client, Progress(*columns, console=err_console, transient=True) as bar:
             task = bar.add_task("convert", total=None)
 
             def advance(result):
@@ -183,7 +202,8 @@ def convert(
 
             bar.update(task, total=len(plan_tasks(inputs, output_dir, fmt)))
             summary = convert_(inputs, output_dir, method=method, fmt=fmt, depth_scale=depth_scale, intrinsics=cam,
-                               jobs=jobs, overwrite=overwrite, progress=advance, scale_invariant=scale_invariant)
+                               jobs=jobs, overwrite=overwrite, progress=advance, scale_invariant=scale_invariant,
+                               client=client, shard_size=shard_size)
     except KeyboardInterrupt:
         fail("interrupted: finished outputs are complete; run the same command again to do the rest", 130)
     except (SurfnormError, OSError) as exc:

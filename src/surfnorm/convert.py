@@ -332,7 +332,7 @@ def _pool_context():
 
 
 def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", depth_scale: float | None = None,
-            intrinsics=None, jobs: int = 1, client=None, overwrite: bool = False,
+            intrinsics=None, jobs: int = 1, client=None, shard_size: int | None = None, overwrite: bool = False,
             progress: Callable[[FileResult], None] | None = None, scale_invariant: bool = False,
             **options) -> ConvertSummary:
     """Convert depth files to normal files; see :func:`plan_tasks` for ``inputs`` and the output names.
@@ -355,6 +355,8 @@ def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", de
         Processes (1: in this process).
     client : dask.distributed.Client, optional
         Run the tasks on this cluster with ``surfnorm.distributed.run_on_dask`` instead.
+    shard_size : int, optional
+        With ``client``: files per Dask task (see ``surfnorm.distributed.default_shard_size``).
     overwrite : bool
         Replace outputs that exist instead of skipping them.
     progress : callable, optional
@@ -393,7 +395,8 @@ def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", de
         from .distributed import run_on_dask
 
         index = {t: i for i, t in enumerate(tasks)}
-        run_on_dask(tasks, settings, client, lambda r: done(index[ConvertTask(r.input, r.output)], r))
+        run_on_dask(tasks, settings, client, lambda r: done(index[ConvertTask(r.input, r.output)], r),
+                    shard_size=shard_size)
         for i, t in enumerate(tasks):  # a task the cluster never answered is an error, not a silent gap
             results.setdefault(i, FileResult(t.input, t.output, "error", f"{t.input}: no result from the Dask cluster"))
     elif jobs == 1 or len(tasks) == 1:

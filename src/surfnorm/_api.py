@@ -37,7 +37,7 @@ def _run(method, refined, options, z, valid, cam):
     out = np.empty(z.shape + (3,), dtype=np.float32)
     mnr_dlf = options.pop("mnr_dlf", None)
     if method.mnr or refined:
-        from .refine import mnr
+        from .mnr import mnr
 
         raw = method.run(z, valid, cam, np.empty_like(out), **options)
         if method.mnr and refined:  # e.g. d2nt_v3+mnr: refine twice
@@ -116,7 +116,7 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
 
     Each pixel takes the normal of the smoothest pixel (smallest |Laplacian of
     depth| under ``dlf``) among its 4-neighbours and itself; see
-    :mod:`surfnorm.refine`.
+    :mod:`surfnorm.mnr`.
 
     Parameters
     ----------
@@ -131,7 +131,7 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     fill : float
         Value for pixels without a valid normal.
     """
-    from .refine import mnr
+    from .mnr import mnr
 
     z = as_depth(depth, batch=False)
     n = as_normals(normals, z.shape)

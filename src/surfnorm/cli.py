@@ -69,7 +69,11 @@ def estimate(
         if output.is_dir():
             fail(f"output: expected a file prefix, got the directory {output}")
         npy = output.with_name(output.name + ".npy")
-        atomic_write(npy, lambda tmp: np.save(open(tmp, "wb"), normals))
+        def save(tmp):
+            with open(tmp, "wb") as fh:
+                np.save(fh, normals)
+
+        atomic_write(npy, save)
         write_rgb8(output.with_name(output.name + ".png"), normal_to_rgb8(normals))
     except (SurfnormError, OSError) as exc:
         fail(str(exc))

@@ -65,10 +65,10 @@ def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
     path = Path(path)
     try:
         raw = gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_bytes()
+    except (EOFError, gzip.BadGzipFile) as exc:  # (BadGzipFile is an OSError: test it first)
+        raise DataFileError(f"{path}: corrupt gzip stream ({exc})") from exc
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read depth file ({exc.strerror or exc})") from exc
-    except (EOFError, gzip.BadGzipFile) as exc:
-        raise DataFileError(f"{path}: corrupt gzip stream ({exc})") from exc
     expected = shape[0] * shape[1] * 4
     if len(raw) != expected:
         raise DataFileError(f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}), got {len(raw)}")

@@ -1,0 +1,186 @@
+"""The PyTorch backend: batched, differentiable normals from depth, on any device.
+
+::
+
+    import surfnorm.torch
+    normals = surfnorm.torch.estimate(depth, K, method="d2nt_v3")   # depth (B, 1, H, W) -> (B, 3, H, W)
+    layer = surfnorm.torch.DepthToNormal(method="d2nt_v2", dlf="alpha")
+
+Same method names, options and conventions as :func:`surfnorm.estimate`
+(camera frame x right, y down, z forward; unit normals facing the camera;
+``fill`` where no valid normal exists; 0-based pixel centres), computed with
+tensor operations instead of Numba kernels. Needs the ``torch`` extra
+(``pip install surfnorm[torch]``); ``import surfnorm`` never imports torch.
+
+* Device and dtype follow ``depth``: float32 and float64 are computed as
+  they are; float16 and bfloat16 are computed in float32 and returned in
+  their own dtype; integer depth gives float32. 3F2N runs in float64 inside
+  (see :func:`surfnorm.torch._ops.three_f2n`).
+* No host synchronisation in the forward pass: every per-pixel choice is a
+  ``torch.where`` on masks, so it runs asynchronously on a GPU and traces
+  under ``torch.compile``.
+* Differentiable with respect to ``depth`` for every method. Where MNR or the
+  truncated softmin select a neighbour, the gradient flows through the
+  selected value; invalid pixels get zero gradient.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+try:
+    import torch
+except ImportError as exc:  # pragma: no cover - exercised only without torch
+    from ..errors import MissingDependencyError
+
+    raise MissingDependencyError(
+        "surfnorm.torch needs PyTorch: install the extra with `pip install surfnorm[torch]`") from exc
+
+from ..errors import InputError
+from ..methods import BORDER_OPTIONS, DAG_OPTIONS, FILL, MNR_OPTIONS, MNR_SUFFIX, Option
+from . import _ops
+from ._validate import as_depth, as_intrinsics, as_mask, compute_dtype
+
+__all__ = ["estimate", "DepthToNormal", "methods"]
+
+
+@dataclass(frozen=True)
+class TorchMethod:
+    """A method of the torch backend: ``run(grid, cam, **options)`` -> (B, 3, H, W)."""
+
+    name: str
+    run: Callable
+    options: dict = field(default_factory=dict)
+    mnr: bool = False  # the recipe ends with MNR
+
+
+_REGISTRY: dict[str, TorchMethod] = {}
+
+
+def _register(name, run, options=None, mnr=False):
+    _REGISTRY[name] = TorchMethod(name, run, dict(options or {}), mnr)
+
+
+def _d2nt_dag(g, cam, *, dlf, tau, truncate, fill):
+    return _ops.d2nt_dag(g, cam, dlf=dlf, tau=tau, truncate=truncate, fill=fill)
+
+
+_register("d2nt_basic", _ops.d2nt_basic, BORDER_OPTIONS)
+_register("d2nt_v2", _d2nt_dag, DAG_OPTIONS)
+_register("d2nt_v3", _d2nt_dag, DAG_OPTIONS, mnr=True)
+_register("cp2tv", _ops.cp2tv, BORDER_OPTIONS)
+_register("3f2n_mean", lambda g, cam, *, fill: _ops.three_f2n(g, cam, third="mean", fill=fill))
+_register("3f2n_median", lambda g, cam, *, fill: _ops.three_f2n(g, cam, third="median", fill=fill))
+
+
+def _option_specs(method: TorchMethod, refined: bool) -> dict[str, Option]:
+    specs = {"fill": FILL, **method.options}
+    if method.mnr or refined:
+        specs.update(MNR_OPTIONS)
+    return specs
+
+
+def methods() -> dict[str, dict]:
+    """The methods this backend offers, by name, with their options' defaults (any may take ``+mnr``)."""
+    return {m.name: {k: o.default for k, o in _option_specs(m, False).items()} for m in _REGISTRY.values()}
+
+
+def _resolve(name, options: dict) -> tuple[TorchMethod, bool, dict]:
+    if not isinstance(name, str):
+        raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
+    base, refined = (name[: -len(MNR_SUFFIX)], True) if name.endswith(MNR_SUFFIX) else (name, False)
+    if base not in _REGISTRY:
+        raise InputError(f"method: expected one of {', '.join(_REGISTRY)} (optionally followed by {MNR_SUFFIX!r}) "
+                         f"in the torch backend, got {name!r}")
+    method = _REGISTRY[base]
+    specs = _option_specs(method, refined)
+    unknown = sorted(set(options) - set(specs))
+    if unknown:
+        raise InputError(f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, "
+                         f"got unknown option(s) {', '.join(unknown)}")
+    clean = {k: spec.check(k, options[k]) if k in options else spec.default for k, spec in specs.items()}
+    return method, refined, clean
+
+
+def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torch.Tensor:
+    """Estimate surface normals from a batch of depth images.
+
+    Parameters
+    ----------
+    depth : Tensor of shape (B, 1, H, W) or (H, W)
+        Depth along the optical axis, any floating or integer dtype, any
+        device. Pixels with depth 0, negative, NaN or inf are invalid and never used.
+    K : Tensor or array_like of shape (B, 3, 3) or (3, 3), or Intrinsics
+        [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with 0-based pixel centres. A
+        tensor may live on depth's device or on the CPU; its values are not
+        checked (that would wait for the device); other forms are.
+    method : str
+        One of :func:`surfnorm.torch.methods` (d2nt_basic, d2nt_v2, d2nt_v3,
+        cp2tv, 3f2n_mean, 3f2n_median), optionally followed by ``+mnr``.
+    mask : Tensor of bool, shape (B, 1, H, W) or (H, W), optional
+        False where depth must not be used; an (H, W) mask applies to every frame.
+    **options
+        The method's options, as in :func:`surfnorm.estimate` (``dlf``,
+        ``tau``, ``truncate``, ``border``, ``mnr_dlf``, ``fill``).
+
+    Returns
+    -------
+    Tensor of shape (B, 3, H, W)
+        Unit normals (x right, y down, z forward) facing the camera, with
+        ``fill`` (default 0.0) in all three components where there is no
+        valid normal. An (H, W) depth gives B = 1. Same device as depth;
+        dtype that of depth (float32 for integer depth).
+
+    Raises
+    ------
+    InputError (a ValueError)
+        Bad depth, K, mask, method name or option; the message names which.
+
+    Examples
+    --------
+    >>> import torch, surfnorm.torch
+    >>> K = torch.tensor([[500.0, 0, 31.5], [0, 500.0, 23.5], [0, 0, 1]])
+    >>> n = surfnorm.torch.estimate(torch.full((2, 1, 48, 64), 2.0), K, method="d2nt_basic")
+    >>> n.shape, n[0, :, 24, 32].tolist()
+    (torch.Size([2, 3, 48, 64]), [0.0, 0.0, -1.0])
+    """
+    method_obj, refined, clean = _resolve(method, options)
+    z, plain = as_depth(depth)
+    user_mask = as_mask(mask, z, plain)
+    work, out_dtype = compute_dtype(z)
+    z = z.to(work)
+    cam = as_intrinsics(K, z.shape[0], z.device, work)
+    valid = torch.isfinite(z) & (z > 0)
+    if user_mask is not None:
+        valid = valid & user_mask
+    # invalid depth -> 1: never read by the estimators, and no NaN even in discarded branches (B x H x W)
+    g = _ops.Grid(torch.where(valid, z, torch.ones_like(z)), valid)
+    mnr_dlf = clean.pop("mnr_dlf", None)
+    normals = method_obj.run(g, cam, **clean)
+    if method_obj.mnr:
+        normals = _ops.mnr(g, normals, dlf=mnr_dlf, fill=clean["fill"])
+    if refined:  # e.g. d2nt_v3+mnr refines twice, as surfnorm.estimate
+        normals = _ops.mnr(g, normals, dlf=mnr_dlf, fill=clean["fill"])
+    return normals.to(out_dtype)
+
+
+class DepthToNormal(torch.nn.Module):
+    """:func:`estimate` as a module: stores the method and its options, nothing else.
+
+    ``DepthToNormal(method="d2nt_v3", **options)(depth, K, mask=None)`` equals
+    ``estimate(depth, K, method=method, mask=mask, **options)``. The options are
+    checked when the module is built.
+    """
+
+    def __init__(self, method: str = "d2nt_v3", **options):
+        super().__init__()
+        _resolve(method, options)
+        self.method = method
+        self.options = dict(options)
+
+    def forward(self, depth: torch.Tensor, K, mask=None) -> torch.Tensor:
+        return estimate(depth, K, method=self.method, mask=mask, **self.options)
+
+    def extra_repr(self) -> str:
+        return ", ".join([f"method={self.method!r}"] + [f"{k}={v!r}" for k, v in self.options.items()])

@@ -40,6 +40,8 @@ TABLE_II = {
 }
 
 #: Table III: (real-time, t in ms, e_A per level, pi per level) by the paper's method name.
+#: As printed, slips included: D2NT's Easy pi (3.05) is not 1.54 x 1.82 = 2.80, and D2NT V2's pi
+#: imply t = 7.1 ms rather than its printed 7.80 (tests/test_bench.py checks pi = e_A t for the rest).
 TABLE_III = {
     "PlaneSVD": (False, 393.69, (2.07, 6.07, 17.59), (813.87, 2389.73, 6923.18)),
     "PlanePCA": (False, 631.88, (2.07, 6.07, 17.59), (1306.29, 3835.59, 11111.92)),
@@ -56,6 +58,7 @@ TABLE_III = {
 }
 
 #: Table IV: e_A per level of 3F2N and CP2TV without and with MNR, and the printed improvement (%).
+#: As printed: CP2TV's improvements (40.8, 15.0, 35.6) do not follow from its e_A (which give 46.2, 20.3, 28.7).
 TABLE_IV = {
     "3F2N": {"w/o MNR": (1.66, 5.69, 15.32), "w/ MNR": (0.82, 4.89, 10.33), "improvement": (50.7, 14.0, 32.5)},
     "CP2TV": {"w/o MNR": (1.69, 6.02, 13.82), "w/ MNR": (0.91, 4.80, 9.86), "improvement": (40.8, 15.0, 35.6)},

@@ -113,12 +113,16 @@ def experiments(cfg: BenchConfig, registered: list[str], peer_names: list[str]) 
     def s(method, noise=0.0, **options):
         return Spec("surfnorm", method, tuple(sorted(options.items())), float(noise))
 
-    out = {"table3": {}, "table2": {}, "table4": {}, "noise": {}}
+    out = {"table3": {}, "table2": {}, "table4": {}, "noise": {}, "faithfulness": {}}
     if "table3" in cfg.tables:
         for name in (cfg.methods if cfg.methods is not None else registered):
             out["table3"][name] = s(name)
         for name in peer_names:
             out["table3"][name] = Spec("peer", name)
+        # the D2NT family as the authors' code computes it (their FD reflects at the image border)
+        for name, options in (("d2nt_basic", {"border": "reflect"}), ("d2nt_v2", {}), ("d2nt_v3", {})):
+            if name in registered:
+                out["faithfulness"][name] = s(name, **options)
     if "table2" in cfg.tables:
         if "d2nt_v2" in registered:
             out["table2"].update({f"D2NT+DAG/{d}": s("d2nt_v2", dlf=d) for d in DLFS})
@@ -312,6 +316,26 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
 
 # ---------------------------------------------------------------------------- the run
 
+class _Clock:
+    """Wall time and CPU time (this process and its finished children) since the last lap."""
+
+    def __init__(self):
+        self.last = self._now()
+
+    @staticmethod
+    def _now():
+        import resource
+
+        own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return time.perf_counter(), own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+    def lap(self) -> dict:
+        now = self._now()
+        out = {"wall_s": round(now[0] - self.last[0], 2), "cpu_s": round(now[1] - self.last[1], 2)}
+        self.last = now
+        return out
+
+
 @dataclass
 class BenchResult:
     config: dict
@@ -342,9 +366,12 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
     peer_names = [n for n in wanted_peers if n in peer_runs]
     exps = experiments(cfg, registered, peer_names)
     specs = list(dict.fromkeys(s for table in exps.values() for s in table.values()))
-    for name in NOISE_METHODS + tuple(paper.TABLE_IV_METHODS.values()) + ("d2nt_basic", "d2nt_v2", "d2nt_v3"):
-        if name not in registered:
-            skipped.setdefault(name, "not registered in surfnorm.methods()")
+    needs = {"table2": ("d2nt_basic", "d2nt_v2", "d2nt_v3"), "table4": tuple(paper.TABLE_IV_METHODS.values()),
+             "noise": NOISE_METHODS}
+    for table, names in needs.items():
+        for name in names:
+            if table in cfg.tables and name not in registered:
+                skipped.setdefault(name, f"not registered in surfnorm.methods() (needed by {table})")
 
     frames, unreadable = discover(cfg)
     cache = Cache(Path(cfg.out) / "cache", code_version(), cfg.root)
@@ -358,6 +385,8 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
                 todo.setdefault(name, []).append(spec)
             else:
                 accuracy.append(rec)
+    stages = {}
+    clock = _Clock()
     total, done = len(frames), len(frames) - len(todo)
     progress("accuracy", done, total)
 
@@ -376,13 +405,19 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
 
         ctx = multiprocessing.get_context("spawn")  # numba and OpenMP do not survive fork well
         with ProcessPoolExecutor(max_workers=min(cfg.jobs, len(todo)), mp_context=ctx) as pool:
-            futures = [pool.submit(_accuracy_one_frame, str(cfg.root), n, s, cfg.seed, peer_names) for n, s in todo.items()]
+            futures = {pool.submit(_accuracy_one_frame, str(cfg.root), n, s, cfg.seed, peer_names): n
+                       for n, s in todo.items()}
             for fut in as_completed(futures):
-                absorb(fut.result())
+                try:
+                    absorb(fut.result())
+                except Exception as exc:  # noqa: BLE001 - a worker that died (e.g. a crash in a peer library)
+                    skipped[f"frame {futures[fut]}"] = f"accuracy worker failed: {type(exc).__name__}: {exc}"
+                    absorb({"frame": futures[fut], "error": None, "records": []})
     else:
         for name, s in todo.items():
             absorb(_accuracy_one_frame(str(cfg.root), name, s, cfg.seed, peer_names))
 
+    stages["accuracy"] = clock.lap()
     # timing: Table III rows, one frame at a time, in this process only
     timed = list(exps["table3"].values())
     timing = []
@@ -404,6 +439,7 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
         timing += [recs[s.key] for s in timed]
         progress("timing", i + 1, len(readable))
 
+    stages["timing"] = clock.lap()
     for rec in accuracy + timing:
         if "error" in rec:
             skipped.setdefault(rec["key"], f"failed on {rec['frame']}: {rec['error']}")
@@ -416,5 +452,5 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
         accuracy=sorted(accuracy, key=lambda r: (r["frame"], r["key"])),
         timing=sorted(timing, key=lambda r: (r["frame"], r["key"])),
         skipped=skipped,
-        meta={"threads": threads, "code_version": cache.version, "jobs": cfg.jobs},
+        meta={"threads": threads, "code_version": cache.version, "jobs": cfg.jobs, "stages": stages},
     )

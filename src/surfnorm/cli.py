@@ -216,6 +216,70 @@ def convert(
         raise typer.Exit(1)
 
 
+@app.command()
+def bench(
+    dataset: Optional[Path] = typer.Argument(None, help="Folder in the 3F2N layout (Easy|Medium|Hard/<object>/depth|normal, params.txt). Default: the frames shipped in surfnorm."),
+    out: Path = typer.Option(..., "--out", "-o", help="Report folder: report.md, results.json, PNG figures, and a cache of finished per-frame results."),
+    methods_: Optional[list[str]] = typer.Option(None, "--methods", "-m", help="Table III rows: registered names (+mnr allowed), repeatable or comma-separated. Default: every registered method."),
+    peers: Optional[list[str]] = typer.Option(None, "--peers", help="Peer libraries: d2nt, kornia, open3d, opencv, or none. Repeatable or comma-separated. Default: all."),
+    levels: Optional[list[str]] = typer.Option(None, "--levels", help="Easy, Medium, Hard (repeatable or comma-separated). Default: all."),
+    frames_per_object: Optional[int] = typer.Option(None, "--frames-per-object", help="At most this many frames of each object (the first ones). Default: all."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Processes for the accuracy runs (timing runs are always single-process, one thread). Default: one per core."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the noise study's Gaussian noise."),
+    tables: Optional[list[str]] = typer.Option(None, "--tables", help="Experiments to run: table2, table3, table4, noise, fig4 (repeatable or comma-separated). Default: all."),
+    repeats: int = typer.Option(7, "--repeats", help="Timed calls per method and frame after the warm-up (3 for methods over 200 ms)."),
+):
+    """Regenerate the paper's Tables II-IV and Figs. 1, 3, 4 (with today's peers) on data in the 3F2N layout."""
+    import os
+    import time
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .bench import BenchConfig, run_bench, write_report
+    from .bench.runner import TABLES
+    from .io.threef2n import LEVELS, sample_root
+
+    def split(values):
+        return None if values is None else [v.strip() for x in values for v in x.split(",") if v.strip()]
+
+    peer_list = split(peers)
+    if peer_list is not None and "none" in peer_list:
+        peer_list = []
+    cfg = BenchConfig(root=dataset if dataset is not None else sample_root(), out=out, methods=split(methods_),
+                      peers=peer_list, levels=tuple(split(levels) or LEVELS), frames_per_object=frames_per_object,
+                      jobs=jobs if jobs is not None else (os.cpu_count() or 1), seed=seed, repeats=repeats,
+                      tables=tuple(split(tables) or TABLES))
+    t0 = time.perf_counter()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=err_console, transient=True) as progress:
+            tasks = {}
+
+            def report(stage, done, total):
+                if stage not in tasks:
+                    tasks[stage] = progress.add_task(f"{stage} (frames)", total=total)
+                progress.update(tasks[stage], completed=done, total=total)
+
+            result = run_bench(cfg, progress=report)
+        paths = write_report(result, out, elapsed_s=time.perf_counter() - t0)
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    for name, why in result.unreadable.items():
+        err_console.print(f"[yellow]not evaluated:[/] {name}: {why}", highlight=False, soft_wrap=True)
+    for name, why in result.skipped.items():
+        err_console.print(f"[yellow]skipped:[/] {name}: {why}", highlight=False, soft_wrap=True)
+    console.print(_table3_text(paths["report"]), highlight=False, soft_wrap=True)
+    console.print(f"wrote {paths['report']}, {paths['results']} and figures in {out}/ in {time.perf_counter() - t0:.0f} s")
+
+
+def _table3_text(report_path: Path) -> str:
+    text = report_path.read_text()
+    start = text.index("## Table III")
+    end = text.find("\n## ", start + 1)
+    return text[start:end if end >= 0 else None].strip()
+
+
 def main():  # pragma: no cover
     app()
 

@@ -76,6 +76,9 @@ _NO_STATE = np.int8(-1)  # the state of a pixel without gradient (or outside the
 _INF = np.inf
 
 
+_P = 3  # padding of the working arrays: every read of a step stays inside, and the margin is "missing"
+
+
 @pixel
 def state_cost(s, target):
     """|s - target| for a state code, inf for a pixel without one."""
@@ -85,105 +88,106 @@ def state_cost(s, target):
     return cost
 
 
-@pixel
-def continuity(lap, v, u, dv, du, inside):
-    """con = 1 - sign(L[p + d] L[p + 2d]); a Laplacian outside the image or at invalid depth counts as 1."""
-    a = 1.0
-    b = 1.0
-    if inside[v + dv, u + du]:
-        a = lap[v + dv, u + du]
-    if inside[v + 2 * dv, u + 2 * du]:
-        b = lap[v + 2 * dv, u + 2 * du]
-    prod = a * b
-    sign = 0.0
-    if prod > 0.0:
-        sign = 1.0
-    elif prod < 0.0:
-        sign = -1.0
-    return 1.0 - sign
+# Helpers below take scalars only: a Numba helper that takes arrays and branches keeps reference
+# counting of those arrays per call (measured 7x slower); the kernels read the arrays themselves.
 
 
 @pixel
-def laplacian(s, ok, v, u, dv, du):
-    """-S[p - d] + 2 S[p] - S[p + d], a missing neighbour mirrored; (0, False) with neither."""
-    has_b = ok[v - dv, u - du]
-    has_f = ok[v + dv, u + du]
-    lap = 0.0
-    if has_b and has_f:
-        lap = -s[v - dv, u - du] + 2.0 * s[v, u] - s[v + dv, u + du]
-    elif has_b:
-        lap = -s[v - dv, u - du] + 2.0 * s[v, u] - s[v - dv, u - du]
-    elif has_f:
-        lap = -s[v + dv, u + du] + 2.0 * s[v, u] - s[v + dv, u + du]
-    return lap, has_b or has_f
+def laplacian(s_b, s_p, s_f, has_b, has_f):
+    """1D Laplacian -S[p - d] + 2 S[p] - S[p + d], a missing neighbour mirrored (BORDER_REFLECT_101);
+    0 with neither. Returns (value, has a neighbour)."""
+    s_b = s_b if has_b else s_f
+    s_f = s_f if has_f else s_b
+    lap = -s_b + 2.0 * s_p - s_f
+    return lap if (has_b or has_f) else 0.0, has_b or has_f
 
 
 @pixel
-def initial_gradient(s, ok, rough, v, u, dv, du, at_border_b, at_border_f, reflect):
-    """Cheapest of central / forward / backward difference: (gradient, energy, state)."""
-    has_b = ok[v - dv, u - du]
-    has_f = ok[v + dv, u + du]
-    # central, energy A_p; at the image border with reflect, the mirror makes it 0
+def continuity(lap_1, lap_2):
+    """con = 1 - sign(L[p + d] L[p + 2d]): 0 for one smooth curve, 1 if either is 0, 2 if the signs differ."""
+    prod = lap_1 * lap_2
+    return 1 - ((1 if prod > 0.0 else 0) - (1 if prod < 0.0 else 0))
+
+
+@pixel
+def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, reflect):
+    """Cheapest of central / forward / backward difference: (gradient, energy, state 2 / 1 / 0).
+
+    Central (S_f - S_b) / 2 with energy A_p; with ``reflect`` a neighbour mirrored at the image border
+    (``mirrored``: the missing neighbour lies outside the image, the other is valid) makes it 0, as in the authors' code. Forward S_f - S_p with energy A_f, backward
+    S_p - S_b with A_b. The first wins ties.
+    """
     g = 0.0
     e = _INF
     state = _NO_STATE
     if has_b and has_f:
-        g = 0.5 * s[v + dv, u + du] - 0.5 * s[v - dv, u - du]
-        e = rough[v, u]
+        g = 0.5 * s_f - 0.5 * s_b
+        e = a_p
         state = np.int8(2)
-    elif reflect and ((has_f and at_border_b) or (has_b and at_border_f)):
-        e = rough[v, u]
+    elif reflect and mirrored:
+        e = a_p
         state = np.int8(2)
-    if has_f and rough[v + dv, u + du] < e:  # forward, energy A_{p+d}
-        g = s[v + dv, u + du] - s[v, u]
-        e = rough[v + dv, u + du]
+    if has_f and a_f < e:
+        g = s_f - s_p
+        e = a_f
         state = np.int8(1)
-    if has_b and rough[v - dv, u - du] < e:  # backward, energy A_{p-d}
-        g = s[v, u] - s[v - dv, u - du]
-        e = rough[v - dv, u - du]
+    if has_b and a_b < e:
+        g = s_p - s_b
+        e = a_b
         state = np.int8(0)
     return g, e, state
 
 
 @njit
-def _sda_init(s, ok, reflect, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, p_u, q_v):
-    """Roughness A, continuity flags, initial gradients; arrays padded by 2 pixels (ok False there)."""
+def _sda_laplacians(s, ok, l_u, l_v, a_u, a_v):
+    """Signed Laplacians L (1 where missing, as the authors' padding) and roughness A = |L| (inf where missing)."""
     Hp, Wp = s.shape
-    l_u = np.zeros((Hp, Wp))
-    l_v = np.zeros((Hp, Wp))
-    inside_u = np.zeros((Hp, Wp), dtype=np.bool_)  # has a Laplacian along u
-    inside_v = np.zeros((Hp, Wp), dtype=np.bool_)
-    for v in range(2, Hp - 2):
-        for u in range(2, Wp - 2):
+    for v in range(1, Hp - 1):
+        for u in range(1, Wp - 1):
             if ok[v, u]:
-                lap, has = laplacian(s, ok, v, u, 0, 1)
+                lap, has = laplacian(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1])
                 l_u[v, u] = lap
-                inside_u[v, u] = ok[v, u]
                 a_u[v, u] = abs(lap) if has else _INF
-                lap, has = laplacian(s, ok, v, u, 1, 0)
+                lap, has = laplacian(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u])
                 l_v[v, u] = lap
-                inside_v[v, u] = ok[v, u]
                 a_v[v, u] = abs(lap) if has else _INF
-    for v in range(2, Hp - 2):
-        for u in range(2, Wp - 2):
+            else:
+                l_u[v, u] = 1.0
+                l_v[v, u] = 1.0
+                a_u[v, u] = _INF
+                a_v[v, u] = _INF
+
+
+@njit
+def _sda_init(s, ok, reflect, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v):
+    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel."""
+    Hp, Wp = s.shape
+    for v in range(_P, Hp - _P):
+        for u in range(_P, Wp - _P):
             if ok[v, u]:
-                con[0, v, u] = continuity(l_u, v, u, 0, -1, inside_u)
-                con[1, v, u] = continuity(l_u, v, u, 0, 1, inside_u)
-                con[2, v, u] = continuity(l_v, v, u, -1, 0, inside_v)
-                con[3, v, u] = continuity(l_v, v, u, 1, 0, inside_v)
-                g, e, st = initial_gradient(s, ok, a_u, v, u, 0, 1, u == 2, u == Wp - 3, reflect)
+                con[v, u] = np.uint8(continuity(l_u[v, u - 1], l_u[v, u - 2]) | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
+                                     | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
+                                     | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
+                g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
+                                            a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
+                                            (u == _P and ok[v, u + 1]) or (u == Wp - _P - 1 and ok[v, u - 1]), reflect)
                 g_u[v, u] = g
                 e_u[v, u] = e
                 s_u[v, u] = st
-                g, e, st = initial_gradient(s, ok, a_v, v, u, 1, 0, v == 2, v == Hp - 3, reflect)
+                g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
+                                            a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
+                                            (v == _P and ok[v + 1, u]) or (v == Hp - _P - 1 and ok[v - 1, u]), reflect)
                 g_v[v, u] = g
                 e_v[v, u] = e
                 s_v[v, u] = st
-    for v in range(2, Hp - 2):
-        for u in range(2, Wp - 2):
-            if ok[v, u]:
-                p_u[v, u] = a_v[v, u] + e_u[v, u]
-                q_v[v, u] = a_u[v, u] + e_v[v, u]
+            else:
+                con[v, u] = 0
+                g_u[v, u] = 0.0
+                g_v[v, u] = 0.0
+                e_u[v, u] = _INF
+                e_v[v, u] = _INF
+                s_u[v, u] = _NO_STATE
+                s_v[v, u] = _NO_STATE
 
 
 @pixel
@@ -213,26 +217,31 @@ def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8):
 
 
 @njit
-def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, p_u, q_v,
-              g_u2, g_v2, e_u2, e_v2, s_u2, s_v2, p_u2, q_v2):
+def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2):
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
-    Returns True if some pixel took another candidate than keep (index 2).
+    Every inner pixel of the second set is written. Returns True if some pixel
+    took another candidate than keep (index 2).
     """
     Hp, Wp = s.shape
     B = SDA_PENALTY
     changed = False
-    for v in range(2, Hp - 2):
-        for u in range(2, Wp - 2):
-            if not ok[v, u]:
+    for v in range(_P, Hp - _P):
+        for u in range(_P, Wp - _P):
+            if not ok[v, u]:  # stays missing
+                g_u2[v, u] = 0.0
+                g_v2[v, u] = 0.0
+                e_u2[v, u] = _INF
+                e_v2[v, u] = _INF
+                s_u2[v, u] = _NO_STATE
+                s_v2[v, u] = _NO_STATE
                 continue
+            flags = con[v, u]
             # ---- G_u ----
-            p_up = p_u[v - 1, u]
-            p_dn = p_u[v + 1, u]
-            e0 = a_u[v, u - 1] + B * ((state_cost(s_u[v, u], 0.0) + state_cost(s_u[v, u - 1], 0.0)) + con[0, v, u])
-            e1 = a_u[v, u + 1] + B * ((state_cost(s_u[v, u], 1.0) + state_cost(s_u[v, u + 1], 1.0)) + con[1, v, u])
-            e3 = 2.0 * p_up
-            e4 = 2.0 * p_dn
+            p_up = a_v[v - 1, u] + e_u[v - 1, u]
+            p_dn = a_v[v + 1, u] + e_u[v + 1, u]
+            e0 = a_u[v, u - 1] + B * ((state_cost(s_u[v, u], 0.0) + state_cost(s_u[v, u - 1], 0.0)) + (flags & 3))
+            e1 = a_u[v, u + 1] + B * ((state_cost(s_u[v, u], 1.0) + state_cost(s_u[v, u + 1], 1.0)) + ((flags >> 2) & 3))
             e5 = _INF
             e6 = _INF
             e7 = _INF
@@ -242,7 +251,7 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, p_u, q_v,
                 e6 = (p_up + a_u[v - 1, u + 1]) + e_v[v - 1, u + 1]
                 e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
                 e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
-            k_u, best_u = cheapest(e0, e1, e_u[v, u], e3, e4, e5, e6, e7, e8)
+            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, e5, e6, e7, e8)
             g = g_u[v, u]
             if k_u == 0:
                 g = (g + c * s[v, u]) - c * (s[v, u - 1] + g_u[v, u - 1])
@@ -264,12 +273,10 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, p_u, q_v,
             e_u2[v, u] = best_u
             s_u2[v, u] = np.int8(k_u) if best_u < _INF else _NO_STATE
             # ---- G_v ----
-            q_l = q_v[v, u - 1]
-            q_r = q_v[v, u + 1]
-            e0 = a_v[v - 1, u] + B * ((state_cost(s_v[v, u], 0.0) + state_cost(s_v[v - 1, u], 0.0)) + con[2, v, u])
-            e1 = a_v[v + 1, u] + B * ((state_cost(s_v[v, u], 1.0) + state_cost(s_v[v + 1, u], 1.0)) + con[3, v, u])
-            e3 = 2.0 * q_l
-            e4 = 2.0 * q_r
+            q_l = a_u[v, u - 1] + e_v[v, u - 1]
+            q_r = a_u[v, u + 1] + e_v[v, u + 1]
+            e0 = a_v[v - 1, u] + B * ((state_cost(s_v[v, u], 0.0) + state_cost(s_v[v - 1, u], 0.0)) + ((flags >> 4) & 3))
+            e1 = a_v[v + 1, u] + B * ((state_cost(s_v[v, u], 1.0) + state_cost(s_v[v + 1, u], 1.0)) + ((flags >> 6) & 3))
             e5 = _INF
             e6 = _INF
             e7 = _INF
@@ -279,7 +286,7 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, p_u, q_v,
                 e6 = (q_l + a_v[v + 1, u - 1]) + e_u[v + 1, u - 1]
                 e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
                 e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
-            k_v, best_v = cheapest(e0, e1, e_v[v, u], e3, e4, e5, e6, e7, e8)
+            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, e5, e6, e7, e8)
             g = g_v[v, u]
             if k_v == 0:
                 g = (g + c * s[v, u]) - c * (s[v - 1, u] + g_v[v - 1, u])
@@ -300,11 +307,48 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, p_u, q_v,
             g_v2[v, u] = g
             e_v2[v, u] = best_v
             s_v2[v, u] = np.int8(k_v) if best_v < _INF else _NO_STATE
-            p_u2[v, u] = a_v[v, u] + best_u
-            q_v2[v, u] = a_u[v, u] + best_v
             if k_u != 2 or k_v != 2:
                 changed = True
     return changed
+
+
+def _padded(shape, dtype, margin_value):
+    arr = np.empty(shape, dtype=dtype)  # the inner part is written by the kernels
+    arr[:_P] = margin_value
+    arr[-_P:] = margin_value
+    arr[:, :_P] = margin_value
+    arr[:, -_P:] = margin_value
+    return arr
+
+
+def _run_sda(signal, valid, iterations, border):
+    """The dynamic programming on padded arrays. Returns (g_u, g_v, e_u, e_v) padded, and the passes applied."""
+    H, W = signal.shape
+    shape = (H + 2 * _P, W + 2 * _P)
+    inner = (slice(_P, -_P), slice(_P, -_P))
+    s = np.zeros(shape)
+    s[inner] = np.where(valid, signal, 0.0)  # user depth is never read where invalid
+    ok = np.zeros(shape, dtype=np.bool_)
+    ok[inner] = valid
+    a_u = _padded(shape, np.float64, _INF)
+    a_v = _padded(shape, np.float64, _INF)
+    con = _padded(shape, np.uint8, 0)
+    sets = [[_padded(shape, np.float64, 0.0), _padded(shape, np.float64, 0.0),
+             _padded(shape, np.float64, _INF), _padded(shape, np.float64, _INF),
+             _padded(shape, np.int8, _NO_STATE), _padded(shape, np.int8, _NO_STATE)] for _ in range(2)]
+    l_u = np.ones(shape)
+    l_v = np.ones(shape)
+    _sda_laplacians(s, ok, l_u, l_v, a_u, a_v)
+    _sda_init(s, ok, border == "reflect", l_u, l_v, a_u, a_v, con, *sets[0])
+    cap = MAX_ITERATIONS if iterations is None else iterations
+    passes = 0
+    cur = 0
+    for i in range(1, cap + 1):
+        if not _sda_step(s, ok, 1.0 / (i + 1), a_u, a_v, con, *sets[cur], *sets[1 - cur]):
+            break
+        cur = 1 - cur
+        passes = i
+    return sets[cur][:4], passes
 
 
 def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
@@ -315,48 +359,25 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
     applied (the pass whose stop test fired is not counted). ``iterations``
     None runs until stable, at most :data:`MAX_ITERATIONS` passes.
     """
-    H, W = signal.shape
-    shape = (H + 4, W + 4)  # padded by 2: every neighbour read stays inside, and is "not ok" there
-    s = np.zeros(shape)
-    s[2:-2, 2:-2] = np.where(valid, signal, 0.0)
-    ok = np.zeros(shape, dtype=np.bool_)
-    ok[2:-2, 2:-2] = valid
-    a_u = np.full(shape, _INF)
-    a_v = np.full(shape, _INF)
-    con = np.ones((4,) + shape)
-    bufs = []
-    for _ in range(2):
-        bufs.append([np.zeros(shape), np.zeros(shape), np.full(shape, _INF), np.full(shape, _INF),
-                     np.full(shape, _NO_STATE, dtype=np.int8), np.full(shape, _NO_STATE, dtype=np.int8),
-                     np.full(shape, _INF), np.full(shape, _INF)])
-    _sda_init(s, ok, border == "reflect", a_u, a_v, con, *bufs[0])
-    for arr, src in zip(bufs[1], bufs[0]):  # pixels never updated (invalid, margin) agree in both sets
-        arr[...] = src
-    cap = MAX_ITERATIONS if iterations is None else iterations
-    passes = 0
-    cur = 0
-    for i in range(1, cap + 1):
-        if not _sda_step(s, ok, 1.0 / (i + 1), a_u, a_v, con, *bufs[cur], *bufs[1 - cur]):
-            break
-        cur = 1 - cur
-        passes = i
-    g_u, g_v, e_u, e_v = (b[2:-2, 2:-2] for b in bufs[cur][:4])
-    g_u = np.where(e_u < _INF, g_u, np.nan)
-    g_v = np.where(e_v < _INF, g_v, np.nan)
-    return g_u, g_v, passes
+    (g_u, g_v, e_u, e_v), passes = _run_sda(np.asarray(signal, dtype=np.float64), valid, iterations, border)
+    inner = (slice(_P, -_P), slice(_P, -_P))
+    return (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
 
 
 @njit
-def _cp2tv_kernel(z, g_u, g_v, f_x, f_y, c_x, c_y, fill, out):
-    """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u))."""
+def _cp2tv_kernel(z, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
+    """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)).
+
+    Gradients and energies are padded by _P; a gradient with infinite energy does not exist.
+    """
     H, W = z.shape
     for v in range(H):
         v_c = v - c_y
         for u in range(W):
             ok = False
-            gu = g_u[v, u]
-            gv = g_v[v, u]
-            if math.isfinite(gu) and math.isfinite(gv):
+            if e_u[v + _P, u + _P] < _INF and e_v[v + _P, u + _P] < _INF:
+                gu = g_u[v + _P, u + _P]
+                gv = g_v[v + _P, u + _P]
                 n_z = -((np.float64(z[v, u]) + v_c * gv) + (u - c_x) * gu)
                 ok = write_unit(out, v, u, f_x * gu, f_y * gv, n_z, fill)
             if not ok:
@@ -364,16 +385,16 @@ def _cp2tv_kernel(z, g_u, g_v, f_x, f_y, c_x, c_y, fill, out):
 
 
 @njit
-def _tf2n_base_kernel(z, valid, g_u, g_v, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """3F2N's median filter on given gradients of inverse depth (the demo's SDA + 3F2N)."""
+def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out):
+    """3F2N's median filter on SDA gradients of inverse depth (the demo's SDA + 3F2N); padded as above."""
     H, W = z.shape
     buf = np.empty(8)
     for v in range(H):
         for u in range(W):
             ok = False
-            gu = g_u[v, u]
-            gv = g_v[v, u]
-            if math.isfinite(gu) and math.isfinite(gv):
+            if e_u[v + _P, u + _P] < _INF and e_v[v + _P, u + _P] < _INF:
+                gu = g_u[v + _P, u + _P]
+                gv = g_v[v + _P, u + _P]
                 n_z, count = median_nz(z, valid, v, u, gu, gv, c_x, c_y, reflect, buf)
                 n_x, n_y, n_z = fronto_parallel_fallback(f_x * gu, f_y * gv, n_z, count)
                 n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
@@ -385,13 +406,12 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, f_x, f_y, c_x, c_y, reflect, fill, out
 def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0):
     """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), into ``out``."""
     f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
-    z64 = z.astype(np.float64)
     if base == "3f2n":
         with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(valid, 1.0 / z64, 0.0)
-        g_u, g_v, _ = sda_gradients(inv, valid, iterations=iterations, border=border)
-        _tf2n_base_kernel(z, valid, g_u, g_v, *f, border == "reflect", np.float32(fill), out)
+            signal = 1.0 / z.astype(np.float64)  # read only where valid
+        (g_u, g_v, e_u, e_v), _ = _run_sda(signal, valid, iterations, border)
+        _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, border == "reflect", np.float32(fill), out)
     else:
-        g_u, g_v, _ = sda_gradients(z64, valid, iterations=iterations, border=border)
-        _cp2tv_kernel(z, g_u, g_v, *f, np.float32(fill), out)
+        (g_u, g_v, e_u, e_v), _ = _run_sda(z.astype(np.float64), valid, iterations, border)
+        _cp2tv_kernel(z, g_u, g_v, e_u, e_v, *f, np.float32(fill), out)
     return out

@@ -126,7 +126,7 @@ def candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p):
 def camera_facing(n_x, n_y, n_z, u_c, v_c, f_x, f_y):
     """(n_x, n_y, n_z) turned, if needed, so that n . P < 0 (P = Z (u_c / f_x, v_c / f_y, 1))."""
     s = 1.0
-    if n_x * (u_c / f_x) + n_y * (v_c / f_y) + n_z > 0.0:
+    if n_x * (u_c * f_y) + n_y * (v_c * f_x) + n_z * (f_x * f_y) > 0.0:  # (n . P) f_x f_y / Z
         s = -1.0
     return s * n_x, s * n_y, s * n_z
 
@@ -200,28 +200,82 @@ def fill_pixel(out, v, u, fill):
     out[v, u, 2] = fill
 
 
+# ---- fast path: runs of pixels whose 3x3 neighbourhood is inside the image and valid --------------
+#
+# Written without branches so that LLVM vectorises the loop over a run (8 pixels per AVX-512
+# instruction): the normals of a run go to three row buffers (an interleaved (H, W, 3) store would
+# stop the vectoriser) and are copied into ``out`` afterwards. Differences of depth and of inverse
+# depth, where precision is lost, are float64; the 8 quotients of eq. 10 are taken in float32 (3x
+# cheaper than float64 division, and the normal is stored in float32 anyway).
+
+
 @pixel
 def all_nine_valid(valid, v, u):
-    """True if (v, u) and its 8 neighbours lie inside the image and are valid (the fast path)."""
+    """True if (v, u) and its 8 neighbours lie inside the image and are valid."""
     H, W = valid.shape
     ok = False
     if v >= 1 and v < H - 1 and u >= 1 and u < W - 1:
-        ok = (valid[v - 1, u - 1] and valid[v - 1, u] and valid[v - 1, u + 1] and valid[v, u - 1]
-              and valid[v, u] and valid[v, u + 1] and valid[v + 1, u - 1] and valid[v + 1, u] and valid[v + 1, u + 1])
+        ok = (valid[v - 1, u - 1] & valid[v - 1, u] & valid[v - 1, u + 1] & valid[v, u - 1] & valid[v, u]
+              & valid[v, u + 1] & valid[v + 1, u - 1] & valid[v + 1, u] & valid[v + 1, u + 1])
     return ok
 
 
 @pixel
+def run_end(valid, v, u):
+    """The first pixel after u in row v that is not inside a fully valid 3x3 neighbourhood."""
+    W = valid.shape[1]
+    end = u + 1
+    while end < W and all_nine_valid(valid, v, end):
+        end += 1
+    return end
+
+
+@pixel
+def interior_gradients(z_l, z_r, z_a, z_b):
+    """dD/du, dD/dv of D = 1/Z from the 4 neighbours: (1/z_r - 1/z_l) / 2 as (z_l - z_r) / (2 z_l z_r),
+    both with one division (the products of two float32 depths are exact in float64)."""
+    lr = z_l * z_r
+    ab = z_a * z_b
+    inv = 0.5 / (lr * ab)
+    return ((z_l - z_r) * ab) * inv, ((z_a - z_b) * lr) * inv
+
+
+@pixel
 def nz_or_inf(z_q, uq_c, vq_c, g_u, g_v, zx_p, zy_p, z_p):
-    """n_z,q of eq. 10 (as :func:`candidate_nz`), +inf where dZ == 0 (no candidate)."""
+    """n_z,q of eq. 10 as float32 (numerator and dZ in float64), +inf where dZ == 0 (no candidate)."""
     d_z = z_p - z_q
-    nz = -(g_u * (zx_p - uq_c * z_q) + g_v * (zy_p - vq_c * z_q)) / d_z
-    return nz if d_z != 0.0 else np.inf
+    num = -(g_u * (zx_p - uq_c * z_q) + g_v * (zy_p - vq_c * z_q))
+    nz = np.float32(num) / np.float32(d_z)
+    return nz if d_z != 0.0 else np.float32(np.inf)
+
+
+@pixel
+def interior_candidates(z, v, u, g_u, g_v, u_c, v_c):
+    """The 8 candidates n_z,q (eq. 10) of an interior pixel, +inf where dZ == 0."""
+    z_p = np.float64(z[v, u])
+    zx_p = u_c * z_p
+    zy_p = v_c * z_p
+    return (nz_or_inf(np.float64(z[v - 1, u - 1]), u_c - 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v - 1, u]), u_c, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v - 1, u + 1]), u_c + 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v, u - 1]), u_c - 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v, u + 1]), u_c + 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v + 1, u - 1]), u_c - 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v + 1, u]), u_c, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+            nz_or_inf(np.float64(z[v + 1, u + 1]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p))
+
+
+@pixel
+def count_finite8(a0, a1, a2, a3, a4, a5, a6, a7):
+    """How many of the 8 candidates exist (are not +inf)."""
+    inf = np.float32(np.inf)
+    return ((np.int64(a0 != inf) + np.int64(a1 != inf)) + (np.int64(a2 != inf) + np.int64(a3 != inf))
+            + ((np.int64(a4 != inf) + np.int64(a5 != inf)) + (np.int64(a6 != inf) + np.int64(a7 != inf))))
 
 
 @pixel
 def sort8(a0, a1, a2, a3, a4, a5, a6, a7):
-    """The 8 values in ascending order: an optimal 19-comparator sorting network, branch-free min/max."""
+    """The 8 values in ascending order: an optimal 19-comparator sorting network of min/max."""
     a0, a2 = min(a0, a2), max(a0, a2)
     a1, a3 = min(a1, a3), max(a1, a3)
     a4, a6 = min(a4, a6), max(a4, a6)
@@ -245,88 +299,155 @@ def sort8(a0, a1, a2, a3, a4, a5, a6, a7):
 
 
 @pixel
-def interior_median_nz(z, v, u, g_u, g_v, c_x, c_y, buf):
-    """:func:`median_nz` where all 9 pixels are valid and inside: no checks, a sorting network."""
-    z_p = np.float64(z[v, u])
-    u_c = u - c_x
-    v_c = v - c_y
-    zx_p = u_c * z_p
-    zy_p = v_c * z_p
-    s0, s1, s2, s3, s4, s5, s6, s7 = sort8(
-        nz_or_inf(np.float64(z[v - 1, u - 1]), u_c - 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v - 1, u]), u_c, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v - 1, u + 1]), u_c + 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v, u - 1]), u_c - 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v, u + 1]), u_c + 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v + 1, u - 1]), u_c - 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v + 1, u]), u_c, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
-        nz_or_inf(np.float64(z[v + 1, u + 1]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p))
-    buf[0] = s0
-    buf[1] = s1
-    buf[2] = s2
-    buf[3] = s3
-    buf[4] = s4
-    buf[5] = s5
-    buf[6] = s6
-    buf[7] = s7
-    count = 8
-    while count > 0 and buf[count - 1] == np.inf:  # the dropped candidates (dZ == 0) sort last
-        count -= 1
-    med = (buf[max(count - 1, 0) // 2] + buf[count // 2]) / 2.0
-    return med, count
+def median_of_sorted(s0, s1, s2, s3, s4, count):
+    """Median of the first ``count`` of sorted values (the rest are +inf): the middle one, or the
+    mean of the middle two for an even count (as numpy); NaN-free garbage for count 0 (not used)."""
+    lo = s0 if count <= 2 else (s1 if count <= 4 else (s2 if count <= 6 else s3))
+    hi = s0 if count <= 1 else (s1 if count <= 3 else (s2 if count <= 5 else (s3 if count <= 7 else s4)))
+    return (np.float64(lo) + np.float64(hi)) / 2.0
 
 
 @pixel
-def interior_gradient(z, v, u, dv, du):
-    """Central difference of 1/Z / 2 where both neighbours are valid (as :func:`inverse_depth_gradient`)."""
-    return (1.0 / np.float64(z[v + dv, u + du]) - 1.0 / np.float64(z[v - dv, u - du])) / 2
+def finish(n_x, n_y, n_z, count, u_c, v_c, f_x, f_y):
+    """The authors' fallbacks, then turn to face the camera and scale to unit length (no branches)."""
+    n_x = n_x if count > 0 else 0.0
+    n_y = n_y if count > 0 else 0.0
+    n_z = -1.0 if (n_x == 0.0) & (n_y == 0.0) else n_z
+    # n . P > 0 with P = Z (u_c / f_x, v_c / f_y, 1), multiplied through by f_x f_y > 0
+    away = n_x * (u_c * f_y) + n_y * (v_c * f_x) + n_z * (f_x * f_y) > 0.0
+    scale = (-1.0 if away else 1.0) / math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+    return n_x * scale, n_y * scale, n_z * scale
+
+
+@pixel
+def store_run(out, v, u0, u1, rows):
+    for u in range(u0, u1):
+        out[v, u, 0] = rows[0, u]
+        out[v, u, 1] = rows[1, u]
+        out[v, u, 2] = rows[2, u]
+
+
+@pixel
+def median_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
+    """3F2N-median normals of pixels u0..u1-1 of row v (all fully valid neighbourhoods) into ``rows``."""
+    v_c = v - c_y
+    for u in range(u0, u1):
+        u_c = u - c_x
+        g_u, g_v = interior_gradients(np.float64(z[v, u - 1]), np.float64(z[v, u + 1]),
+                                      np.float64(z[v - 1, u]), np.float64(z[v + 1, u]))
+        a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
+        count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
+        s0, s1, s2, s3, s4, s5, s6, s7 = sort8(a0, a1, a2, a3, a4, a5, a6, a7)
+        n_x, n_y, n_z = finish(f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count,
+                               u_c, v_c, f_x, f_y)
+        rows[0, u] = n_x
+        rows[1, u] = n_y
+        rows[2, u] = n_z
+
+
+@pixel
+def mean_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
+    """3F2N-mean normals of pixels u0..u1-1 of row v (all fully valid neighbourhoods) into ``rows``."""
+    v_c = v - c_y
+    zero = np.float32(0.0)
+    inf = np.float32(np.inf)
+    for u in range(u0, u1):
+        u_c = u - c_x
+        g_u, g_v = interior_gradients(np.float64(z[v, u - 1]), np.float64(z[v, u + 1]),
+                                      np.float64(z[v - 1, u]), np.float64(z[v + 1, u]))
+        a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
+        count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
+        total = ((np.float64(a0 if a0 != inf else zero) + np.float64(a1 if a1 != inf else zero))
+                 + (np.float64(a2 if a2 != inf else zero) + np.float64(a3 if a3 != inf else zero))
+                 + ((np.float64(a4 if a4 != inf else zero) + np.float64(a5 if a5 != inf else zero))
+                    + (np.float64(a6 if a6 != inf else zero) + np.float64(a7 if a7 != inf else zero))))
+        n_x, n_y, n_z = finish(f_x * g_u, f_y * g_v, total / max(count, 1), count, u_c, v_c, f_x, f_y)
+        rows[0, u] = n_x
+        rows[1, u] = n_y
+        rows[2, u] = n_z
+
+
+@pixel
+def generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out):
+    """3F2N at a pixel next to the image border or to invalid depth (checks every neighbour)."""
+    ok = False
+    if valid[v, u]:
+        g_u, ok_u = inverse_depth_gradient(z, valid, v, u, 0, 1, reflect)
+        g_v, ok_v = inverse_depth_gradient(z, valid, v, u, 1, 0, reflect)
+        if ok_u and ok_v:
+            if median:
+                n_z, count = median_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, buf)
+            else:
+                n_z, count = mean_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect)
+            n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
+            n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
+            ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
+    if not ok:
+        fill_pixel(out, v, u, fill)
+
+
+@pixel
+def row_is_dense(rows_valid, v):
+    """True if rows v - 1, v, v + 1 exist and hold only valid depth."""
+    H = rows_valid.shape[0]
+    ok = False
+    if v >= 1 and v < H - 1:
+        ok = rows_valid[v - 1] and rows_valid[v] and rows_valid[v + 1]
+    return ok
 
 
 @njit
-def _tf2n_median_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """3F2N with the median filter: gradients of 1/Z -> eq. 10 per neighbour -> median -> unit, one pass."""
+def _tf2n_median_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill, out):
+    """3F2N with the median filter: gradients of 1/Z -> eq. 10 per neighbour -> median -> unit, one pass.
+
+    ``rows_valid[v]``: row v holds only valid depth. Between such rows the interior of a row is one
+    run, whose loop starts at the constant 1 (a run starting elsewhere is not vectorised by LLVM).
+    """
     H, W = z.shape
+    rows = np.empty((3, W), dtype=np.float32)  # a run's normals, component by component
     buf = np.empty(8)
     for v in range(H):
-        for u in range(W):
+        if row_is_dense(rows_valid, v):
+            median_run(z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows)
+            store_run(out, v, 1, W - 1, rows)
+            generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
+            generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
+            continue
+        u = 0
+        while u < W:
             if all_nine_valid(valid, v, u):
-                g_u = interior_gradient(z, v, u, 0, 1)
-                g_v = interior_gradient(z, v, u, 1, 0)
-                n_z, count = interior_median_nz(z, v, u, g_u, g_v, c_x, c_y, buf)
-                n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
-                n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
-                write_unit(out, v, u, n_x, n_y, n_z, fill)
-                continue
-            ok = False
-            if valid[v, u]:
-                g_u, ok_u = inverse_depth_gradient(z, valid, v, u, 0, 1, reflect)
-                g_v, ok_v = inverse_depth_gradient(z, valid, v, u, 1, 0, reflect)
-                if ok_u and ok_v:
-                    n_z, count = median_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, buf)
-                    n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
-                    n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
-                    ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
-            if not ok:
-                fill_pixel(out, v, u, fill)
+                end = run_end(valid, v, u)
+                median_run(z, v, u, end, f_x, f_y, c_x, c_y, rows)
+                store_run(out, v, u, end, rows)
+                u = end
+            else:
+                generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
+                u += 1
 
 
 @njit
-def _tf2n_mean_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
+def _tf2n_mean_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill, out):
     """3F2N with the mean filter: gradients of 1/Z -> eq. 10 per neighbour -> mean -> unit, one pass."""
     H, W = z.shape
+    rows = np.empty((3, W), dtype=np.float32)
+    buf = np.empty(8)
     for v in range(H):
-        for u in range(W):
-            ok = False
-            if valid[v, u]:
-                g_u, ok_u = inverse_depth_gradient(z, valid, v, u, 0, 1, reflect)
-                g_v, ok_v = inverse_depth_gradient(z, valid, v, u, 1, 0, reflect)
-                if ok_u and ok_v:
-                    n_z, count = mean_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect)
-                    n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
-                    n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
-                    ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
-            if not ok:
-                fill_pixel(out, v, u, fill)
+        if row_is_dense(rows_valid, v):
+            mean_run(z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows)
+            store_run(out, v, 1, W - 1, rows)
+            generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, False, buf, out)
+            generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, False, buf, out)
+            continue
+        u = 0
+        while u < W:
+            if all_nine_valid(valid, v, u):
+                end = run_end(valid, v, u)
+                mean_run(z, v, u, end, f_x, f_y, c_x, c_y, rows)
+                store_run(out, v, u, end, rows)
+                u = end
+            else:
+                generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, False, buf, out)
+                u += 1
 
 
 def _camera(cam):
@@ -336,7 +457,7 @@ def _camera(cam):
 def three_filters(z, valid, cam, out, *, third="median", border="one-sided", fill=0.0):
     """3F2N (Fan et al., RA-L 2021, eq. 7-11) with the ``third`` filter "mean" or "median", into ``out``."""
     kernel = _tf2n_median_kernel if third == "median" else _tf2n_mean_kernel
-    kernel(z, valid, *_camera(cam), border == "reflect", np.float32(fill), out)
+    kernel(z, valid, valid.all(axis=1), *_camera(cam), border == "reflect", np.float32(fill), out)
     return out
 
 

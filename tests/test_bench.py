@@ -113,8 +113,12 @@ def test_every_table_and_figure_on_one_frame(tmp_path):
     assert "[40.8%]" in text  # Table IV, CP2TV Easy
     for name in ("fig1", "fig3", "fig4"):
         assert paths[name].read_bytes()[:8] == PNG_MAGIC
-    # Table II / IV / noise specs were all made
+    # Table II / IV / noise specs were all made, and every per-frame figure is in results.json
     assert len(result.experiments["table2"]) == 12
+    doc = json.loads(paths["results"].read_text())
+    keys = {k for table in result.experiments.values() for k in table.values()}
+    assert sorted(r["key"] for r in doc["accuracy"]) == sorted(keys)
+    assert all(set(r) >= {"frame", "level", "e_a", "e_p", "coverage"} for r in doc["accuracy"])
     assert set(result.experiments["noise"]) == {f"{m}/{s:g}" for m in runner.NOISE_METHODS for s in (0.0, 0.001)}
     summary = json.loads(paths["results"].read_text())["summary"]
     noisy = summary[result.experiments["noise"]["d2nt_basic/0.001"]]["e_a"]["Easy"]

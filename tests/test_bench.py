@@ -113,8 +113,12 @@ def test_every_table_and_figure_on_one_frame(tmp_path):
     assert "[40.8%]" in text  # Table IV, CP2TV Easy
     for name in ("fig1", "fig3", "fig4"):
         assert paths[name].read_bytes()[:8] == PNG_MAGIC
-    # Table II / IV / noise specs were all made
+    # Table II / IV / noise specs were all made, and every per-frame figure is in results.json
     assert len(result.experiments["table2"]) == 12
+    doc = json.loads(paths["results"].read_text())
+    keys = {k for table in result.experiments.values() for k in table.values()}
+    assert sorted(r["key"] for r in doc["accuracy"]) == sorted(keys)
+    assert all(set(r) >= {"frame", "level", "e_a", "e_p", "coverage"} for r in doc["accuracy"])
     assert set(result.experiments["noise"]) == {f"{m}/{s:g}" for m in runner.NOISE_METHODS for s in (0.0, 0.001)}
     summary = json.loads(paths["results"].read_text())["summary"]
     noisy = summary[result.experiments["noise"]["d2nt_basic/0.001"]]["e_a"]["Easy"]
@@ -162,10 +166,10 @@ def test_rerun_reuses_cached_results(tmp_path, monkeypatch):
 
     monkeypatch.setattr(runner, "_accuracy_one_frame", accuracy)
     monkeypatch.setattr(runner, "_time_one_frame", timing)
-    third = run_bench(small(tmp_path, methods=FAST + ["d2nt_v2"]))
-    assert calls == [("accuracy", ["d2nt_v2"]), ("timing", ["d2nt_v2"])]
+    third = run_bench(small(tmp_path, methods=FAST + ["cp2tv+mnr"]))
+    assert calls == [("accuracy", ["cp2tv+mnr"]), ("timing", ["cp2tv+mnr"])]
     assert [r["key"] for r in third.timing] == [s for s in sorted(r["key"] for r in third.timing)]
-    assert len(third.accuracy) == 3 and len(third.timing) == 3
+    assert len(third.timing) == 3 and len(third.accuracy) == len(first.accuracy) + 1
 
 
 def test_failing_method_and_missing_peer_are_reported(tmp_path, monkeypatch):

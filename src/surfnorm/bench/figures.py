@@ -95,10 +95,20 @@ def _panel_frame(result) -> str | None:
     ok = [f for f in result.frames if f not in result.unreadable]
     if result.config.get("panel_frame") in ok:
         return result.config["panel_frame"]
-    for lv in reversed(paper.LEVELS):
+    from ..io.threef2n import read_frame
+
+    for lv in reversed(paper.LEVELS):  # the hardest level present
+        firsts = {}
         for f in ok:
             if f.startswith(lv + "/"):
-                return f
+                firsts.setdefault(f.rsplit("/", 1)[0], f)  # the first frame of each object
+        if firsts:
+            # the object that fills most of its frame, so that the panel shows detail rather than white space
+            def area(name):
+                rows, cols = _bbox(read_frame(result.config["root"], name).mask)
+                return (rows.stop or 0) - (rows.start or 0), (cols.stop or 0) - (cols.start or 0)
+
+            return max(firsts.values(), key=lambda f: min(area(f)))
     return None
 
 

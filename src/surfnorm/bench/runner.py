@@ -6,9 +6,10 @@ Two stages, each resumable (per-frame results are cached on disk in
 * accuracy: every (frame, experiment) pair -> e_A, e_p, coverage; may run in
   ``jobs`` processes, one frame per task;
 * timing: per frame, every Table III row (registered methods and peers) is
-  called once to warm up, then ``repeats`` times with one thread, the order of
-  the methods rotating from round to round so that drift hits all alike; the
-  figure kept is the median. Never in parallel.
+  called once to warm up (compiling, loading caches), then ``repeats`` times
+  with one thread (``SLOW_REPEATS`` times when the first timed call took over
+  ``SLOW_MS``), the order of the methods rotating from round to round so that
+  drift hits all alike; the figure kept is the median. Never in parallel.
 
 Anything that fails at runtime (a method raising, a frame that cannot be read)
 is recorded with its reason and reported; the run goes on.
@@ -181,6 +182,10 @@ def _noisy(frame, std: float, seed: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- cache
 
+#: Sources that only present results: editing them does not invalidate cached per-frame results.
+_NOT_IN_RESULTS = {"cli.py", "demo.py", "bench/report.py", "bench/figures.py", "bench/paper.py", "bench/__init__.py"}
+
+
 def code_version() -> str:
     """A hash of surfnorm's source and the peer libraries' versions: cached results from other code are not reused."""
     from .peers import peer_versions
@@ -188,6 +193,8 @@ def code_version() -> str:
     h = hashlib.sha256()
     pkg = Path(__file__).resolve().parent.parent
     for path in sorted(pkg.rglob("*.py")):
+        if path.relative_to(pkg).as_posix() in _NOT_IN_RESULTS:
+            continue
         h.update(path.relative_to(pkg).as_posix().encode())
         h.update(path.read_bytes())
     h.update(json.dumps(peer_versions(), sort_keys=True).encode())

@@ -399,8 +399,14 @@ def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", de
     if client is not None:
         from .distributed import run_on_dask
 
-        index = {t: i for i, t in enumerate(tasks)}
-        run_on_dask(tasks, settings, client, lambda r: done(index[ConvertTask(r.input, r.output)], r))
+        index = {(t.input, t.output): i for i, t in enumerate(tasks)}
+
+        def on_result(r: FileResult):
+            i = index.get((Path(r.input), Path(r.output)))
+            if i is not None and i not in results:
+                done(i, r)
+
+        run_on_dask(tasks, settings, client, on_result)
         for i, t in enumerate(tasks):  # a task the cluster never answered is an error, not a silent gap
             results.setdefault(i, FileResult(t.input, t.output, "error", f"{t.input}: no result from the Dask cluster"))
     elif jobs == 1 or len(tasks) == 1:

@@ -6,6 +6,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 TEST_STAMP := $(VENV)/.test-installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
+# PyTorch for the tests of surfnorm.torch: the CPU build (on this machine pip finds its wheel file)
+TORCH_VERSION := 2.13.0
+TORCH_STAMP := $(VENV)/.torch-installed-$(TORCH_VERSION)
 
 .PHONY: demo test bench clean
 
@@ -21,10 +24,17 @@ $(TEST_STAMP): $(STAMP)
 	$(PY) -m pip install -q -e ".[test]"
 	touch $@
 
+# A separate step, so that a failure says that it was PyTorch that could not be installed.
+$(TORCH_STAMP): $(STAMP)
+	@echo "Installing PyTorch $(TORCH_VERSION) (CPU build) for the tests of surfnorm.torch"
+	@$(PY) -m pip install -q "torch==$(TORCH_VERSION)" || { \
+		echo "make test: could not install torch==$(TORCH_VERSION), needed by tests/test_torch.py" >&2; exit 1; }
+	touch $@
+
 demo: $(STAMP)
 	$(VENV)/bin/surfnorm demo demo-output
 
-test: $(TEST_STAMP)
+test: $(TEST_STAMP) $(TORCH_STAMP)
 	$(PY) -m pytest -q
 
 clean:

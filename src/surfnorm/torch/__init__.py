@@ -26,6 +26,7 @@ tensor operations instead of Numba kernels. Needs the ``torch`` extra
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -70,8 +71,10 @@ _register("d2nt_basic", _ops.d2nt_basic, BORDER_OPTIONS)
 _register("d2nt_v2", _d2nt_dag, DAG_OPTIONS)
 _register("d2nt_v3", _d2nt_dag, DAG_OPTIONS, mnr=True)
 _register("cp2tv", _ops.cp2tv, BORDER_OPTIONS)
-_register("3f2n_mean", lambda g, cam, *, fill: _ops.three_f2n(g, cam, third="mean", fill=fill))
-_register("3f2n_median", lambda g, cam, *, fill: _ops.three_f2n(g, cam, third="median", fill=fill))
+_register("3f2n_mean", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="mean", border=border, fill=fill),
+          BORDER_OPTIONS)
+_register("3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill),
+          BORDER_OPTIONS)
 
 
 def _option_specs(method: TorchMethod, refined: bool) -> dict[str, Option]:
@@ -151,7 +154,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     work, out_dtype = compute_dtype(z)
     z = z.to(work)
     cam = as_intrinsics(K, z.shape[0], z.device, work)
-    valid = torch.isfinite(z) & (z > 0)
+    valid = (z > 0) & (z < math.inf)  # finite and positive (NaN fails both)
     if user_mask is not None:
         valid = valid & user_mask
     # invalid depth -> 1: never read by the estimators, and no NaN even in discarded branches (B x H x W)

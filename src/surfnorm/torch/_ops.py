@@ -43,11 +43,7 @@ class Shifted:
 
     def __init__(self, x: torch.Tensor, outside=0):
         self.H, self.W = x.shape[-2:]
-        if x.dtype == torch.bool:
-            # constant padding of bool tensors is not supported everywhere: pad as uint8
-            self.padded = F.pad(x.to(torch.uint8), (1, 1, 1, 1), value=int(outside)).bool()
-        else:
-            self.padded = F.pad(x, (1, 1, 1, 1), value=outside)
+        self.padded = F.pad(x, (1, 1, 1, 1), value=outside)
 
     def at(self, dv: int, du: int) -> torch.Tensor:
         return self.padded[..., 1 + dv: 1 + dv + self.H, 1 + du: 1 + du + self.W]
@@ -110,11 +106,14 @@ def fd_gradient(g: Grid, dv: int, du: int, reflect: bool):
     gradient is 0 in the first and last column/row, as in the authors' code.
     """
     has_b, has_f = g.usable(-dv, -du), g.usable(dv, du)
-    z_b, z_f, z = g.z_at(-dv, -du), g.z_at(dv, du), g.z
-    grad = torch.where(has_b & has_f, (z_f - z_b) / 2, torch.where(has_f, z_f - z, z - z_b))
+    # a missing sample is replaced by p itself, and the difference divided by the distance
+    # of the two samples: central (z_f - z_b) / 2, or one-sided (z_f - z_p) / 1, (z_p - z_b) / 1
+    z_f = torch.where(has_f, g.z_at(dv, du), g.z)
+    z_b = torch.where(has_b, g.z_at(-dv, -du), g.z)
+    dist = (has_f.to(g.z.dtype) + has_b.to(g.z.dtype)).clamp(min=1)
+    grad = (z_f - z_b) / dist
     if reflect:
-        border = _border(z, du)
-        grad = torch.where(border, torch.zeros_like(grad), grad)
+        grad = torch.where(_border(g.z, du), torch.zeros_like(grad), grad)
     return grad, has_b | has_f
 
 
@@ -159,11 +158,12 @@ def dag_gradient(g: Grid, dv: int, du: int, s: torch.Tensor, tau: float, truncat
 
 def unit(n_x, n_y, n_z, ok, fill: float) -> torch.Tensor:
     """Stack to (B, 3, H, W) and normalise; ``fill`` where not ``ok`` or the vector has no direction."""
-    norm = torch.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-    ok = ok & (norm > 0) & torch.isfinite(norm)
-    safe = torch.where(ok, norm, torch.ones_like(norm))
-    n = torch.stack((n_x / safe, n_y / safe, n_z / safe), dim=1)
-    return torch.where(ok.unsqueeze(1), n, torch.full_like(n, fill))
+    sq = n_x * n_x + n_y * n_y + n_z * n_z
+    ok = ok & (sq > 0) & (sq < math.inf)  # |n| > 0 and finite
+    # (the square root never sees 0: its derivative there would turn the zero gradient of a filled pixel into NaN)
+    norm = torch.sqrt(torch.where(ok, sq, torch.ones_like(sq))).unsqueeze(1)
+    n = torch.stack((n_x, n_y, n_z), dim=1) / norm
+    return torch.where(ok.unsqueeze(1), n, fill)
 
 
 def pixel_offsets(z: torch.Tensor, cam):
@@ -281,56 +281,66 @@ def mnr(g: Grid, normals: torch.Tensor, *, dlf: str, fill: float) -> torch.Tenso
 _EIGHT = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
-def three_f2n(g: Grid, cam, *, third: str, fill: float):
-    """3F2N (Fan et al., Three-Filters-to-Normal, RA-L 2021) with a mean or median third filter.
+def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
+    """3F2N (Fan et al., Three-Filters-to-Normal, RA-L 2021, eq. 7-11) with a mean or median third filter.
 
-    As the SDA-SNE authors' demo (see the 3F2N section of the project's spec):
+    As ``surfnorm.three_filters`` (and the SDA-SNE authors' demo):
 
-    1. D = 1 / z; n_x = f_x dD/du, n_y = f_y dD/dv by central differences
-       (one-sided at gaps; 0 in the first/last column/row, OpenCV
-       BORDER_REFLECT_101 as the authors' code);
-    2. for each of the 8 neighbours q (reflect-101 outside the image; an
-       invalid q, or one with the same depth, is dropped),
-       n_z,q = -(n_x dX + n_y dY) / dZ with (dX, dY, dZ) = P_p - P_q;
-    3. n_z = mean or median (mean of the two middle values for an even count)
-       of the n_z,q; where no q is left, n_x = n_y = 0; where n_x = n_y = 0
-       exactly, n_z = -1;
-    4. normalise, and turn every normal to face the camera (n . P < 0): the
-       raw 3F2N normal points away from it (n . P = +1 on a plane).
+    1. D = 1 / z; n_x = f_x dD/du, n_y = f_y dD/dv (the two gradient filters)
+       by central differences, one-sided beside a gap;
+    2. for each of the 8 neighbours q, with (dX, dY, dZ) = P_p - P_q,
+       n_z,q = -(n_x dX + n_y dY) / dZ (eq. 10); an invalid q, or one with
+       dZ == 0 exactly, gives no candidate;
+    3. n_z = mean or median of the candidates (eq. 11; the mean of the two
+       middle values for an even count); where none is left, n_x = n_y = 0;
+       where n_x = n_y = 0 exactly, n_z = -1;
+    4. normalise, and turn each normal so that n . P < 0 (the raw 3F2N
+       normal points away from the camera: n . P = +1 on a plane).
+
+    ``border="reflect"`` is OpenCV's BORDER_REFLECT_101, as the authors' code:
+    the gradient across the image border is 0 and the mirrored neighbour
+    counts as a candidate; ``"one-sided"`` takes one-sided differences there
+    and leaves out-of-image neighbours out.
 
     Runs in float64 whatever the input dtype, as the NumPy backend and the
-    authors' code: the differences of inverse depth and of depth lose too
-    much in float32 (e_A moves by up to 0.04 deg).
+    authors' code: differences of inverse depth and of depth lose too much in
+    float32 (e_A moves by up to 0.04 deg on the 3F2N sample).
     """
     out_dtype = g.z.dtype
     z = g.z.double()
     fx, fy, cx, cy = (c.double() for c in cam)
     d = Grid(1.0 / z, g.valid)
-    d_u, ok_u = fd_gradient(d, 0, 1, True)
-    d_v, ok_v = fd_gradient(d, 1, 0, True)
+    reflect = border == "reflect"
+    d_u, ok_u = fd_gradient(d, 0, 1, reflect)
+    d_v, ok_v = fd_gradient(d, 1, 0, reflect)
     n_x, n_y = fx * d_u, fy * d_v
     u_c, v_c = pixel_offsets(z, (fx, fy, cx, cy))
-    X, Y = u_c * z / fx, v_c * z / fy
-    # reflect-101 padding of the point cloud and of the validity, as the authors' filter2D
-    P = F.pad(torch.stack((X, Y, z, g.valid.to(z.dtype)), dim=1), (1, 1, 1, 1), mode="reflect")
+    # f_x dX = (u_p - c_x) Z_p - (u_q - c_x) Z_q, so the focal lengths cancel from eq. 10: the
+    # candidates use the maps (u - c_x) Z and (v - c_y) Z, as surfnorm.three_filters does
+    zx, zy = u_c * z, v_c * z
+    # those maps, depth and validity, padded by reflect-101 (the authors' filter2D) or as unusable (B x 4 x H+2 x W+2)
+    P = torch.stack((zx, zy, z, g.valid.to(z.dtype)), dim=1)
+    P = F.pad(P, (1, 1, 1, 1), mode="reflect") if reflect else F.pad(P, (1, 1, 1, 1), value=0.0)
     H, W = z.shape[-2:]
     candidates, keep = [], []
     for dv, du in _EIGHT:
-        X_q, Y_q, Z_q, valid_q = P[:, :, 1 + dv: 1 + dv + H, 1 + du: 1 + du + W].unbind(1)
-        dZ = z - Z_q
+        zx_q, zy_q, z_q, valid_q = P[:, :, 1 + dv: 1 + dv + H, 1 + du: 1 + du + W].unbind(1)
+        dZ = z - z_q
         k = (valid_q > 0) & (dZ != 0)
         safe = torch.where(k, dZ, torch.ones_like(dZ))
-        candidates.append(-(n_x * (X - X_q) + n_y * (Y - Y_q)) / safe)
+        candidates.append(-(d_u * (zx - zx_q) + d_v * (zy - zy_q)) / safe)
         keep.append(k)
-    n_zq = torch.stack(candidates, dim=1)  # B x 8 x H x W
-    keep = torch.stack(keep, dim=1)
-    count = keep.sum(dim=1, keepdim=True)
+    count = sum(k.to(torch.int64) for k in keep).unsqueeze(1)  # B x 1 x H x W
     if third == "mean":
-        n_z = torch.where(keep, n_zq, torch.zeros_like(n_zq)).sum(dim=1, keepdim=True) / count.clamp(min=1)
+        total = torch.zeros_like(z)
+        for c, k in zip(candidates, keep):  # in neighbour order, as the NumPy backend adds them
+            total = total + torch.where(k, c, torch.zeros_like(c))
+        n_z = total.unsqueeze(1) / count.clamp(min=1)
     else:
         # dropped candidates sort last; the median of the k kept ones is the mean of sorted[(k-1)//2] and sorted[k//2]
-        ordered = torch.sort(torch.where(keep, n_zq, torch.full_like(n_zq, math.inf)), dim=1).values
-        lower = torch.gather(ordered, 1, ((count - 1).clamp(min=0)) // 2)
+        n_zq = torch.stack([torch.where(k, c, torch.full_like(c, math.inf)) for c, k in zip(candidates, keep)], dim=1)
+        ordered = torch.sort(n_zq, dim=1).values  # B x 8 x H x W
+        lower = torch.gather(ordered, 1, (count - 1).clamp(min=0) // 2)
         upper = torch.gather(ordered, 1, (count // 2).clamp(max=7))
         n_z = (lower + upper) / 2
     n_z = n_z.squeeze(1)
@@ -338,8 +348,8 @@ def three_f2n(g: Grid, cam, *, third: str, fill: float):
     zero = torch.zeros_like(n_x)
     n_x, n_y = torch.where(none_left, zero, n_x), torch.where(none_left, zero, n_y)
     n_z = torch.where((n_x == 0) & (n_y == 0), -torch.ones_like(n_z), torch.where(none_left, zero, n_z))
-    # face the camera
-    away = (n_x * X + n_y * Y + n_z * z) > 0
+    # face the camera: n . P / Z = n_x (u - c_x) / f_x + n_y (v - c_y) / f_y + n_z < 0
+    away = (n_x * (u_c / fx) + n_y * (v_c / fy) + n_z) > 0
     sign = 1.0 - 2.0 * away.to(z.dtype)
     n = unit(sign * n_x, sign * n_y, sign * n_z, g.valid & ok_u & ok_v, fill)
     return n.to(out_dtype)

@@ -1,0 +1,393 @@
+"""The PyTorch backend: parity with the NumPy backend, gradients, shapes, dtypes, devices, errors."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch", reason="the torch extra is not installed")
+
+import surfnorm  # noqa: E402
+import surfnorm.torch as st  # noqa: E402
+from surfnorm import InputError  # noqa: E402
+from surfnorm.io import threef2n  # noqa: E402
+from surfnorm.metrics import mean_angular_error  # noqa: E402
+from surfnorm.reference import official_figures  # noqa: E402
+
+from .naive_torch_3f2n import three_f2n as naive_three_f2n  # noqa: E402
+from .surfaces import camera, plane, sphere  # noqa: E402
+
+TOL = 1e-4  # per component, float32 (acceptance criterion of issue 7)
+K = np.array([[100.0, 0, 15.5], [0, 100.0, 11.5], [0, 0, 1]])
+TORCH_METHODS = list(st.methods())
+SHARED_METHODS = [m for m in TORCH_METHODS if m in surfnorm.methods()]  # what both backends register
+TORCH_ONLY = [m for m in TORCH_METHODS if m not in surfnorm.methods()]  # 3F2N until the NumPy one is merged
+CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+
+
+def nchw(n: torch.Tensor) -> np.ndarray:
+    """(B, 3, H, W) tensor -> (B, H, W, 3) float32 array, as the NumPy backend returns."""
+    return n.detach().permute(0, 2, 3, 1).float().numpy()
+
+
+def load(root, names):
+    frames = [threef2n.read_frame(root, name) for name in names]
+    depth = np.stack([f.depth for f in frames])
+    masks = np.stack([f.mask for f in frames])
+    Ks = np.stack([f.K.matrix for f in frames])
+    return frames, depth, masks, Ks
+
+
+def variants(name):
+    """(method, options) pairs covering every option value of ``name`` at least once."""
+    opts = st.methods()[name]
+    out = [(name, {}), (name + "+mnr", {})]
+    if "dlf" in opts:
+        out += [(name, {"dlf": "alpha", "tau": 0.5}), (name, {"dlf": "beta", "truncate": False}),
+                (name + "+mnr", {"dlf": "gamma", "mnr_dlf": "1d"}), (name + "+mnr", {"mnr_dlf": "beta"})]
+    if "border" in opts:
+        out += [(name, {"border": "reflect"})]
+    if "mnr_dlf" in opts:
+        out += [(name, {"mnr_dlf": "gamma"})]
+    return out
+
+
+def assert_parity(depth, masks, Ks, method, options, names):
+    """The torch backend on a batch equals surfnorm.estimate frame by frame to TOL per component."""
+    got = nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method=method,
+                           mask=None if masks is None else torch.from_numpy(masks)[:, None], **options))
+    for i, name in enumerate(names):
+        ref = surfnorm.estimate(depth[i], Ks[i], method=method, mask=None if masks is None else masks[i], **options)
+        err = np.abs(got[i] - ref).max()
+        assert err <= TOL, f"{method} {options} on {name}: max error {err:.2e}"
+    return got
+
+
+class TestParity:
+    """Issue 7, acceptance 1: the torch backend on the CPU matches the NumPy backend to 1e-4 per component."""
+
+    @pytest.mark.parametrize("name", SHARED_METHODS)
+    def test_shipped_frames(self, name):
+        root = threef2n.sample_root()
+        names = threef2n.find_frames(root)
+        _, depth, masks, Ks = load(root, names)
+        # the whole frames with the default options, with and without the foreground mask
+        for m in (None, masks):
+            assert_parity(depth, m, Ks, name, {}, names)
+            assert_parity(depth, m, Ks, name + "+mnr", {}, names)
+        # every option on a corner of each frame (image border, silhouette, background)
+        Ks_crop = Ks.copy()
+        Ks_crop[:, 0, 2] -= 64
+        crop = (slice(None), slice(0, 120), slice(64, 224))
+        for method, options in variants(name)[2:]:
+            assert_parity(np.ascontiguousarray(depth[crop]), np.ascontiguousarray(masks[crop]), Ks_crop,
+                          method, options, names)
+
+    @pytest.mark.parametrize("name", SHARED_METHODS)
+    def test_twelve_frames(self, shared_sample, name):
+        names = threef2n.find_frames(shared_sample)
+        assert len(names) == 12
+        for chunk in (names[:6], names[6:]):
+            _, depth, masks, Ks = load(shared_sample, chunk)
+            assert_parity(depth, None, Ks, name, {}, chunk)
+            assert_parity(depth, masks, Ks, name + "+mnr", {}, chunk)
+
+    def test_every_method_is_compared(self):
+        # Each method of the torch backend is checked against the NumPy backend or, until the
+        # NumPy backend registers it, against the naive reference below; nothing is left out.
+        assert set(SHARED_METHODS) | set(TORCH_ONLY) == set(TORCH_METHODS)
+        assert set(TORCH_ONLY) <= {"3f2n_mean", "3f2n_median"}
+
+    def test_options_match_the_numpy_backend(self):
+        for name in SHARED_METHODS:
+            assert st.methods()[name] == surfnorm.methods()[name].options, name
+
+
+class TestThreeFilters:
+    """3F2N against a naive per-pixel reference, and against the authors' figures."""
+
+    @pytest.mark.parametrize("third", ["mean", "median"])
+    @pytest.mark.parametrize("border", ["one-sided", "reflect"])
+    def test_naive_reference_with_gaps_and_borders(self, third, border):
+        f = threef2n.read_frame(threef2n.sample_root(), "Medium/Trex/000001")
+        depth = f.depth[150:180, 300:340].copy()  # crosses the silhouette
+        depth[5, 7] = np.nan
+        depth[12:14, 20:23] = 0.0
+        depth[0, 3] = -1.0
+        valid = np.isfinite(depth) & (depth > 0)
+        cam = f.K
+        cx, cy = cam.cx - 300, cam.cy - 150
+        Kc = np.array([[cam.fx, 0, cx], [0, cam.fy, cy], [0, 0, 1]])
+        ref = np.array(naive_three_f2n(depth, valid, cam.fx, cam.fy, cx, cy, third=third, border=border))
+        got = nchw(st.estimate(torch.from_numpy(depth), Kc, method=f"3f2n_{third}", border=border))[0]
+        # Where n is perpendicular to the viewing ray, "facing the camera" does not fix its sign and rounding
+        # decides it. That happens by construction where a gradient is one-sided or 0 (image border with
+        # reflect, beside a gap) and the mean/median equals the candidate of that same neighbour:
+        # n_z,q = -n_x (u - c_x) / f_x exactly, so n . P = 0. Compare up to sign there.
+        v, u = np.mgrid[0:depth.shape[0], 0:depth.shape[1]]
+        ray = np.stack(((u - cx) / cam.fx, (v - cy) / cam.fy, np.ones(u.shape)), axis=-1)
+        ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+        edge_on = (np.abs(np.einsum("hwc,hwc->hw", ref, ray)) < 1e-6) & (np.abs(ref).sum(-1) > 0)  # not fill
+        assert edge_on.sum() < 0.05 * edge_on.size
+        np.testing.assert_allclose(got[~edge_on], ref[~edge_on], atol=1e-6)
+        np.testing.assert_allclose(np.abs(got[edge_on]), np.abs(ref[edge_on]), atol=1e-6)
+
+    @pytest.mark.parametrize("third", ["mean", "median"])
+    def test_authors_figures_on_shipped_frames(self, third):
+        root = threef2n.sample_root()
+        names = threef2n.find_frames(root)
+        frames, depth, _, Ks = load(root, names)
+        got = nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks),
+                               method=f"3f2n_{third}", border="reflect"))
+        for i, f in enumerate(frames):
+            e_a = mean_angular_error(got[i], f.normals, f.mask)
+            assert abs(e_a - official_figures(f.name)[f"3f2n_{third}"]) < 1e-4, f.name
+
+    def test_faces_the_camera(self):
+        d, _, hit = sphere(camera(40, 30), 30, 40, (0.1, 0.0, 3.0), 1.0)
+        n = st.estimate(torch.from_numpy(d), camera(40, 30), method="3f2n_median")[0]
+        assert bool((n[2][torch.from_numpy(hit)] < 0).all())
+
+
+class TestClosedForm:
+    @pytest.mark.parametrize("name", TORCH_METHODS)
+    def test_tilted_plane(self, name):
+        Kp = camera(32, 24)
+        d, normals, hit = plane(Kp, 24, 32, (0.3, -0.2, -1.0), 2.0)
+        assert hit.all()
+        n = nchw(st.estimate(torch.from_numpy(d), Kp, method=name))[0]
+        np.testing.assert_allclose(n[1:-1, 1:-1], normals[1:-1, 1:-1], atol=1e-4, err_msg=name)
+
+
+def random_depth(h=6, w=7, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return (1.0 + torch.rand(h, w, generator=g, dtype=torch.float64)).requires_grad_()
+
+
+class TestGradients:
+    """Issue 7, acceptance 2: gradcheck in float64 on small random depth for each method."""
+
+    @pytest.mark.parametrize("method,options", [v for name in TORCH_METHODS for v in variants(name)[:2]]
+                             + [("d2nt_v2", {"dlf": "beta", "truncate": False}), ("d2nt_v3", {"dlf": "alpha"}),
+                                ("cp2tv", {"border": "reflect"}), ("3f2n_mean", {"border": "reflect"})])
+    def test_gradcheck(self, method, options):
+        z = random_depth()
+        Kt = torch.tensor(K, dtype=torch.float64)
+        mask = torch.ones(6, 7, dtype=torch.bool)
+        mask[2, 3] = False  # a gap: one-sided differences and mirrored Laplacians around it
+        assert torch.autograd.gradcheck(lambda d: st.estimate(d, Kt, method=method, mask=mask, **options), (z,))
+
+    def test_truncated_softmin_passes_gradient_to_the_chosen_side_only(self):
+        # a step: right of column 3 the depth jumps; the truncated softmin takes the left difference at (2, 3)
+        z = torch.full((5, 8), 2.0, dtype=torch.float64)
+        z[:, 4:] = 4.0  # smoothness 0 on the left of (2, 3), about 2 on the right: |s_2 - s_1| > 1
+        z = z + 0.01 * torch.arange(8, dtype=torch.float64)  # a gentle slope, so the gradient is not zero
+        z.requires_grad_()
+        n = st.estimate(z, torch.tensor(K), method="d2nt_v2")
+        (g,) = torch.autograd.grad(n[0, 0, 2, 3], z)
+        assert g[2, 2] != 0 and g[2, 4] == 0
+
+    def test_mnr_passes_gradient_through_the_selected_normal(self):
+        z = random_depth(7, 7, seed=3).detach()
+        z.requires_grad_()
+        Kt = torch.tensor(K, dtype=torch.float64)
+        raw = st.estimate(z, Kt, method="d2nt_v2")
+        refined = st.estimate(z, Kt, method="d2nt_v2+mnr")
+        # find a pixel whose refined normal came from a neighbour, and check the gradient equals that neighbour's
+        for v in range(1, 6):
+            for u in range(1, 6):
+                if not torch.equal(refined[0, :, v, u], raw[0, :, v, u]):
+                    for dv, du in ((0, -1), (0, 1), (-1, 0), (1, 0)):
+                        if torch.equal(refined[0, :, v, u], raw[0, :, v + dv, u + du]):
+                            (g_ref,) = torch.autograd.grad(refined[0, 2, v, u], z, retain_graph=True)
+                            (g_raw,) = torch.autograd.grad(raw[0, 2, v + dv, u + du], z, retain_graph=True)
+                            assert torch.equal(g_ref, g_raw)
+                            return
+        pytest.fail("MNR kept every normal of the random depth; pick another seed")
+
+    def test_invalid_pixels_get_zero_gradient(self):
+        z = random_depth().detach()
+        z[1, 1] = float("nan")
+        z[4, 5] = 0.0
+        z.requires_grad_()
+        n = st.estimate(z, torch.tensor(K), method="d2nt_v3")
+        n.sum().backward()
+        assert torch.isfinite(z.grad).all() and z.grad[1, 1] == 0 and z.grad[4, 5] == 0
+
+
+class TestModule:
+    @pytest.mark.parametrize("method,options", [("d2nt_v3", {}), ("d2nt_v2", {"dlf": "alpha", "fill": float("nan")}),
+                                                ("3f2n_mean+mnr", {"border": "reflect"})])
+    def test_function_and_module_identical(self, method, options):
+        z = random_depth(12, 15).detach()[None, None].float()
+        mask = torch.rand(12, 15, generator=torch.Generator().manual_seed(1)) > 0.1
+        layer = st.DepthToNormal(method=method, **options)
+        torch.testing.assert_close(layer(z, K, mask=mask), st.estimate(z, K, method=method, mask=mask, **options),
+                                   rtol=0, atol=0, equal_nan=True)
+
+    def test_module_only_stores_options(self):
+        layer = st.DepthToNormal(method="d2nt_v2", tau=0.5)
+        assert list(layer.parameters()) == [] and list(layer.buffers()) == []
+        assert "method='d2nt_v2'" in repr(layer) and "tau=0.5" in repr(layer)
+
+    def test_module_checks_options_when_built(self):
+        with pytest.raises(InputError, match="tau: expected a positive finite number, got -1"):
+            st.DepthToNormal(method="d2nt_v2", tau=-1)
+
+
+class TestShapesDtypesDevices:
+    def test_plain_image_gives_batch_of_one(self):
+        n = st.estimate(torch.full((24, 32), 2.0), K, method="d2nt_basic")
+        assert n.shape == (1, 3, 24, 32) and n.dtype == torch.float32
+        torch.testing.assert_close(n[0, :, 5, 5], torch.tensor([0.0, 0.0, -1.0]))
+
+    def test_batch_with_one_K_per_frame(self):
+        root = threef2n.sample_root()
+        names = threef2n.find_frames(root)[:2]
+        _, depth, _, Ks = load(root, names)
+        Ks[1, 0, 2] += 7.0  # a different principal point for the second frame
+        both = st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method="d2nt_basic")
+        for i in range(2):
+            alone = st.estimate(torch.from_numpy(depth[i]), Ks[i], method="d2nt_basic")
+            torch.testing.assert_close(both[i], alone[0], rtol=0, atol=0)
+
+    def test_one_mask_for_the_whole_batch(self):
+        z = torch.full((2, 1, 10, 12), 2.0)
+        mask = torch.ones(10, 12, dtype=torch.bool)
+        mask[:, :4] = False
+        n = st.estimate(z, K, method="d2nt_v3", mask=mask)
+        assert bool((n[:, :, :, :4] == 0).all()) and bool((n[:, 2, :, 4:] < 0).all())
+        n2 = st.estimate(z, K, method="d2nt_v3", mask=mask.expand(2, 1, 10, 12))
+        torch.testing.assert_close(n, n2, rtol=0, atol=0)
+
+    @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+    def test_low_precision_computed_in_float32(self, dtype):
+        z = (2.0 + torch.rand(1, 1, 20, 24, generator=torch.Generator().manual_seed(2))).to(dtype)
+        n = st.estimate(z, K, method="d2nt_v2")
+        assert n.dtype == dtype
+        ref = st.estimate(z.float(), K, method="d2nt_v2")
+        torch.testing.assert_close(n.float(), ref.to(dtype).float(), rtol=0, atol=0)
+
+    def test_float64_and_integer_depth(self):
+        z = torch.full((1, 1, 10, 12), 2000, dtype=torch.int32)
+        assert st.estimate(z, K, method="d2nt_basic").dtype == torch.float32
+        n = st.estimate(z.double(), K, method="d2nt_basic")
+        assert n.dtype == torch.float64
+        torch.testing.assert_close(n[0, :, 5, 5], torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64))
+
+    def test_fill_and_invalid_depth(self):
+        z = torch.full((1, 1, 10, 12), 2.0)
+        z[0, 0, 3, 3] = float("nan")
+        z[0, 0, 5, 6] = 0.0
+        z[0, 0, 7, 2] = -1.0
+        z[0, 0, 8, 9] = float("inf")
+        for name in TORCH_METHODS:
+            n = st.estimate(z, K, method=name, fill=float("nan"))
+            for v, u in ((3, 3), (5, 6), (7, 2), (8, 9)):
+                assert bool(n[0, :, v, u].isnan().all()), name
+            ok = ~n.isnan().any(1)
+            torch.testing.assert_close(n.norm(dim=1)[ok], torch.ones(int(ok.sum())))
+
+    def test_input_not_modified(self):
+        z = random_depth().detach()
+        before = z.clone()
+        st.estimate(z, K, method="3f2n_median+mnr")
+        assert torch.equal(z, before)
+
+    def test_import_surfnorm_does_not_import_torch(self):
+        code = "import sys, surfnorm; surfnorm.methods(); assert 'torch' not in sys.modules, 'torch imported'"
+        subprocess.run([sys.executable, "-c", code], check=True)
+
+    @CUDA
+    @pytest.mark.parametrize("name", TORCH_METHODS)
+    def test_cuda_matches_cpu_without_host_sync(self, name):
+        root = threef2n.sample_root()
+        _, depth, masks, Ks = load(root, threef2n.find_frames(root))
+        z, m = torch.from_numpy(depth)[:, None], torch.from_numpy(masks)[:, None]
+        cpu = st.estimate(z, torch.from_numpy(Ks), method=name, mask=m)
+        zc, mc, Kc = z.cuda(), m.cuda(), torch.from_numpy(Ks).cuda()
+        torch.cuda.synchronize()
+        torch.cuda.set_sync_debug_mode("error")
+        try:
+            gpu = st.estimate(zc, Kc, method=name, mask=mc)
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+        assert gpu.device.type == "cuda"
+        torch.testing.assert_close(gpu.cpu(), cpu, rtol=0, atol=TOL)
+
+
+class TestCompile:
+    @pytest.mark.parametrize("method", ["d2nt_v3", "3f2n_median+mnr"])
+    def test_traces_as_one_graph(self, method):
+        # fullgraph=True fails on any graph break, e.g. a Python branch on a tensor value or .item();
+        # the aot_eager backend traces forward and backward without compiling C++ (seconds, not minutes)
+        torch._dynamo.reset()
+        fn = torch.compile(lambda z, k: st.estimate(z, k, method=method), fullgraph=True, dynamic=False,
+                           backend="aot_eager")
+        z = random_depth(8, 9).detach()[None, None].float().requires_grad_()
+        Kt = torch.tensor(K, dtype=torch.float32)
+        out = fn(z, Kt)
+        torch.testing.assert_close(out, st.estimate(z, Kt, method=method), rtol=0, atol=1e-6)
+        (g,) = torch.autograd.grad(out[..., 2:-2, 2:-2].sum(), z)
+        (g_ref,) = torch.autograd.grad(st.estimate(z, Kt, method=method)[..., 2:-2, 2:-2].sum(), z)
+        torch.testing.assert_close(g, g_ref, rtol=1e-5, atol=1e-6)
+
+    @pytest.mark.filterwarnings("ignore:`torch.jit.script_method` is deprecated:DeprecationWarning")
+    def test_inductor(self):
+        # the default backend generates and compiles C++ on the CPU (needs a C compiler)
+        torch._dynamo.reset()
+        fn = torch.compile(lambda z, k: st.estimate(z, k, method="d2nt_basic"), fullgraph=True, dynamic=False)
+        z = random_depth(8, 9).detach()[None, None].float()
+        Kt = torch.tensor(K, dtype=torch.float32)
+        torch.testing.assert_close(fn(z, Kt), st.estimate(z, Kt, method="d2nt_basic"), rtol=0, atol=1e-5)
+
+
+class TestErrors:
+    def test_method(self):
+        with pytest.raises(InputError, match=r"method: expected one of d2nt_basic, .* in the torch backend, got 'plane_svd'"):
+            st.estimate(torch.ones(5, 5), K, method="plane_svd")
+        with pytest.raises(InputError, match="method: expected a method name"):
+            st.estimate(torch.ones(5, 5), K, method=3)
+
+    def test_options(self):
+        with pytest.raises(InputError, match=r"options of method 'd2nt_basic': expected some of border, fill, got unknown option\(s\) tau"):
+            st.estimate(torch.ones(5, 5), K, method="d2nt_basic", tau=1.0)
+        with pytest.raises(InputError, match="dlf: expected one of"):
+            st.estimate(torch.ones(5, 5), K, method="d2nt_v2", dlf="delta")
+
+    def test_depth(self):
+        with pytest.raises(InputError, match="depth: expected a tensor of shape \\(B, 1, H, W\\) or \\(H, W\\), got None"):
+            st.estimate(None, K)
+        with pytest.raises(InputError, match=r"depth: expected a tensor of shape \(B, 1, H, W\) or \(H, W\), got a tensor of shape \(2, 5, 5\)"):
+            st.estimate(torch.ones(2, 5, 5), K)
+        with pytest.raises(InputError, match=r"got a tensor of shape \(1, 2, 5, 5\)"):
+            st.estimate(torch.ones(1, 2, 5, 5), K)
+        with pytest.raises(InputError, match="depth: expected real-valued depth .* a boolean tensor is a mask"):
+            st.estimate(torch.ones(5, 5, dtype=torch.bool), K)
+        with pytest.raises(InputError, match="depth: expected real-valued depth"):
+            st.estimate(torch.ones(5, 5, dtype=torch.complex64), K)
+        with pytest.raises(InputError, match="depth: expected at least 3x3 pixels"):
+            st.estimate(torch.ones(2, 5), K)
+        with pytest.raises(InputError, match="depth: expected at least one frame in the batch"):
+            st.estimate(torch.ones(0, 1, 5, 5), K)
+        with pytest.raises(InputError, match="depth: expected a tensor of shape .* got object"):
+            st.estimate(object(), K)
+
+    def test_mask(self):
+        with pytest.raises(InputError, match=r"mask: expected shape \(H, W\) = \(5, 6\) to match depth, got a tensor of shape \(6, 5\)"):
+            st.estimate(torch.ones(5, 6), K, mask=torch.ones(6, 5, dtype=torch.bool))
+        with pytest.raises(InputError, match=r"mask: expected shape \(2, 1, 5, 6\) or \(5, 6\) to match depth"):
+            st.estimate(torch.ones(2, 1, 5, 6), K, mask=torch.ones(3, 1, 5, 6, dtype=torch.bool))
+        with pytest.raises(InputError, match="mask: expected a boolean tensor"):
+            st.estimate(torch.ones(5, 6), K, mask=torch.ones(5, 6, dtype=torch.complex64))
+
+    def test_K(self):
+        with pytest.raises(InputError, match=r"K: expected shape \(3, 3\) or \(2, 3, 3\) for 2 frame\(s\), got a tensor of shape \(3, 3, 3\)"):
+            st.estimate(torch.ones(2, 1, 5, 5), torch.ones(3, 3, 3))
+        with pytest.raises(InputError, match="K: expected positive focal lengths"):
+            st.estimate(torch.ones(5, 5), [[-1.0, 0, 2], [0, 1, 2], [0, 0, 1]])
+        with pytest.raises(InputError, match=r"K\[1\]: expected positive focal lengths"):
+            st.estimate(torch.ones(2, 1, 5, 5), np.stack([K, -K]))
+        with pytest.raises(InputError, match="K: expected a real"):
+            st.estimate(torch.ones(5, 5), torch.ones(3, 3, dtype=torch.bool))

@@ -1,6 +1,7 @@
 # Two commands for a newcomer on a fresh machine:
 #   make demo   set up .venv and run every estimator on the sample frames shipped in the package
 #   make test   set up .venv (with the test extras and the CPU build of PyTorch) and run all tests
+#   make bench  speed of the D2NT family next to the authors' d2nt package -> bench-output/speed.{md,json}
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -9,6 +10,7 @@ TEST_STAMP := $(VENV)/.test-installed-$(shell cat pyproject.toml | cksum | cut -
 # PyTorch for the tests of surfnorm.torch: the CPU build (on this machine pip finds its wheel file)
 TORCH_VERSION := 2.13.0
 TORCH_STAMP := $(VENV)/.torch-installed-$(TORCH_VERSION)
+BENCH_STAMP := $(VENV)/.bench-installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test bench clean
 
@@ -36,6 +38,14 @@ demo: $(STAMP)
 
 test: $(TEST_STAMP) $(TORCH_STAMP)
 	$(PY) -m pytest -q
+
+# d2nt 0.1.3 declares opencv-python; --no-deps keeps our opencv-python-headless, which provides the same cv2.
+$(BENCH_STAMP): $(STAMP)
+	$(PY) -m pip install -q --no-deps d2nt==0.1.3
+	touch $@
+
+bench: $(BENCH_STAMP)
+	NUMBA_NUM_THREADS=1 $(PY) benchmarks/speed.py --out bench-output
 
 clean:
 	rm -rf $(VENV) demo-output bench-output

@@ -10,7 +10,7 @@ import numpy as np
 from ._validate import as_depth, as_mask, as_normals, check_bool, check_choice, check_fill, valid_pixels
 from .camera import Intrinsics
 from .errors import InputError
-from .gradients import DLF_NAMES
+from ._choices import DLF_NAMES
 from .methods import resolve
 
 __all__ = ["estimate", "refine"]
@@ -33,17 +33,25 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
     return [Intrinsics.from_matrix(arr)] * n
 
 
-def _run(method, refined, options, z, valid, cam):
-    out = np.empty(z.shape + (3,), dtype=np.float32)
-    mnr_dlf = options.pop("mnr_dlf", None)
-    if method.mnr or refined:
-        from .mnr import mnr
+def _run(method, refined, options, z, valid, cam, out=None):
+    if out is None:
+        out = np.empty(z.shape + (3,), dtype=np.float32)
+    if not refined:
+        # A recipe ending with MNR (d2nt_v3) refines inside its own run, fused: no full-size temporary.
+        return method.run(z, valid, cam, out, **options)
+    from .mnr import mnr
 
-        raw = method.run(z, valid, cam, np.empty_like(out), **options)
-        if method.mnr and refined:  # e.g. d2nt_v3+mnr: refine twice
-            raw = mnr(z, valid, raw, np.empty_like(out), dlf=mnr_dlf, fill=options["fill"])
-        return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"])
-    return method.run(z, valid, cam, out, **options)
+    mnr_dlf = options["mnr_dlf"]
+    run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
+    raw = method.run(z, valid, cam, np.empty(out.shape, np.float32), **run_options)
+    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"])
+
+
+def _valid(z, mask):
+    # One Numba pass (compiled on first use; imported here so that ``import surfnorm`` compiles nothing).
+    from .gradients import valid_map
+
+    return valid_map(z, mask)
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None,
@@ -98,24 +106,27 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     method_obj, refined, clean = resolve(method, options)
     z = as_depth(depth)
     user_mask = as_mask(mask, z.shape)
-    valid = valid_pixels(z, user_mask)
     if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
         from .units import relative_depth
 
-        z = relative_depth(z, valid, disparity=disparity)
-        valid = valid_pixels(z, valid)  # a value that over/underflows float32 when rescaled is not used
+        # Invalid pixels become 0 in the rescaled depth, and a value that over/underflows float32 when
+        # rescaled is not finite and positive, so the validity computed below from z covers both.
+        z = relative_depth(z, valid_pixels(z, user_mask), disparity=disparity)
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        return _run(method_obj, refined, dict(clean), z, valid, cam)
+        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam)
     cams = _intrinsics_list(K, z.shape[0])
-    out = np.empty(z.shape + (3,), dtype=np.float32)
-
-    def one(i):
-        out[i] = _run(method_obj, refined, dict(clean), z[i], valid[i], cams[i])
-
     workers = threads if threads is not None else (os.cpu_count() or 1)
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise InputError(f"threads: expected a positive integer, got {threads!r}")
+    out = np.empty(z.shape + (3,), dtype=np.float32)
+
+    def one(i):
+        # Everything per frame (validity, kernel) runs here, so frames proceed in parallel:
+        # the kernels release the GIL (nogil=True).
+        frame_mask = None if user_mask is None else user_mask[i]
+        _run(method_obj, refined, dict(clean), z[i], _valid(z[i], frame_mask), cams[i], out[i])
+
     if workers == 1 or z.shape[0] == 1:
         for i in range(z.shape[0]):
             one(i)
@@ -151,5 +162,5 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     n = as_normals(normals, z.shape)
     check_choice("dlf", dlf, DLF_NAMES)
     fill = check_fill(fill)
-    valid = valid_pixels(z, as_mask(mask, z.shape))
+    valid = _valid(z, as_mask(mask, z.shape))
     return mnr(z, valid, n, np.empty_like(n), dlf=dlf, fill=fill)

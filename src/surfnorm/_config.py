@@ -10,6 +10,7 @@ must not be optimised away.
 from __future__ import annotations
 
 import numba
+import numba.extending
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
@@ -31,3 +32,16 @@ def pixel(func):
     Numba IR level, so kernels stay written as calls to readable helpers.
     """
     return numba.njit(inline="always", **NJIT)(func)
+
+
+@numba.extending.intrinsic
+def as_float64(typingctx, bits):
+    """The float64 whose IEEE-754 bit pattern is the int64 ``bits`` (a register move; vectorises)."""
+    from llvmlite import ir
+
+    sig = numba.types.float64(numba.types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return sig, codegen

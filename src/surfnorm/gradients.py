@@ -9,9 +9,17 @@ Depth-to-Normal Translator", ICRA 2023 (numbered in the order they appear):
 * eq. 13  softmin M(s_i) = exp(-s_i / tau) / sum_j exp(-s_j / tau)
 * eq. 14  truncated softmin: weights 1 and 0 when |s_2 - s_1| > 1
 
-Everything here is a per-pixel ``@njit`` function that the kernels in
-``translate.py`` and ``refine.py`` call inside their loops, so that a whole
-estimator is a single pass over the image with no temporaries.
+The per-pixel ``@pixel`` functions below are the readable statement of the
+rules (and the general path of the kernels, used near the image border and
+near missing depth). The kernels in ``translate.py`` and ``mnr.py`` sweep the
+image row by row: each pixel's smoothness and softmin weight exp(-s/tau) is
+computed once into a small row buffer (not once per neighbour that uses it),
+and inside runs of pixels whose 3x3 neighbourhood is all valid a branch-free
+loop (:func:`fast_row`, :func:`segment`) does the same arithmetic without any
+validity or bounds checks, so that LLVM can vectorise it. The row-level
+functions are ordinary ``@njit`` functions (called once per row, so the call
+costs nothing), not inlined: inlining them into every kernel made compiling
+d2nt_v3 take minutes.
 
 Invalid depth (``valid[v, u] == False``) is never read. Where a neighbour is
 missing (invalid or outside the image) a gradient falls back to the one-sided
@@ -24,18 +32,14 @@ no gradient along it.
 from __future__ import annotations
 
 import math
+from decimal import Decimal, getcontext
 
 import numpy as np
 
-from ._config import njit, pixel
+from ._choices import BORDERS, DLF_NAMES
+from ._config import as_float64, njit, pixel
 
-__all__ = ["DLF_NAMES", "BORDERS", "dlf_code", "fd_gradients", "dag_gradients"]
-
-#: How a finite difference treats the image border (see :func:`stencil`).
-BORDERS = ("one-sided", "reflect")
-
-#: The four discrete Laplace filters of Table II, by name.
-DLF_NAMES = ("1d", "alpha", "beta", "gamma")
+__all__ = ["DLF_NAMES", "BORDERS", "dlf_code", "fd_gradients", "dag_gradients", "valid_map", "softmin_ratio"]
 
 # Weights of the 3x3 DLFs, as (edge neighbour weight, corner neighbour weight);
 # the centre weight is minus their sum, so nabla^2 z = sum_k w_k (z_k - z_c).
@@ -102,28 +106,72 @@ def smoothness(z, valid, v, u, dlf, axis):
 SOFTMIN_EPS = np.float32(1e-8)
 
 
+# exp for float32 arguments, evaluated in float64 and rounded once, so that it
+# is correctly rounded in practice (and vectorises, unlike a call to libm's
+# expf, which also misrounds about 1 argument in 10^4 by one ulp).
+# exp(x) = 2^k e^r with k = round(x / ln 2), r = x - k ln 2 (ln 2 split in a
+# high part with trailing zero bits, so that k * _LN2_HI is exact, and the
+# rest), e^r by its Taylor series to r^13 (|r| <= ln2 / 2: truncation 4e-18).
+getcontext().prec = 40
+_LN2 = Decimal(2).ln()
+_LN2_HI = math.ldexp(math.floor(math.ldexp(float(_LN2), 32)), -32)
+_LN2_LO = float(_LN2 - Decimal(_LN2_HI))
+_INV_LN2 = float(1 / _LN2)
+_C0, _C1, _C2, _C3, _C4, _C5, _C6, _C7, _C8, _C9, _C10, _C11, _C12, _C13 = (1.0 / math.factorial(k) for k in range(14))
+_EXP_LO, _EXP_HI = -104.0, 89.0  # exp(-104) < 2^-150 rounds to 0 in float32; exp(89) overflows to inf
+
+
+@pixel
+def exp32(x):
+    """exp(x) of a float32, as a float32 (see the note above)."""
+    x_d = np.float64(x)
+    x_c = x_d if x_d > _EXP_LO else _EXP_LO  # NaN -> _EXP_LO, put back below
+    x_c = x_c if x_c < _EXP_HI else _EXP_HI
+    k = math.floor(x_c * _INV_LN2 + 0.5)
+    r = (x_c - k * _LN2_HI) - k * _LN2_LO
+    e_r = ((((((((((((_C13 * r + _C12) * r + _C11) * r + _C10) * r + _C9) * r + _C8) * r + _C7) * r + _C6)
+                * r + _C5) * r + _C4) * r + _C3) * r + _C2) * r + _C1) * r + _C0  # Horner
+    two_k = as_float64((np.int64(k) + 1023) << 52)
+    y = np.float32(e_r * two_k)
+    return y if x_d == x_d else x
+
+
+def softmin_ratio(tau: float, truncate: bool) -> np.float32:
+    """The weight ratio beyond which the truncated softmin (eq. 14) snaps to (1, 0): e^(1/tau), or inf (no truncation)."""
+    return np.float32(math.exp(1.0 / float(np.float32(tau)))) if truncate else np.float32(np.inf)
+
+
+@pixel
+def softmin_pair(p_b, p_f, ratio):
+    """Weights (lambda_b, lambda_f) from p_i = exp(-s_i / tau) of the two neighbours (eq. 13-14).
+
+    softmin regularised by :data:`SOFTMIN_EPS`; truncated to (1, 0) or (0, 1)
+    when one weight exceeds ``ratio`` = e^(1/tau) times the other (|s_b - s_f| > 1
+    for tau = 1); ``ratio`` = inf switches truncation off.
+    """
+    total = SOFTMIN_EPS + p_b + p_f
+    half_eps = np.float32(0.5) * SOFTMIN_EPS
+    lambda_b = (p_b + half_eps) / total
+    lambda_f = (p_f + half_eps) / total
+    b_wins = lambda_b / (lambda_f + SOFTMIN_EPS) > ratio
+    f_wins = lambda_f / (lambda_b + SOFTMIN_EPS) > ratio
+    one, zero = np.float32(1.0), np.float32(0.0)
+    out_b = one if b_wins else (zero if f_wins else lambda_b)
+    out_f = zero if b_wins else (one if f_wins else lambda_f)
+    return out_b, out_f
+
+
 @pixel
 def truncated_softmin(s_1, s_2, tau, truncate):
-    """Weights (lambda_1, lambda_2) of two neighbours with smoothness s_1, s_2.
+    """Weights (lambda_1, lambda_2) of two neighbours with smoothness s_1, s_2 (eq. 13-14).
 
-    softmin (eq. 13) with softness ``tau``, regularised by :data:`SOFTMIN_EPS`;
-    with ``truncate`` the smoother side gets weight 1 and the other 0 when
-    their softmin weights differ by more than a factor e^(1/tau), i.e. when
+    softmin with softness ``tau``, regularised by :data:`SOFTMIN_EPS`; with
+    ``truncate`` the smoother side gets weight 1 and the other 0 when their
+    softmin weights differ by more than a factor e^(1/tau), i.e. when
     |s_2 - s_1| > 1 (eq. 14).
     """
-    p_1 = np.float32(math.exp(-s_1 / tau))
-    p_2 = np.float32(math.exp(-s_2 / tau))
-    total = SOFTMIN_EPS + p_1 + p_2
-    half_eps = np.float32(0.5) * SOFTMIN_EPS
-    lambda_1 = (p_1 + half_eps) / total
-    lambda_2 = (p_2 + half_eps) / total
-    if truncate:
-        ratio = np.float32(math.exp(1.0 / tau))
-        if lambda_1 / (lambda_2 + SOFTMIN_EPS) > ratio:
-            lambda_1, lambda_2 = np.float32(1.0), np.float32(0.0)
-        elif lambda_2 / (lambda_1 + SOFTMIN_EPS) > ratio:
-            lambda_1, lambda_2 = np.float32(0.0), np.float32(1.0)
-    return lambda_1, lambda_2
+    ratio = np.float32(math.exp(1.0 / tau)) if truncate else np.float32(np.inf)
+    return softmin_pair(exp32(-s_1 / tau), exp32(-s_2 / tau), ratio)
 
 
 @pixel
@@ -234,3 +282,143 @@ def dag_gradients(z: np.ndarray, valid: np.ndarray, *, dlf: str = "1d", tau: flo
     out = np.empty((2,) + z.shape, dtype=np.float32)
     _dag_map_kernel(z, valid, dlf_code(dlf), np.float32(tau), bool(truncate), out)
     return out
+
+
+# ---------------------------------------------------------------------------
+# Validity and the row machinery of the fast kernels.
+
+
+@njit
+def _valid_kernel(z, out):
+    H, W = z.shape
+    for v in range(H):
+        for u in range(W):
+            d = z[v, u]
+            out[v, u] = (d > 0) & (d < np.inf)  # finite and positive (NaN fails both)
+
+
+@njit
+def _valid_masked_kernel(z, mask, out):
+    H, W = z.shape
+    for v in range(H):
+        for u in range(W):
+            d = z[v, u]
+            out[v, u] = (d > 0) & (d < np.inf) & mask[v, u]
+
+
+def valid_map(z: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """Pixels whose depth may be used (finite, positive, in ``mask``): one pass, one allocation.
+
+    Same result as :func:`surfnorm._validate.valid_pixels` (NumPy, three passes).
+    """
+    out = np.empty(z.shape, dtype=np.bool_)
+    if mask is None:
+        _valid_kernel(z, out)
+    else:
+        _valid_masked_kernel(z, mask, out)
+    return out
+
+
+@pixel
+def box_row(up, mid, dn, interior, col, runs):
+    """Runs of columns where up, mid and dn are all True at u - 1, u and u + 1; returns their number.
+
+    Applied to the rows v - 1, v, v + 1 of a validity map: the runs [a, b)
+    (``runs[k, 0]``, ``runs[k, 1]``) of pixels whose 3x3 neighbourhood lies in
+    the image and is all valid, where the kernels use a branch-free loop.
+    None unless ``interior`` (row v has rows above and below). ``col`` is
+    scratch of length W; ``runs`` has room for W // 2 + 1 runs. Computed once
+    per row and shared by every stage that sweeps it (scanning a row for runs
+    in every stage cost as much as the stages themselves).
+    """
+    W = col.shape[0]
+    n = 0
+    if interior:
+        count = 0
+        for u in range(W):
+            c = up[u] & mid[u] & dn[u]
+            col[u] = c
+            count += np.int64(c)
+        if count == W:  # the usual case, found with one vectorised pass: one run over the whole row
+            runs[0, 0] = 1
+            runs[0, 1] = W - 1
+            n = 1
+        else:
+            u = 1
+            while u < W - 1:
+                if col[u - 1] and col[u] and col[u + 1]:
+                    runs[n, 0] = u
+                    while u < W - 1 and col[u - 1] and col[u] and col[u + 1]:
+                        u += 1
+                    runs[n, 1] = u
+                    n += 1
+                else:
+                    u += 1
+    return n
+
+
+@pixel
+def fast_row(valid, v, col, runs):
+    """:func:`box_row` of the validity map around row v."""
+    H = valid.shape[0]
+    return box_row(valid[max(v - 1, 0)], valid[v], valid[min(v + 1, H - 1)], v >= 1 and v < H - 1, col, runs)
+
+
+@pixel
+def segment(runs, n_runs, k, W):
+    """Fast run k = [a, b) of a row, k = 0 .. n_runs; the last one, k = n_runs, is empty at the end (a = b = W).
+
+    A sweep over a row handles pixels [previous b, a) by the per-pixel rule,
+    then the run [a, b) by a branch-free loop.
+    """
+    a, b = W, W
+    if k < n_runs:
+        a, b = runs[k, 0], runs[k, 1]
+    return a, b
+
+
+@njit
+def laplacian_row(z, valid, r, runs, n_runs, dlf, axis, s):
+    """s[u] = smoothness |nabla^2 z| (eq. 11) of every valid pixel of row r (0 where invalid).
+
+    Branch-free inside the fast runs of row r (all neighbours valid, so no
+    mirroring), the per-pixel rule :func:`smoothness` elsewhere; the same sums
+    in the same order.
+    """
+    H, W = z.shape
+    up, mid, dn = z[max(r - 1, 0)], z[r], z[min(r + 1, H - 1)]
+    edge_w, corner_w = _DLF_EDGE[dlf], _DLF_CORNER[dlf]
+    u = 0
+    for k in range(n_runs + 1):
+        a, b = segment(runs, n_runs, k, W)
+        for x in range(u, a):
+            s[x] = smoothness(z, valid, r, x, dlf, axis) if valid[r, x] else np.float32(0.0)
+        if b > a:
+            # Views shifted so that the loop index starts at 0: Numba's negative-index
+            # handling otherwise hides the address pattern and LLVM does not vectorise.
+            out, left, centre, right, above, below = s[a:b], mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
+            if dlf == 0 and axis == 0:
+                for i in range(b - a):
+                    out[i] = abs((left[i] - centre[i]) + (right[i] - centre[i]))
+            elif dlf == 0:
+                for i in range(b - a):
+                    out[i] = abs((above[i] - centre[i]) + (below[i] - centre[i]))
+            elif corner_w == 0:
+                for i in range(b - a):
+                    c = centre[i]
+                    out[i] = abs(edge_w * ((((above[i] - c) + (below[i] - c)) + (left[i] - c)) + (right[i] - c)))
+            else:
+                above_l, above_r, below_l, below_r = up[a - 1:b - 1], up[a + 1:b + 1], dn[a - 1:b - 1], dn[a + 1:b + 1]
+                for i in range(b - a):
+                    c = centre[i]
+                    lap = edge_w * ((((above[i] - c) + (below[i] - c)) + (left[i] - c)) + (right[i] - c))
+                    lap += corner_w * ((((above_l[i] - c) + (above_r[i] - c)) + (below_l[i] - c)) + (below_r[i] - c))
+                    out[i] = abs(lap)
+        u = b
+
+
+@njit
+def softmin_row(s, tau, p):
+    """p[u] = exp(-s[u] / tau), the unnormalised softmin weight (eq. 13) of each pixel of a row."""
+    for u in range(s.shape[0]):
+        p[u] = exp32(-s[u] / tau)

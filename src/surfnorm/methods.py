@@ -13,7 +13,7 @@ from typing import Any, Callable
 
 from ._validate import check_bool, check_choice, check_fill, check_positive
 from .errors import InputError
-from .gradients import BORDERS, DLF_NAMES
+from ._choices import BORDERS, DLF_NAMES
 
 __all__ = ["Option", "Method", "MethodInfo", "register", "resolve", "methods", "CATEGORIES", "MNR_SUFFIX"]
 
@@ -66,7 +66,7 @@ class Method:
     summary: str
     run: Callable
     options: dict = field(default_factory=dict)
-    mnr: bool = False  # the recipe ends with MNR (and so takes mnr_dlf)
+    mnr: bool = False  # the recipe ends with MNR, which run does itself (fused), taking mnr_dlf
 
 
 @dataclass(frozen=True)

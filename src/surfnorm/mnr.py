@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._config import njit, pixel
-from .gradients import dlf_code, smoothness, usable
+from .gradients import box_row, dlf_code, fast_row, laplacian_row, segment, smoothness, usable
 
 __all__ = ["mnr"]
 
@@ -31,7 +31,11 @@ _NEIGHBOURS = ((0, -1, 0), (0, 1, 0), (-1, 0, 1), (1, 0, 1))
 
 @pixel
 def mnr_choice(z, valid, has_normal, v, u, dlf):
-    """The pixel (v', u') whose normal p = (v, u) takes: the smoothest of its 4-neighbours and itself."""
+    """The pixel (v', u') whose normal p = (v, u) takes: the smoothest of its 4-neighbours and itself.
+
+    The rule at one pixel, written out; the kernels apply it row by row from
+    smoothness values computed once per pixel (:func:`mnr_row`).
+    """
     best_v, best_u = v, u
     best_s = np.float32(np.inf)
     for k in range(4):
@@ -50,25 +54,124 @@ def mnr_choice(z, valid, has_normal, v, u, dlf):
     return best_v, best_u
 
 
+@pixel
+def self_smoothness_row(s_h, s_v, one_d, s_self):
+    """The score of p itself: the mean of the horizontal and vertical 1D smoothness, or the 3x3 one."""
+    if one_d:
+        for u in range(s_h.shape[0]):
+            s_self[u] = np.float32(0.5) * (s_h[u] + s_v[u])
+    else:
+        s_self[:] = s_h
+
+
+@pixel
+def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, out_row):
+    """MNR at one pixel of row v, any neighbours missing (the rule of :func:`mnr_choice` on precomputed scores)."""
+    W = out_row.shape[0]
+    if has_mid[x]:
+        best_s, k = np.float32(np.inf), 4
+        if x >= 1 and has_mid[x - 1] and s_h[x - 1] < best_s:
+            best_s, k = s_h[x - 1], 0
+        if x + 1 < W and has_mid[x + 1] and s_h[x + 1] < best_s:
+            best_s, k = s_h[x + 1], 1
+        if v >= 1 and has_up[x] and s_up[x] < best_s:
+            best_s, k = s_up[x], 2
+        if v + 1 < H and has_dn[x] and s_dn[x] < best_s:
+            best_s, k = s_dn[x], 3
+        if s_self[x] < best_s:
+            k = 4
+        for c in range(3):
+            if k == 0:
+                out_row[x, c] = n_mid[x - 1, c]
+            elif k == 1:
+                out_row[x, c] = n_mid[x + 1, c]
+            elif k == 2:
+                out_row[x, c] = n_up[x, c]
+            elif k == 3:
+                out_row[x, c] = n_dn[x, c]
+            else:
+                out_row[x, c] = n_mid[x, c]
+    else:
+        out_row[x, 0] = fill
+        out_row[x, 1] = fill
+        out_row[x, 2] = fill
+
+
+@njit
+def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, col, runs, out_row):
+    """MNR of row v: each pixel with a normal takes the normal of the smoothest of [left, right, up, down, self].
+
+    n_*: normals (W, 3) of rows v - 1, v, v + 1; has_*: whether they exist;
+    s_h: smoothness of row v scoring left/right; s_up, s_dn: of rows v -+ 1
+    scoring up/down; s_self: the score of p itself. Strict ``<`` in that order
+    keeps the first candidate on ties, as ``argmin`` in the authors' code.
+    """
+    W = out_row.shape[0]
+    n_runs = box_row(has_up, has_mid, has_dn, v >= 1 and v < H - 1, col, runs)
+    inf = np.float32(np.inf)
+    up_flat, mid_flat, dn_flat, out_flat = n_up.reshape(3 * W), n_mid.reshape(3 * W), n_dn.reshape(3 * W), out_row.reshape(3 * W)
+    u = 0
+    for k in range(n_runs + 1):
+        a, b = segment(runs, n_runs, k, W)
+        for x in range(u, a):
+            mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, out_row)
+        if b > a:  # all four neighbours have normals: branch-free argmin (views start at a: see laplacian_row)
+            s_l, s_r, s_a, s_b, s_c = s_h[a - 1:b - 1], s_h[a + 1:b + 1], s_up[a:b], s_dn[a:b], s_self[a:b]
+            n_l, n_r = mid_flat[3 * (a - 1):3 * (b - 1)], mid_flat[3 * (a + 1):3 * (b + 1)]
+            n_a, n_b, n_c = up_flat[3 * a:3 * b], dn_flat[3 * a:3 * b], mid_flat[3 * a:3 * b]
+            run_out = out_flat[3 * a:3 * b]
+            for i in range(b - a):
+                best_s, best = inf, 4
+                s_q = s_l[i]
+                best = 0 if s_q < best_s else best
+                best_s = s_q if s_q < best_s else best_s
+                s_q = s_r[i]
+                best = 1 if s_q < best_s else best
+                best_s = s_q if s_q < best_s else best_s
+                s_q = s_a[i]
+                best = 2 if s_q < best_s else best
+                best_s = s_q if s_q < best_s else best_s
+                s_q = s_b[i]
+                best = 3 if s_q < best_s else best
+                best_s = s_q if s_q < best_s else best_s
+                best = 4 if s_c[i] < best_s else best
+                for c in range(3):
+                    j = 3 * i + c
+                    run_out[j] = (n_l[j] if best == 0 else n_r[j] if best == 1 else n_a[j] if best == 2 else
+                                  n_b[j] if best == 3 else n_c[j])
+        u = b
+
+
 @njit
 def _mnr_kernel(z, valid, has_normal, normals, dlf, fill, out):
+    """MNR of a whole normal map, row by row; smoothness computed once per pixel into rolling rows."""
     H, W = z.shape
+    col = np.empty(W, np.bool_)
+    runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
+    mruns = np.empty((W // 2 + 1, 2), np.int64)
+    s_v = np.empty((3, W), np.float32)
+    s_h, s_self = np.empty(W, np.float32), np.empty(W, np.float32)
+    n_runs[0] = fast_row(valid, 0, col, runs[0])
+    laplacian_row(z, valid, 0, runs[0], n_runs[0], dlf, 1, s_v[0])
     for v in range(H):
-        for u in range(W):
-            if has_normal[v, u]:
-                q_v, q_u = mnr_choice(z, valid, has_normal, v, u, dlf)
-                out[v, u, 0] = normals[q_v, q_u, 0]
-                out[v, u, 1] = normals[q_v, q_u, 1]
-                out[v, u, 2] = normals[q_v, q_u, 2]
-            else:
-                out[v, u, 0] = fill
-                out[v, u, 1] = fill
-                out[v, u, 2] = fill
+        if v + 1 < H:
+            j = (v + 1) % 3
+            n_runs[j] = fast_row(valid, v + 1, col, runs[j])
+            laplacian_row(z, valid, v + 1, runs[j], n_runs[j], dlf, 1, s_v[j])
+        j = v % 3
+        if dlf == 0:
+            laplacian_row(z, valid, v, runs[j], n_runs[j], 0, 0, s_h)
+        else:
+            s_h[:] = s_v[j]
+        self_smoothness_row(s_h, s_v[j], dlf == 0, s_self)
+        up, dn = max(v - 1, 0), min(v + 1, H - 1)
+        mnr_row(v, H, normals[up], normals[v], normals[dn], has_normal[up], has_normal[v], has_normal[dn],
+                s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self, fill, col, mruns, out[v])
 
 
 def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Pixels with usable depth and a finite, non-zero normal."""
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         sq = np.einsum("hwc,hwc->hw", normals, normals)
         return np.ascontiguousarray(valid & np.isfinite(sq) & (sq > 0))
 

@@ -23,9 +23,11 @@ import math
 import numpy as np
 
 from ._config import njit, pixel
-from .gradients import dag_gradient, dlf_code, fd_gradient, stencil
+from .gradients import (dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
+                        softmin_row, stencil, usable)
+from .mnr import mnr_row, self_smoothness_row
 
-__all__ = ["d2nt", "cp2tv"]
+__all__ = ["d2nt", "d2nt_v3", "cp2tv"]
 
 
 @pixel
@@ -45,51 +47,244 @@ def write_unit(out, v, u, n_x, n_y, n_z, fill):
 
 
 @pixel
+def store_unit(out_row, u, n_x, n_y, n_z, fill):
+    """:func:`write_unit` into a row (W, 3), written with selects so that a loop of it vectorises."""
+    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+    ok = (norm > 0) & (norm < np.inf)
+    out_row[u, 0] = n_x / norm if ok else fill
+    out_row[u, 1] = n_y / norm if ok else fill
+    out_row[u, 2] = n_z / norm if ok else fill
+    return ok
+
+
+@pixel
+def store_unit_flat(out_flat, i, n_x, n_y, n_z, fill):
+    """:func:`store_unit` into a flat run of pixels (x, y, z, x, y, z, ...).
+
+    LLVM cannot tell that out[u, 0], out[u, 1], out[u, 2] of a 2-D view do not
+    overlap (its strides are run-time values), so it vectorises only the flat form.
+    """
+    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+    ok = (norm > 0) & (norm < np.inf)
+    out_flat[3 * i] = n_x / norm if ok else fill
+    out_flat[3 * i + 1] = n_y / norm if ok else fill
+    out_flat[3 * i + 2] = n_z / norm if ok else fill
+    return ok
+
+
+@pixel
 def d2nt_normal(z, z_u, z_v, f_x, f_y, u_c, v_c):
     """Eq. 9 (camera-facing sign) with u_c = u - c_x, v_c = v - c_y; not normalised."""
     return f_x * z_u, f_y * z_v, -(z + u_c * z_u + v_c * z_v)
+
+
+@pixel
+def centred_columns(W, c_x):
+    """u - c_x for every column, as float32 (one array instead of one conversion per pixel)."""
+    u_c = np.empty(W, dtype=np.float32)
+    for u in range(W):
+        u_c[u] = np.float32(u - c_x)
+    return u_c
+
+
+# --- D2NT with finite differences (d2nt_basic) ------------------------------------------------
+
+
+@pixel
+def d2nt_fd_pixel(z, valid, v, u, f_x, f_y, u_c, v_c, reflect, fill, out_row):
+    """The general rule at one pixel: per pixel gradients (one-sided at gaps) -> eq. 9 -> unit length."""
+    ok = False
+    if valid[v, u]:
+        z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
+        z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
+        if ok_u and ok_v:
+            n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, u_c, v_c)
+            ok = store_unit(out_row, u, n_x, n_y, n_z, fill)
+    if not ok:
+        out_row[u, 0] = fill
+        out_row[u, 1] = fill
+        out_row[u, 2] = fill
 
 
 @njit
 def _d2nt_fd_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
     """D2NT with finite-difference gradients: one pass, per pixel gradients -> eq. 9 -> unit length."""
     H, W = z.shape
+    u_c = centred_columns(W, c_x)
+    col, runs = np.empty(W, np.bool_), np.empty((W // 2 + 1, 2), np.int64)
+    two = np.float32(2.0)
     for v in range(H):
         v_c = np.float32(v - c_y)
-        for u in range(W):
-            ok = False
-            if valid[v, u]:
-                z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
-                z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
-                ok = ok_u and ok_v
-                if ok:
-                    n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, np.float32(u - c_x), v_c)
-                    ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
-            if not ok:
-                out[v, u, 0] = fill
-                out[v, u, 1] = fill
-                out[v, u, 2] = fill
+        n_runs = fast_row(valid, v, col, runs)
+        up, mid, dn, out_row = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)], out[v]
+        out_flat = out_row.reshape(3 * W)
+        u = 0
+        for k in range(n_runs + 1):
+            a, b = segment(runs, n_runs, k, W)
+            for x in range(u, a):
+                d2nt_fd_pixel(z, valid, v, x, f_x, f_y, u_c[x], v_c, reflect, fill, out_row)
+            if b > a:  # 3x3 all valid: central differences, no checks (views start at a: see laplacian_row)
+                left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
+                u_cs, run_out = u_c[a:b], out_flat[3 * a:3 * b]
+                for i in range(b - a):
+                    z_u = (right[i] - left[i]) / two
+                    z_v = (below[i] - above[i]) / two
+                    n_x, n_y, n_z = d2nt_normal(centre[i], z_u, z_v, f_x, f_y, u_cs[i], v_c)
+                    store_unit_flat(run_out, i, n_x, n_y, n_z, fill)
+            u = b
+
+
+# --- D2NT with the DAG filter (d2nt_v2, and the first stage of d2nt_v3) ----------------------
+
+
+@pixel
+def dag_pixel_gradient(z, valid, v, u, dv, du, p_b, p_f, ratio):
+    """DAG gradient along (dv, du) from the neighbours' softmin weights p_b, p_f (eq. 10, 12-14).
+
+    lambda_b Delta_b z + lambda_f Delta_f z; one-sided where only one
+    neighbour is usable. Returns (gradient, ok).
+    """
+    has_b = usable(valid, v - dv, u - du)
+    has_f = usable(valid, v + dv, u + du)
+    lambda_b = np.float32(1.0) if has_b else np.float32(0.0)
+    lambda_f = np.float32(1.0) if has_f else np.float32(0.0)
+    if has_b and has_f:
+        lambda_b, lambda_f = softmin_pair(p_b, p_f, ratio)
+    z_p = z[v, u]
+    delta_b = z_p - z[v - dv, u - du] if has_b else np.float32(0.0)
+    delta_f = z[v + dv, u + du] - z_p if has_f else np.float32(0.0)
+    return lambda_b * delta_b + lambda_f * delta_f, has_b or has_f
 
 
 @njit
-def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, truncate, fill, out):
-    """D2NT with DAG gradients (eq. 10-14): one pass, per pixel gradients -> eq. 9 -> unit length."""
+def prepare_dag_row(z, valid, r, dlf, tau, col, runs_r, s, p_v_r):
+    """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness."""
+    n_runs = fast_row(valid, r, col, runs_r)
+    laplacian_row(z, valid, r, runs_r, n_runs, dlf, 1, s)
+    softmin_row(s, tau, p_v_r)
+    return n_runs
+
+
+@njit
+def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row, ok_row):
+    """Unit D2NT normals of row v with DAG gradients; ok_row[u] says whether (v, u) got one.
+
+    p_h: softmin weights exp(-s/tau) of row v with the horizontal smoothness;
+    p_up, p_dn: those of rows v - 1 and v + 1 with the vertical smoothness.
+    """
     H, W = z.shape
-    for v in range(H):
-        v_c = np.float32(v - c_y)
-        for u in range(W):
+    up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
+    out_flat = out_row.reshape(3 * W)
+    u = 0
+    for k in range(n_runs + 1):
+        a, b = segment(runs, n_runs, k, W)
+        for x in range(u, a):
             ok = False
-            if valid[v, u]:
-                z_u, ok_u = dag_gradient(z, valid, v, u, 0, 1, dlf, 0, tau, truncate)
-                z_v, ok_v = dag_gradient(z, valid, v, u, 1, 0, dlf, 1, tau, truncate)
-                ok = ok_u and ok_v
-                if ok:
-                    n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, np.float32(u - c_x), v_c)
-                    ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
+            if valid[v, x]:
+                z_u, ok_u = dag_pixel_gradient(z, valid, v, x, 0, 1, p_h[max(x - 1, 0)], p_h[min(x + 1, W - 1)], ratio)
+                z_v, ok_v = dag_pixel_gradient(z, valid, v, x, 1, 0, p_up[x], p_dn[x], ratio)
+                if ok_u and ok_v:
+                    n_x, n_y, n_z = d2nt_normal(z[v, x], z_u, z_v, f_x, f_y, u_c[x], v_c)
+                    ok = store_unit(out_row, x, n_x, n_y, n_z, fill)
             if not ok:
-                out[v, u, 0] = fill
-                out[v, u, 1] = fill
-                out[v, u, 2] = fill
+                out_row[x, 0] = fill
+                out_row[x, 1] = fill
+                out_row[x, 2] = fill
+            ok_row[x] = ok
+        if b > a:  # 3x3 all valid: both neighbours exist along both axes (views start at a: see laplacian_row)
+            left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
+            p_l, p_r, p_a, p_b = p_h[a - 1:b - 1], p_h[a + 1:b + 1], p_up[a:b], p_dn[a:b]
+            u_cs, run_out, run_ok = u_c[a:b], out_flat[3 * a:3 * b], ok_row[a:b]
+            for i in range(b - a):
+                z_p = centre[i]
+                lambda_l, lambda_r = softmin_pair(p_l[i], p_r[i], ratio)
+                z_u = lambda_l * (z_p - left[i]) + lambda_r * (right[i] - z_p)
+                lambda_u, lambda_d = softmin_pair(p_a[i], p_b[i], ratio)
+                z_v = lambda_u * (z_p - above[i]) + lambda_d * (below[i] - z_p)
+                n_x, n_y, n_z = d2nt_normal(z_p, z_u, z_v, f_x, f_y, u_cs[i], v_c)
+                run_ok[i] = store_unit_flat(run_out, i, n_x, n_y, n_z, fill)
+        u = b
+
+
+@njit
+def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, fill, out):
+    """D2NT with DAG gradients (eq. 9-14), row by row.
+
+    Row buffers (rolling, row r in slot r % 3) hold each row's fast runs and
+    each pixel's softmin weight exp(-s/tau), so every smoothness and
+    exponential is computed once per pixel instead of once per neighbour.
+    """
+    H, W = z.shape
+    u_c = centred_columns(W, c_x)
+    col, ok_row = np.empty(W, np.bool_), np.empty(W, np.bool_)
+    runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
+    p_v = np.empty((3, W), np.float32)
+    s, p_h = np.empty(W, np.float32), np.empty(W, np.float32)
+    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, col, runs[0], s, p_v[0])
+    for v in range(H):
+        if v + 1 < H:
+            n_runs[(v + 1) % 3] = prepare_dag_row(z, valid, v + 1, dlf, tau, col, runs[(v + 1) % 3], s, p_v[(v + 1) % 3])
+        if dlf == 0:  # 1D DLF: the horizontal neighbours are scored with the horizontal filter
+            laplacian_row(z, valid, v, runs[v % 3], n_runs[v % 3], 0, 0, s)
+            softmin_row(s, tau, p_h)
+        else:
+            p_h[:] = p_v[v % 3]
+        dag_row(z, valid, v, runs[v % 3], n_runs[v % 3], p_h, p_v[(v - 1) % 3], p_v[(v + 1) % 3], f_x, f_y, u_c,
+                np.float32(v - c_y), ratio, fill, out[v], ok_row)
+
+
+@njit
+def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill, out):
+    """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep.
+
+    The unrefined normals live only in a rolling buffer of 3 rows: row v + 1
+    is estimated just before row v is refined (MNR looks one row up and down).
+    Row data (fast runs, softmin weights, MNR smoothness) use 4 slots, rows
+    v - 1 .. v + 2.
+    """
+    H, W = z.shape
+    u_c = centred_columns(W, c_x)
+    col, ok_row = np.empty(W, np.bool_), np.empty(W, np.bool_)
+    runs, n_runs = np.empty((4, W // 2 + 1, 2), np.int64), np.zeros(4, np.int64)
+    mruns = np.empty((W // 2 + 1, 2), np.int64)
+    p_v, sm_v = np.empty((4, W), np.float32), np.empty((4, W), np.float32)
+    s, p_h, sm_h, s_self = (np.empty(W, np.float32), np.empty(W, np.float32), np.empty(W, np.float32),
+                            np.empty(W, np.float32))
+    raw, has = np.empty((3, W, 3), np.float32), np.empty((3, W), np.bool_)
+    # A pixel whose normal failed holds `fill`; MNR treats it as having a normal when fill is non-zero and finite
+    # (as when MNR runs on a finished map): fill_counts.
+    fill_sq = fill * fill + fill * fill + fill * fill
+    fill_counts = (fill_sq > 0) & (fill_sq < np.inf)
+    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, col, runs[0], s, p_v[0])
+    laplacian_row(z, valid, 0, runs[0], n_runs[0], mnr_dlf, 1, sm_v[0])
+    for r in range(-1, H):
+        q = r + 1  # estimate row q = v + 1 (needs weights of rows q - 1 .. q + 1), then refine row v = r
+        if q + 1 < H:
+            j = (q + 1) % 4
+            n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, col, runs[j], s, p_v[j])
+            laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, 1, sm_v[j])
+        if q < H:
+            j = q % 4
+            if dlf == 0:
+                laplacian_row(z, valid, q, runs[j], n_runs[j], 0, 0, s)
+                softmin_row(s, tau, p_h)
+            else:
+                p_h[:] = p_v[j]
+            dag_row(z, valid, q, runs[j], n_runs[j], p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4], f_x, f_y, u_c,
+                    np.float32(q - c_y), ratio, fill, raw[q % 3], ok_row)
+            has_q, valid_q = has[q % 3], valid[q]
+            for u in range(W):
+                has_q[u] = ok_row[u] | (valid_q[u] & fill_counts)
+        v = r
+        if v >= 0:
+            j = v % 4
+            if mnr_dlf == 0:
+                laplacian_row(z, valid, v, runs[j], n_runs[j], 0, 0, sm_h)
+            else:
+                sm_h[:] = sm_v[j]
+            self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
+            mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
+                    has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, fill, col, mruns, out[v])
 
 
 def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0):
@@ -98,8 +293,20 @@ def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True,
     if gradient == "fd":
         _d2nt_fd_kernel(z, valid, *f, border == "reflect", np.float32(fill), out)
     else:
-        _d2nt_dag_kernel(z, valid, *f, dlf_code(dlf), np.float32(tau), bool(truncate), np.float32(fill), out)
+        _d2nt_dag_kernel(z, valid, *f, dlf_code(dlf), np.float32(tau), softmin_ratio(tau, truncate),
+                         np.float32(fill), out)
     return out
+
+
+def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0):
+    """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3)."""
+    f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
+    _d2nt_v3_kernel(z, valid, *f, dlf_code(dlf), np.float32(tau), softmin_ratio(tau, truncate), dlf_code(mnr_dlf),
+                    np.float32(fill), out)
+    return out
+
+
+# --- CP2TV -------------------------------------------------------------------------------------
 
 
 @pixel
@@ -119,22 +326,54 @@ def tangent(z, valid, v, u, dv, du, f_x, f_y, c_x, c_y, reflect):
     return (xf - xb) / d, (yf - yb) / d, (zf - zb) / d, dist > 0
 
 
+@pixel
+def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
+    ok = False
+    if valid[v, u]:
+        ux, uy, uz, ok_u = tangent(z, valid, v, u, 0, 1, f_x, f_y, c_x, c_y, reflect)
+        vx, vy, vz, ok_v = tangent(z, valid, v, u, 1, 0, f_x, f_y, c_x, c_y, reflect)
+        if ok_u and ok_v:  # n = t_v x t_u
+            ok = store_unit(out_row, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, fill)
+    if not ok:
+        out_row[u, 0] = fill
+        out_row[u, 1] = fill
+        out_row[u, 2] = fill
+
+
 @njit
 def _cp2tv_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
     H, W = z.shape
+    # u - c_x, v - c_y in float64, as back_project computes them (3D points are float64)
+    u_c = np.empty(W, np.float64)
+    for u in range(W):
+        u_c[u] = u - c_x
+    f_x64, f_y64 = np.float64(f_x), np.float64(f_y)
+    col, runs = np.empty(W, np.bool_), np.empty((W // 2 + 1, 2), np.int64)
+    two = np.float32(2.0)
     for v in range(H):
-        for u in range(W):
-            ok = False
-            if valid[v, u]:
-                ux, uy, uz, ok_u = tangent(z, valid, v, u, 0, 1, f_x, f_y, c_x, c_y, reflect)
-                vx, vy, vz, ok_v = tangent(z, valid, v, u, 1, 0, f_x, f_y, c_x, c_y, reflect)
-                ok = ok_u and ok_v
-                if ok:  # n = t_v x t_u
-                    ok = write_unit(out, v, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, fill)
-            if not ok:
-                out[v, u, 0] = fill
-                out[v, u, 1] = fill
-                out[v, u, 2] = fill
+        n_runs = fast_row(valid, v, col, runs)
+        up, mid, dn, out_row = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)], out[v]
+        out_flat = out_row.reshape(3 * W)
+        v_c, v_up, v_dn = v - c_y, (v - 1) - c_y, (v + 1) - c_y
+        u = 0
+        for k in range(n_runs + 1):
+            a, b = segment(runs, n_runs, k, W)
+            for x in range(u, a):
+                cp2tv_pixel(z, valid, v, x, f_x, f_y, c_x, c_y, reflect, fill, out_row)
+            if b > a:  # central differences of back-projected neighbours, no checks (views: see laplacian_row)
+                left, right, above, below = mid[a - 1:b - 1], mid[a + 1:b + 1], up[a:b], dn[a:b]
+                uc_l, uc_r, uc_c, run_out = u_c[a - 1:b - 1], u_c[a + 1:b + 1], u_c[a:b], out_flat[3 * a:3 * b]
+                for i in range(b - a):
+                    z_l, z_r, z_u, z_d = left[i], right[i], above[i], below[i]
+                    t_ux = (z_r * uc_r[i] / f_x64 - z_l * uc_l[i] / f_x64) / two
+                    t_uy = (z_r * v_c / f_y64 - z_l * v_c / f_y64) / two
+                    t_uz = (z_r - z_l) / two
+                    t_vx = (z_d * uc_c[i] / f_x64 - z_u * uc_c[i] / f_x64) / two
+                    t_vy = (z_d * v_dn / f_y64 - z_u * v_up / f_y64) / two
+                    t_vz = (z_d - z_u) / two
+                    store_unit_flat(run_out, i, t_vy * t_uz - t_vz * t_uy, t_vz * t_ux - t_vx * t_uz,
+                                    t_vx * t_uy - t_vy * t_ux, fill)
+            u = b
 
 
 def cp2tv(z, valid, cam, out, *, border="one-sided", fill=0.0):

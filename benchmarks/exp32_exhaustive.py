@@ -1,0 +1,65 @@
+"""Check the kernels' exp (surfnorm.gradients.exp32) on every float32 in [-104.5, 0] (about 1.1e9 values).
+
+    python benchmarks/exp32_exhaustive.py      # about 2 minutes on one core
+
+The softmin (eq. 13) needs exp(-s / tau) with s >= 0, tau > 0. exp32 computes
+in float64 and rounds once; this compares it, bit for bit, with exp in
+float64 rounded to float32 (correctly rounded but for double-rounding cases)
+and with the C library's expf (what ``math.exp`` of a float32 compiles to in
+Numba, and what the kernels called before they were vectorised).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numba
+import numpy as np
+
+from surfnorm.gradients import exp32
+
+
+@numba.njit(nogil=True)
+def _ours(x, out):
+    for i in range(x.size):
+        out[i] = exp32(x[i])
+
+
+@numba.njit(nogil=True)
+def _libm(x, out):
+    for i in range(x.size):
+        out[i] = math.exp(x[i])
+
+
+@numba.njit(nogil=True)
+def _via_float64(x, out):
+    for i in range(x.size):
+        out[i] = np.float32(math.exp(np.float64(x[i])))
+
+
+def main():
+    top = int(np.array([104.5], np.float32).view(np.uint32)[0])
+    step = 1 << 24
+    n = vs_float64 = vs_libm = libm_vs_float64 = 0
+    t0 = time.perf_counter()
+    for lo in range(0, top + 1, step):
+        bits = np.arange(lo, min(lo + step, top + 1), dtype=np.uint32) | np.uint32(0x80000000)  # negative floats
+        x = bits.view(np.float32)
+        ours, libm, ref = np.empty_like(x), np.empty_like(x), np.empty_like(x)
+        _ours(x, ours)
+        _libm(x, libm)
+        _via_float64(x, ref)
+        ob, lb, rb = ours.view(np.uint32), libm.view(np.uint32), ref.view(np.uint32)
+        vs_float64 += int(np.count_nonzero(ob != rb))
+        vs_libm += int(np.count_nonzero(ob != lb))
+        libm_vs_float64 += int(np.count_nonzero(lb != rb))
+        n += x.size
+    print(f"{n} float32 values in [-104.5, 0] ({time.perf_counter() - t0:.0f} s):")
+    print(f"  exp32 != float32(exp(float64 x)): {vs_float64}")
+    print(f"  exp32 != C library expf:          {vs_libm}")
+    print(f"  expf  != float32(exp(float64 x)): {libm_vs_float64}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,279 @@
+"""Speed of surfnorm's D2NT family and CP2TV next to the authors' d2nt package, same frames, same process.
+
+    NUMBA_NUM_THREADS=1 python benchmarks/speed.py [--out bench-output] [--repeats 50] [--quick]
+
+(``make bench`` installs d2nt 0.1.3 into .venv and runs this.) Everything is
+single-threaded unless said otherwise: NUMBA_NUM_THREADS=1, ``threads=1``,
+``cv2.setNumThreads(1)`` for the authors' OpenCV filters. Compilation happens
+outside the timed region (one call first). Our time is the public front door
+``surfnorm.estimate`` on a float32 (H, W) frame, validation included; theirs
+is ``d2nt.depth2normal``. The two are called alternately, so both see the
+same machine load, and each figure is the median of ``--repeats`` runs.
+
+Also measured: ``import surfnorm`` and the first estimate in a fresh process
+with a warm compile cache (subprocesses), the peak memory of one d2nt_v3 call
+(tracemalloc for NumPy arrays, and the growth of the process's peak RSS, which
+also sees Numba's own allocations), and the throughput of a stack of 16
+frames on 1 and 2 threads.
+
+Writes ``speed.md`` (the table printed) and ``speed.json`` (figures, versions,
+commit, CPU, thread counts, load average) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before Numba is imported
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import surfnorm  # noqa: E402
+from surfnorm.io._atomic import atomic_write  # noqa: E402
+from surfnorm.io.threef2n import find_frames, read_frame, sample_root  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+# Ours, with the options that compute what the authors' version computes (their FD reflects at the border).
+METHODS = {"d2nt_basic": {"border": "reflect"}, "d2nt_v2": {}, "d2nt_v3": {}, "cp2tv": {}}
+TARGET_MS = {"d2nt_basic": 1.2, "d2nt_v2": 2.5, "d2nt_v3": 4.0}
+
+
+def seeded_frame(seed=0, h=480, w=640, holes=0.0):
+    """A smooth synthetic scene (sphere in front of a tilted wall), optionally with random holes (depth 0)."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    wall = 3.0 + 0.002 * u + 0.001 * v
+    r2 = ((u - w / 2) ** 2 + (v - h / 2) ** 2) / (0.3 * h) ** 2
+    z = np.where(r2 < 1, 2.0 - 0.5 * np.sqrt(np.clip(1 - r2, 0, 1)), wall) + 1e-4 * rng.standard_normal((h, w))
+    z[rng.random((h, w)) < holes] = 0.0
+    K = np.array([[525.0, 0, (w - 1) / 2], [0, 525.0, (h - 1) / 2], [0, 0, 1]])
+    return z.astype(np.float32), surfnorm.Intrinsics.from_matrix(K)
+
+
+def inputs():
+    frames = [(f.name, f.depth, f.K) for f in (read_frame(sample_root(), n) for n in find_frames(sample_root()))]
+    frames.append(("seeded smooth", *seeded_frame(0)))
+    frames.append(("seeded, 5% holes", *seeded_frame(1, holes=0.05)))
+    return frames
+
+
+def authors_K(cam):
+    # d2nt uses 1-based pixel coordinates: its u0 is our cx + 1.
+    return np.array([[cam.fx, 0, cam.cx + 1], [0, cam.fy, cam.cy + 1], [0, 0, 1]])
+
+
+def interleaved(funcs, repeats):
+    """Median seconds of each function, called in turn ``repeats`` times (after one untimed call each)."""
+    for f in funcs:
+        f()
+    times = [[] for _ in funcs]
+    for _ in range(repeats):
+        for f, t in zip(funcs, times):
+            t0 = time.perf_counter()
+            f()
+            t.append(time.perf_counter() - t0)
+    return [statistics.median(t) for t in times]
+
+
+def time_frames(repeats, quick):
+    try:
+        import cv2
+        import d2nt
+        cv2.setNumThreads(1)
+    except ImportError:
+        d2nt = None
+    rows = []
+    for name, z, cam in inputs()[: 2 if quick else None]:
+        for method, options in METHODS.items():
+            ours = lambda: surfnorm.estimate(z, cam, method=method, threads=1, **options)  # noqa: E731
+            funcs = [ours]
+            if d2nt is not None and method.startswith("d2nt"):
+                K = authors_K(cam)
+                funcs.append(lambda: d2nt.depth2normal(z, K, version=method))
+            t = interleaved(funcs, repeats)
+            rows.append({"frame": name, "method": method, "shape": list(z.shape), "ours_ms": t[0] * 1e3,
+                         "authors_ms": t[1] * 1e3 if len(t) > 1 else None,
+                         "ratio": t[1] / t[0] if len(t) > 1 else None, "repeats": repeats})
+            print(f"  {name:22s} {method:11s} ours {t[0] * 1e3:7.3f} ms"
+                  + (f"  authors {t[1] * 1e3:7.2f} ms  ratio {t[1] / t[0]:5.1f}x" if len(t) > 1 else ""), flush=True)
+    return rows
+
+
+def subprocess_seconds(code, runs):
+    """Median of what ``code`` prints (seconds) over fresh interpreters, and the median wall time of each process."""
+    inner, outer = [], []
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+        outer.append(time.perf_counter() - t0)
+        inner.append([float(x) for x in out.stdout.split()])
+    return [statistics.median(col) for col in zip(*inner)], statistics.median(outer)
+
+
+IMPORT_CODE = "import time; t = time.perf_counter(); import surfnorm; print(time.perf_counter() - t)"
+FIRST_CALL_CODE = """
+import time; t0 = time.perf_counter()
+import numpy as np, surfnorm
+t1 = time.perf_counter()
+z = np.full((480, 640), 2.0, np.float32)
+surfnorm.estimate(z, [[525.0, 0, 319.5], [0, 525.0, 239.5], [0, 0, 1]], method="{method}")
+t2 = time.perf_counter()
+print(t1 - t0, t2 - t1, t2 - t0)
+"""
+MEMORY_CODE = """
+import resource, tracemalloc, numpy as np, surfnorm
+from surfnorm.io.threef2n import read_frame, sample_root
+f = read_frame(sample_root(), "Easy/android/000001")
+surfnorm.estimate(f.depth[:40, :40].copy(), f.K, method="{method}")  # load the kernels
+z = f.depth
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+tracemalloc.start()
+n = surfnorm.estimate(z, f.K, method="{method}")
+peak = tracemalloc.get_traced_memory()[1]
+tracemalloc.stop()
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(peak, (after - before) * 1024, n.nbytes)
+"""
+AUTHORS_MEMORY_CODE = """
+import tracemalloc, numpy as np, d2nt
+from surfnorm.io.threef2n import read_frame, sample_root
+f = read_frame(sample_root(), "Easy/android/000001")
+K = np.array([[f.K.fx, 0, f.K.cx + 1], [0, f.K.fy, f.K.cy + 1], [0, 0, 1]])
+d2nt.depth2normal(f.depth[:40, :40].copy(), K, version="d2nt_v3")
+tracemalloc.start()
+n = d2nt.depth2normal(f.depth, K, version="d2nt_v3")
+print(tracemalloc.get_traced_memory()[1], 0, n.nbytes)
+"""
+
+
+def time_batches(repeats, quick):
+    frames = inputs()[:3]
+    stack = np.stack([frames[i % 3][1] for i in range(16)])
+    cams = [frames[i % 3][2] for i in range(16)]
+    rows = []
+    for method in (["d2nt_v3"] if quick else ["d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv"]):
+        options = METHODS[method]
+        t1, t2 = interleaved([lambda: surfnorm.estimate(stack, cams, method=method, threads=1, **options),
+                              lambda: surfnorm.estimate(stack, cams, method=method, threads=2, **options)], repeats)
+        rows.append({"method": method, "frames": 16, "one_thread_ms": t1 * 1e3, "two_threads_ms": t2 * 1e3,
+                     "speed_up": t1 / t2, "frames_per_s_2_threads": 16 / t2, "repeats": repeats})
+        print(f"  batch of 16 {method:11s} 1 thread {t1 * 1e3:7.1f} ms  2 threads {t2 * 1e3:7.1f} ms  "
+              f"speed-up {t1 / t2:4.2f}x", flush=True)
+    return rows
+
+
+def machine():
+    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
+               platform.processor()) if os.path.exists("/proc/cpuinfo") else platform.processor()
+    import numba
+
+    versions = {"python": platform.python_version(), "numpy": np.__version__, "numba": numba.__version__,
+                "surfnorm": surfnorm.__version__}
+    for mod in ("llvmlite", "cv2", "d2nt"):
+        try:
+            versions[mod] = __import__(mod).__version__
+        except ImportError:
+            versions[mod] = None
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
+        dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
+                                    capture_output=True, text=True).stdout.strip())
+    except OSError:
+        commit, dirty = None, None
+    return {"cpu": cpu, "cores": os.cpu_count(), "numba_threads": int(os.environ["NUMBA_NUM_THREADS"]),
+            "versions": versions, "commit": commit, "uncommitted_changes": dirty, "platform": platform.platform()}
+
+
+def markdown(record):
+    lines = [f"# surfnorm speed ({record['machine']['cpu']}, {record['machine']['cores']} cores, single thread)", "",
+             f"Commit {record['machine']['commit']}; load average {record['load_before']} before, "
+             f"{record['load_after']} after. Medians of {record['repeats']} interleaved runs.", "",
+             "| frame (480x640) | method | ours (ms) | authors' d2nt 0.1.3 (ms) | ratio |",
+             "|---|---|---:|---:|---:|"]
+    for r in record["frames"]:
+        theirs = f"{r['authors_ms']:.2f}" if r["authors_ms"] else "-"
+        ratio = f"{r['ratio']:.1f}x" if r["ratio"] else "-"
+        lines.append(f"| {r['frame']} | {r['method']} | {r['ours_ms']:.3f} | {theirs} | {ratio} |")
+    lines += ["", "| method | median over frames, ours (ms) | target (ms) | median ratio |", "|---|---:|---:|---:|"]
+    for method in METHODS:
+        rs = [r for r in record["frames"] if r["method"] == method]
+        ratios = [r["ratio"] for r in rs if r["ratio"]]
+        ratio = f"{statistics.median(ratios):.1f}x" if ratios else "-"
+        lines.append(f"| {method} | {statistics.median(r['ours_ms'] for r in rs):.3f} | "
+                     f"{TARGET_MS.get(method, '-')} | {ratio} |")
+    s = record["startup"]
+    lines += ["", "| start-up and memory | measured | target |", "|---|---:|---:|",
+              f"| `import surfnorm` (in-process, median of fresh interpreters) | {s['import_s']:.3f} s | 0.3 s |",
+              f"| `python -c 'import surfnorm'` wall time, interpreter included | {s['import_process_s']:.3f} s | |",
+              f"| first d2nt_v3 estimate, fresh process, warm cache (after the import) | {s['first_call_s']:.3f} s | 0.5 s |",
+              f"| import + first estimate | {s['import_and_first_s']:.3f} s | |"]
+    m = record["memory"]
+    out_mb = m["output_bytes"] / 2**20
+    lines += [f"| peak memory of one d2nt_v3 call, NumPy (tracemalloc) | {m['tracemalloc_peak_bytes'] / 2**20:.2f} MiB "
+              f"= {m['tracemalloc_peak_bytes'] / m['output_bytes']:.2f}x output ({out_mb:.2f} MiB) | 3x |",
+              f"| peak RSS growth of that call (all allocations) | {m['rss_growth_bytes'] / 2**20:.2f} MiB "
+              f"= {m['rss_growth_bytes'] / m['output_bytes']:.2f}x output | 3x |"]
+    if m.get("authors_tracemalloc_peak_bytes"):
+        lines.append(f"| authors' d2nt_v3, NumPy peak (tracemalloc) | {m['authors_tracemalloc_peak_bytes'] / 2**20:.2f} MiB "
+                     f"= {m['authors_tracemalloc_peak_bytes'] / m['output_bytes']:.1f}x output | |")
+    lines += ["", "| batch of 16 (N, 480, 640) | 1 thread (ms) | 2 threads (ms) | speed-up | target |",
+              "|---|---:|---:|---:|---:|"]
+    for b in record["batch"]:
+        lines.append(f"| {b['method']} | {b['one_thread_ms']:.1f} | {b['two_threads_ms']:.1f} | "
+                     f"{b['speed_up']:.2f}x | 1.7x |")
+    return "\n".join(lines) + "\n"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="bench-output")
+    parser.add_argument("--repeats", type=int, default=50)
+    parser.add_argument("--quick", action="store_true", help="two frames, fewer runs (a smoke test, not a measurement)")
+    args = parser.parse_args()
+    repeats = 5 if args.quick else args.repeats
+    load_before = [round(x, 2) for x in os.getloadavg()]
+    print("single frames (interleaved with the authors' package):", flush=True)
+    frames = time_frames(repeats, args.quick)
+    print("start-up (fresh interpreters):", flush=True)
+    (imp,), imp_wall = subprocess_seconds(IMPORT_CODE, 3 if args.quick else 9)
+    (t_imp, t_first, t_both), _ = subprocess_seconds(FIRST_CALL_CODE.format(method="d2nt_v3"), 3 if args.quick else 9)
+    print(f"  import {imp:.3f} s (process {imp_wall:.3f} s); first d2nt_v3 {t_first:.3f} s; both {t_both:.3f} s")
+    (peak, rss, nbytes), _ = subprocess_seconds(MEMORY_CODE.format(method="d2nt_v3"), 1)
+    memory = {"tracemalloc_peak_bytes": peak, "rss_growth_bytes": rss, "output_bytes": nbytes}
+    try:
+        import d2nt  # noqa: F401
+
+        (a_peak, _, _), _ = subprocess_seconds(AUTHORS_MEMORY_CODE, 1)
+        memory["authors_tracemalloc_peak_bytes"] = a_peak
+    except ImportError:
+        pass
+    print(f"  memory: {memory}", flush=True)
+    print("batches:", flush=True)
+    batch = time_batches(max(10, repeats // 3) if not args.quick else 3, args.quick)
+    record = {"about": __doc__.splitlines()[0], "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+              "machine": machine(), "repeats": repeats, "load_before": load_before,
+              "load_after": [round(x, 2) for x in os.getloadavg()], "frames": frames,
+              "startup": {"import_s": imp, "import_process_s": imp_wall, "first_call_s": t_first,
+                          "import_and_first_s": t_both},
+              "memory": memory, "batch": batch}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = markdown(record)
+    atomic_write(out / "speed.md", lambda p: p.write_text(table))
+    atomic_write(out / "speed.json", lambda p: p.write_text(json.dumps(record, indent=1) + "\n"))
+    print()
+    print(table)
+
+
+if __name__ == "__main__":
+    main()

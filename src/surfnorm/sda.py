@@ -82,10 +82,7 @@ _P = 3  # padding of the working arrays: every read of a step stays inside, and 
 @pixel
 def state_cost(s, target):
     """|s - target| for a state code, inf for a pixel without one."""
-    cost = _INF
-    if s >= 0:
-        cost = abs(np.float64(s) - target)
-    return cost
+    return abs(np.float64(s) - target) if s >= 0 else _INF
 
 
 # Helpers below take scalars only: a Numba helper that takes arrays and branches keeps reference
@@ -195,25 +192,38 @@ def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8):
     """(index, energy) of the cheapest of nine candidates, the lowest index on ties; keep (2) if all are inf."""
     k = 0
     best = e0
-    if e1 < best:
-        k, best = 1, e1
-    if e2 < best:
-        k, best = 2, e2
-    if e3 < best:
-        k, best = 3, e3
-    if e4 < best:
-        k, best = 4, e4
-    if e5 < best:
-        k, best = 5, e5
-    if e6 < best:
-        k, best = 6, e6
-    if e7 < best:
-        k, best = 7, e7
-    if e8 < best:
-        k, best = 8, e8
-    if best == _INF:
-        k = 2
-    return k, best
+    k = 1 if e1 < best else k
+    best = e1 if e1 < best else best
+    k = 2 if e2 < best else k
+    best = e2 if e2 < best else best
+    k = 3 if e3 < best else k
+    best = e3 if e3 < best else best
+    k = 4 if e4 < best else k
+    best = e4 if e4 < best else best
+    k = 5 if e5 < best else k
+    best = e5 if e5 < best else best
+    k = 6 if e6 < best else k
+    best = e6 if e6 < best else best
+    k = 7 if e7 < best else k
+    best = e7 if e7 < best else best
+    k = 8 if e8 < best else k
+    best = e8 if e8 < best else best
+    return (2 if best == _INF else k), best
+
+
+@pixel
+def pick(k, c0, c1, c2, c3, c4, c5, c6, c7, c8):
+    """Candidate number k (a chain of selects, no branches)."""
+    g = c2
+    g = c0 if k == 0 else g
+    g = c1 if k == 1 else g
+    g = c3 if k == 3 else g
+    g = c4 if k == 4 else g
+    g = c5 if k == 5 else g
+    g = c6 if k == 6 else g
+    g = c7 if k == 7 else g
+    g = c8 if k == 8 else g
+    return g
 
 
 @njit
@@ -221,95 +231,73 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
     Every inner pixel of the second set is written. Returns True if some pixel
-    took another candidate than keep (index 2).
+    took another candidate than keep (index 2). Written without branches (all
+    nine candidates are formed, one is selected) so that LLVM vectorises it;
+    every array read here is surfnorm's own (depth is zeroed where invalid).
     """
     Hp, Wp = s.shape
     B = SDA_PENALTY
-    changed = False
+    moved = 0
     for v in range(_P, Hp - _P):
         for u in range(_P, Wp - _P):
-            if not ok[v, u]:  # stays missing
-                g_u2[v, u] = 0.0
-                g_v2[v, u] = 0.0
-                e_u2[v, u] = _INF
-                e_v2[v, u] = _INF
-                s_u2[v, u] = _NO_STATE
-                s_v2[v, u] = _NO_STATE
-                continue
+            valid_p = ok[v, u]
             flags = con[v, u]
-            # ---- G_u ----
+            z_p = s[v, u]
+            gu_p = g_u[v, u]
+            gv_p = g_v[v, u]
+            # ---- G_u: energies (see the module docstring) ----
             p_up = a_v[v - 1, u] + e_u[v - 1, u]
             p_dn = a_v[v + 1, u] + e_u[v + 1, u]
+            has_gv = e_v[v, u] < _INF  # candidates 5-8 use G_v at p
             e0 = a_u[v, u - 1] + B * ((state_cost(s_u[v, u], 0.0) + state_cost(s_u[v, u - 1], 0.0)) + (flags & 3))
             e1 = a_u[v, u + 1] + B * ((state_cost(s_u[v, u], 1.0) + state_cost(s_u[v, u + 1], 1.0)) + ((flags >> 2) & 3))
-            e5 = _INF
-            e6 = _INF
-            e7 = _INF
-            e8 = _INF
-            if e_v[v, u] < _INF:  # candidates 5-8 use G_v at p
-                e5 = (p_up + a_u[v - 1, u - 1]) + e_v[v - 1, u - 1]
-                e6 = (p_up + a_u[v - 1, u + 1]) + e_v[v - 1, u + 1]
-                e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
-                e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
-            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, e5, e6, e7, e8)
-            g = g_u[v, u]
-            if k_u == 0:
-                g = (g + c * s[v, u]) - c * (s[v, u - 1] + g_u[v, u - 1])
-            elif k_u == 1:
-                g = (g - c * s[v, u]) + c * (s[v, u + 1] - g_u[v, u + 1])
-            elif k_u == 3:
-                g = g_u[v - 1, u]
-            elif k_u == 4:
-                g = g_u[v + 1, u]
-            elif k_u == 5:
-                g = (g_u[v - 1, u] - g_v[v - 1, u - 1]) + g_v[v, u]
-            elif k_u == 6:
-                g = (g_u[v - 1, u] + g_v[v - 1, u + 1]) - g_v[v, u]
-            elif k_u == 7:
-                g = (g_u[v + 1, u] + g_v[v + 1, u - 1]) - g_v[v, u]
-            elif k_u == 8:
-                g = (g_u[v + 1, u] - g_v[v + 1, u + 1]) + g_v[v, u]
-            g_u2[v, u] = g
-            e_u2[v, u] = best_u
-            s_u2[v, u] = np.int8(k_u) if best_u < _INF else _NO_STATE
+            e5 = (p_up + a_u[v - 1, u - 1]) + e_v[v - 1, u - 1]
+            e6 = (p_up + a_u[v - 1, u + 1]) + e_v[v - 1, u + 1]
+            e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
+            e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
+            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, e5 if has_gv else _INF,
+                                   e6 if has_gv else _INF, e7 if has_gv else _INF, e8 if has_gv else _INF)
+            new_gu = pick(k_u,
+                          (gu_p + c * z_p) - c * (s[v, u - 1] + g_u[v, u - 1]),
+                          (gu_p - c * z_p) + c * (s[v, u + 1] - g_u[v, u + 1]),
+                          gu_p,
+                          g_u[v - 1, u],
+                          g_u[v + 1, u],
+                          (g_u[v - 1, u] - g_v[v - 1, u - 1]) + gv_p,
+                          (g_u[v - 1, u] + g_v[v - 1, u + 1]) - gv_p,
+                          (g_u[v + 1, u] + g_v[v + 1, u - 1]) - gv_p,
+                          (g_u[v + 1, u] - g_v[v + 1, u + 1]) + gv_p)
             # ---- G_v ----
             q_l = a_u[v, u - 1] + e_v[v, u - 1]
             q_r = a_u[v, u + 1] + e_v[v, u + 1]
+            has_gu = e_u[v, u] < _INF  # candidates 5-8 use G_u at p
             e0 = a_v[v - 1, u] + B * ((state_cost(s_v[v, u], 0.0) + state_cost(s_v[v - 1, u], 0.0)) + ((flags >> 4) & 3))
             e1 = a_v[v + 1, u] + B * ((state_cost(s_v[v, u], 1.0) + state_cost(s_v[v + 1, u], 1.0)) + ((flags >> 6) & 3))
-            e5 = _INF
-            e6 = _INF
-            e7 = _INF
-            e8 = _INF
-            if e_u[v, u] < _INF:  # candidates 5-8 use G_u at p
-                e5 = (q_l + a_v[v - 1, u - 1]) + e_u[v - 1, u - 1]
-                e6 = (q_l + a_v[v + 1, u - 1]) + e_u[v + 1, u - 1]
-                e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
-                e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
-            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, e5, e6, e7, e8)
-            g = g_v[v, u]
-            if k_v == 0:
-                g = (g + c * s[v, u]) - c * (s[v - 1, u] + g_v[v - 1, u])
-            elif k_v == 1:
-                g = (g - c * s[v, u]) + c * (s[v + 1, u] - g_v[v + 1, u])
-            elif k_v == 3:
-                g = g_v[v, u - 1]
-            elif k_v == 4:
-                g = g_v[v, u + 1]
-            elif k_v == 5:
-                g = (g_v[v, u - 1] - g_u[v - 1, u - 1]) + g_u[v, u]
-            elif k_v == 6:
-                g = (g_v[v, u - 1] + g_u[v + 1, u - 1]) - g_u[v, u]
-            elif k_v == 7:
-                g = (g_v[v, u + 1] + g_u[v - 1, u + 1]) - g_u[v, u]
-            elif k_v == 8:
-                g = (g_v[v, u + 1] - g_u[v + 1, u + 1]) + g_u[v, u]
-            g_v2[v, u] = g
-            e_v2[v, u] = best_v
-            s_v2[v, u] = np.int8(k_v) if best_v < _INF else _NO_STATE
-            if k_u != 2 or k_v != 2:
-                changed = True
-    return changed
+            e5 = (q_l + a_v[v - 1, u - 1]) + e_u[v - 1, u - 1]
+            e6 = (q_l + a_v[v + 1, u - 1]) + e_u[v + 1, u - 1]
+            e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
+            e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
+            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, e5 if has_gu else _INF,
+                                   e6 if has_gu else _INF, e7 if has_gu else _INF, e8 if has_gu else _INF)
+            new_gv = pick(k_v,
+                          (gv_p + c * z_p) - c * (s[v - 1, u] + g_v[v - 1, u]),
+                          (gv_p - c * z_p) + c * (s[v + 1, u] - g_v[v + 1, u]),
+                          gv_p,
+                          g_v[v, u - 1],
+                          g_v[v, u + 1],
+                          (g_v[v, u - 1] - g_u[v - 1, u - 1]) + gu_p,
+                          (g_v[v, u - 1] + g_u[v + 1, u - 1]) - gu_p,
+                          (g_v[v, u + 1] + g_u[v - 1, u + 1]) - gu_p,
+                          (g_v[v, u + 1] - g_u[v + 1, u + 1]) + gu_p)
+            # ---- write; an invalid pixel stays missing ----
+            g_u2[v, u] = new_gu if valid_p else 0.0
+            e_u2[v, u] = best_u if valid_p else _INF
+            s_u2[v, u] = np.int8(k_u) if (valid_p & (best_u < _INF)) else _NO_STATE
+            g_v2[v, u] = new_gv if valid_p else 0.0
+            e_v2[v, u] = best_v if valid_p else _INF
+            s_v2[v, u] = np.int8(k_v) if (valid_p & (best_v < _INF)) else _NO_STATE
+            moved += np.int64(valid_p & ((k_u != 2) | (k_v != 2)))
+    return moved > 0
 
 
 def _padded(shape, dtype, margin_value):
@@ -322,7 +310,7 @@ def _padded(shape, dtype, margin_value):
 
 
 def _run_sda(signal, valid, iterations, border):
-    """The dynamic programming on padded arrays. Returns (g_u, g_v, e_u, e_v) padded, and the passes applied."""
+    """The dynamic programming on padded arrays. Returns [g_u, g_v, e_u, e_v, signal] padded, and the passes applied."""
     H, W = signal.shape
     shape = (H + 2 * _P, W + 2 * _P)
     inner = (slice(_P, -_P), slice(_P, -_P))
@@ -348,7 +336,7 @@ def _run_sda(signal, valid, iterations, border):
             break
         cur = 1 - cur
         passes = i
-    return sets[cur][:4], passes
+    return sets[cur][:4] + [s], passes
 
 
 def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
@@ -359,29 +347,32 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
     applied (the pass whose stop test fired is not counted). ``iterations``
     None runs until stable, at most :data:`MAX_ITERATIONS` passes.
     """
-    (g_u, g_v, e_u, e_v), passes = _run_sda(np.asarray(signal, dtype=np.float64), valid, iterations, border)
+    (g_u, g_v, e_u, e_v, _), passes = _run_sda(np.asarray(signal, dtype=np.float64), valid, iterations, border)
     inner = (slice(_P, -_P), slice(_P, -_P))
     return (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
 
 
 @njit
-def _cp2tv_kernel(z, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
+def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
     """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)).
 
-    Gradients and energies are padded by _P; a gradient with infinite energy does not exist.
+    ``s`` (depth, zero where invalid), gradients and energies are padded by _P; a gradient with
+    infinite energy does not exist. (No helper that takes arrays and branches here: see the note above ``laplacian``.)
     """
-    H, W = z.shape
+    H, W = out.shape[0], out.shape[1]
     for v in range(H):
         v_c = v - c_y
         for u in range(W):
-            ok = False
-            if e_u[v + _P, u + _P] < _INF and e_v[v + _P, u + _P] < _INF:
-                gu = g_u[v + _P, u + _P]
-                gv = g_v[v + _P, u + _P]
-                n_z = -((np.float64(z[v, u]) + v_c * gv) + (u - c_x) * gu)
-                ok = write_unit(out, v, u, f_x * gu, f_y * gv, n_z, fill)
-            if not ok:
-                fill_pixel(out, v, u, fill)
+            gu = g_u[v + _P, u + _P]
+            gv = g_v[v + _P, u + _P]
+            n_x = f_x * gu
+            n_y = f_y * gv
+            n_z = -((s[v + _P, u + _P] + v_c * gv) + (u - c_x) * gu)
+            norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+            ok = (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF) & (norm > 0.0) & (norm < _INF)
+            out[v, u, 0] = n_x / norm if ok else fill
+            out[v, u, 1] = n_y / norm if ok else fill
+            out[v, u, 2] = n_z / norm if ok else fill
 
 
 @njit
@@ -409,9 +400,9 @@ def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided
     if base == "3f2n":
         with np.errstate(divide="ignore", invalid="ignore"):
             signal = 1.0 / z.astype(np.float64)  # read only where valid
-        (g_u, g_v, e_u, e_v), _ = _run_sda(signal, valid, iterations, border)
+        (g_u, g_v, e_u, e_v, _), _ = _run_sda(signal, valid, iterations, border)
         _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, border == "reflect", np.float32(fill), out)
     else:
-        (g_u, g_v, e_u, e_v), _ = _run_sda(z.astype(np.float64), valid, iterations, border)
-        _cp2tv_kernel(z, g_u, g_v, e_u, e_v, *f, np.float32(fill), out)
+        (g_u, g_v, e_u, e_v, s), _ = _run_sda(z.astype(np.float64), valid, iterations, border)
+        _cp2tv_kernel(s, g_u, g_v, e_u, e_v, *f, np.float32(fill), out)
     return out

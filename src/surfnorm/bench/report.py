@@ -226,7 +226,7 @@ def _faithfulness_md(result, levels) -> list[str]:
             "`surfnorm.reference.official_figures`), the largest difference on one frame, in degrees, and the "
             "largest difference on one frame from the same package run live in this bench (the d2nt peer).", "",
             _table(["method"] + [f"{lv} ours / authors" for lv in levels]
-                   + ["max |diff| per frame", "max |diff| vs the d2nt peer", "frames"], rows), ""]
+                   + ["max abs. diff. per frame", "max abs. diff. vs the d2nt peer", "frames"], rows), ""]
 
 
 def _table2_md(result, summary, levels, lvi) -> list[str]:

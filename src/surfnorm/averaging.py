@@ -107,7 +107,7 @@ def write_sum(out, v, u, n_x, n_y, n_z, ok, fill):
 
 # Both kernels go row by row: for each triangle j of the ring, over all pixels of the row. That inner
 # loop has no branches (invalid neighbours are weighted 0, selects instead of ifs), so the compiler
-# vectorises it; pixel by pixel with 8 triangles each was 2-5x slower.
+# vectorises it (AngleWeighted pixel by pixel, 8 triangles each, was 2x slower).
 
 @njit
 def _area_weighted_kernel(P, valid, fill, out):

@@ -1,6 +1,6 @@
 # Two commands for a newcomer on a fresh machine:
 #   make demo   set up .venv and run every estimator on the sample frames shipped in the package
-#   make test   set up .venv (with the test extras and the CPU build of PyTorch) and run all tests
+#   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, the authors' d2nt) and run all tests
 #   make bench  speed of the D2NT family next to the authors' d2nt package -> bench-output/speed.{md,json}
 PYTHON ?= python3
 VENV := .venv
@@ -10,7 +10,8 @@ TEST_STAMP := $(VENV)/.test-installed-$(shell cat pyproject.toml | cksum | cut -
 # PyTorch for the tests of surfnorm.torch: the CPU build (on this machine pip finds its wheel file)
 TORCH_VERSION := 2.13.0
 TORCH_STAMP := $(VENV)/.torch-installed-$(TORCH_VERSION)
-BENCH_STAMP := $(VENV)/.bench-installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
+# The authors' d2nt package: the peer that the speed benchmark and the tests compare with
+D2NT_STAMP := $(VENV)/.d2nt-installed-0.1.3
 
 .PHONY: demo test bench clean
 
@@ -36,15 +37,15 @@ $(TORCH_STAMP): $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/surfnorm demo demo-output
 
-test: $(TEST_STAMP) $(TORCH_STAMP)
+test: $(TEST_STAMP) $(TORCH_STAMP) $(D2NT_STAMP)
 	$(PY) -m pytest -q
 
 # d2nt 0.1.3 declares opencv-python; --no-deps keeps our opencv-python-headless, which provides the same cv2.
-$(BENCH_STAMP): $(STAMP)
+$(D2NT_STAMP): $(STAMP)
 	$(PY) -m pip install -q --no-deps d2nt==0.1.3
 	touch $@
 
-bench: $(BENCH_STAMP)
+bench: $(D2NT_STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/speed.py --out bench-output
 
 clean:

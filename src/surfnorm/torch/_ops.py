@@ -1,7 +1,7 @@
 """The estimators as whole-tensor PyTorch operations on a batch (B, H, W).
 
 Every function here follows its NumPy-backend twin (``gradients.py``,
-``translate.py``, ``refine.py``) pixel for pixel, but is written as a fixed
+``translate.py``, ``mnr.py``) pixel for pixel, but is written as a fixed
 sequence of element-wise tensor operations on shifted views of the image
 instead of a loop, so that it runs on any device, batches for free, is
 differentiable and traces under ``torch.compile``. Choices that the loop
@@ -245,12 +245,12 @@ def cp2tv(g: Grid, cam, *, border: str, fill: float):
     return unit(n_x, n_y, n_z, g.valid & ok_u & ok_v, fill)
 
 
-# (dv, du, axis of the 1D DLF) of MNR's candidate neighbours, in tie-break order (refine._NEIGHBOURS)
+# (dv, du, axis of the 1D DLF) of MNR's candidate neighbours, in tie-break order (mnr._NEIGHBOURS)
 _MNR_NEIGHBOURS = ((0, -1, 0), (0, 1, 0), (-1, 0, 1), (1, 0, 1))
 
 
 def mnr(g: Grid, normals: torch.Tensor, *, dlf: str, fill: float) -> torch.Tensor:
-    """MNR (refine._mnr_kernel): each pixel takes the normal of the smoothest of its 4-neighbours and itself.
+    """MNR (mnr._mnr_kernel): each pixel takes the normal of the smoothest of its 4-neighbours and itself.
 
     The choice is a chain of ``torch.where`` on the smoothness maps (first
     neighbour wins ties; p itself only when strictly smoother), so the

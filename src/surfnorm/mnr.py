@@ -98,13 +98,15 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
 
 
 @njit
-def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, col, runs, out_row):
+def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, col, runs, choice,
+            out_row):
     """MNR of row v: each pixel with a normal takes the normal of the smoothest of [left, right, up, down, self].
 
     n_*: normals (W, 3) of rows v - 1, v, v + 1; has_*: whether they exist;
     s_h: smoothness of row v scoring left/right; s_up, s_dn: of rows v -+ 1
     scoring up/down; s_self: the score of p itself. Strict ``<`` in that order
     keeps the first candidate on ties, as ``argmin`` in the authors' code.
+    ``col``, ``runs``, ``choice`` (3 W int32) are scratch.
     """
     W = out_row.shape[0]
     n_runs = box_row(has_up, has_mid, has_dn, v >= 1 and v < H - 1, col, runs)
@@ -120,6 +122,7 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
             n_l, n_r = mid_flat[3 * (a - 1):3 * (b - 1)], mid_flat[3 * (a + 1):3 * (b + 1)]
             n_a, n_b, n_c = up_flat[3 * a:3 * b], dn_flat[3 * a:3 * b], mid_flat[3 * a:3 * b]
             run_out = out_flat[3 * a:3 * b]
+            run_choice = choice[3 * a:3 * b]
             for i in range(b - a):
                 best_s, best = inf, 4
                 s_q = s_l[i]
@@ -135,10 +138,16 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
                 best = 3 if s_q < best_s else best
                 best_s = s_q if s_q < best_s else best_s
                 best = 4 if s_c[i] < best_s else best
-                for c in range(3):
-                    j = 3 * i + c
-                    run_out[j] = (n_l[j] if best == 0 else n_r[j] if best == 1 else n_a[j] if best == 2 else
-                                  n_b[j] if best == 3 else n_c[j])
+                run_choice[3 * i] = best
+                run_choice[3 * i + 1] = best
+                run_choice[3 * i + 2] = best
+            # Then copy the chosen normals, one float at a time: all five candidates loaded, then selected.
+            # (A load inside a branch, a loop not starting at 0, or more arrays per loop, and LLVM does not
+            # vectorise: "cannot identify array bounds" / "too many SCEV assumptions".)
+            for j in range(3 * (b - a)):
+                best = run_choice[j]
+                l_j, r_j, a_j, b_j, c_j = n_l[j], n_r[j], n_a[j], n_b[j], n_c[j]
+                run_out[j] = l_j if best == 0 else r_j if best == 1 else a_j if best == 2 else b_j if best == 3 else c_j
         u = b
 
 
@@ -148,7 +157,7 @@ def _mnr_kernel(z, valid, has_normal, normals, dlf, fill, out):
     H, W = z.shape
     col = np.empty(W, np.bool_)
     runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
-    mruns = np.empty((W // 2 + 1, 2), np.int64)
+    mruns, choice = np.empty((W // 2 + 1, 2), np.int64), np.empty(3 * W, np.int32)
     s_v = np.empty((3, W), np.float32)
     s_h, s_self = np.empty(W, np.float32), np.empty(W, np.float32)
     n_runs[0] = fast_row(valid, 0, col, runs[0])
@@ -166,7 +175,7 @@ def _mnr_kernel(z, valid, has_normal, normals, dlf, fill, out):
         self_smoothness_row(s_h, s_v[j], dlf == 0, s_self)
         up, dn = max(v - 1, 0), min(v + 1, H - 1)
         mnr_row(v, H, normals[up], normals[v], normals[dn], has_normal[up], has_normal[v], has_normal[dn],
-                s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self, fill, col, mruns, out[v])
+                s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self, fill, col, mruns, choice, out[v])
 
 
 def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:

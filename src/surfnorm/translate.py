@@ -66,9 +66,10 @@ def store_unit_flat(out_flat, i, n_x, n_y, n_z, fill):
     """
     norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
     ok = (norm > 0) & (norm < np.inf)
-    out_flat[3 * i] = n_x / norm if ok else fill
-    out_flat[3 * i + 1] = n_y / norm if ok else fill
-    out_flat[3 * i + 2] = n_z / norm if ok else fill
+    u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm  # divided outside the selects, which LLVM then keeps branch-free
+    out_flat[3 * i] = u_x if ok else fill
+    out_flat[3 * i + 1] = u_y if ok else fill
+    out_flat[3 * i + 2] = u_z if ok else fill
     return ok
 
 
@@ -246,7 +247,7 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill
     u_c = centred_columns(W, c_x)
     col, ok_row = np.empty(W, np.bool_), np.empty(W, np.bool_)
     runs, n_runs = np.empty((4, W // 2 + 1, 2), np.int64), np.zeros(4, np.int64)
-    mruns = np.empty((W // 2 + 1, 2), np.int64)
+    mruns, choice = np.empty((W // 2 + 1, 2), np.int64), np.empty(3 * W, np.int32)
     p_v, sm_v = np.empty((4, W), np.float32), np.empty((4, W), np.float32)
     s, p_h, sm_h, s_self = (np.empty(W, np.float32), np.empty(W, np.float32), np.empty(W, np.float32),
                             np.empty(W, np.float32))
@@ -284,7 +285,8 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill
                 sm_h[:] = sm_v[j]
             self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
             mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
-                    has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, fill, col, mruns, out[v])
+                    has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, fill, col, mruns, choice,
+                    out[v])
 
 
 def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0):

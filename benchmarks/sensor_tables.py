@@ -1,6 +1,7 @@
 """Tables for issue 6 on the 3F2N sample: background as invalid (mask) vs not, and the scale-invariant mode.
 
     PYTHONPATH=src python benchmarks/sensor_tables.py [ROOT] [--methods a,b,...] [--json out.json]
+    PYTHONPATH=src python benchmarks/sensor_tables.py --methods d2nt_v2,d2nt_v3 --sweep 1,10,100,1000,10000
 
 ROOT defaults to the 12-frame sample at /work/shared/data/3f2n-sample (falls back to
 the 3 frames shipped in the package). e_A per level = mean over the level's frames
@@ -45,9 +46,23 @@ def main(argv=None):
     ap.add_argument("root", nargs="?", default=str(DEFAULT_ROOT if DEFAULT_ROOT.is_dir() else sample_root()))
     ap.add_argument("--methods", default=None)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--sweep", default=None, help="comma-separated REFERENCE_DEPTH values: e_A (mask, scale-invariant) per value")
     args = ap.parse_args(argv)
     names = args.methods.split(",") if args.methods else list(surfnorm.methods())
     frames = [read_frame(args.root, n) for n in find_frames(args.root)]
+    if args.sweep:
+        import surfnorm.units as units
+
+        print("| method | REFERENCE_DEPTH | " + " | ".join(LEVELS) + " |\n|---|---|" + "---|" * len(LEVELS))
+        for name in names:
+            for ref in (float(x) for x in args.sweep.split(",")):
+                units.REFERENCE_DEPTH = ref
+                e = {}
+                for f in frames:
+                    n = surfnorm.estimate(f.depth, f.K, method=name, mask=f.mask, scale_invariant=True)
+                    e.setdefault(f.level, []).append(metrics.mean_angular_error(n, f.normals, f.mask))
+                print(f"| {name} | {ref:g} | " + " | ".join(f"{np.mean(e[l]):.3f}" for l in LEVELS if l in e) + " |", flush=True)
+        return
     rows = []
     for f in frames:
         band = band_of(f.mask)

@@ -280,36 +280,102 @@ def test_200_pngs_with_5_corrupt(batch, tmp_path):
     assert again.exit_code == 1 and "0 written, 195 skipped (output existed), 5 failed" in again.output.replace("\n", " ")
 
 
-def test_killed_mid_run_then_restarted_finishes_every_output(tmp_path):
+def _interrupt(command, env, out: Path, at_least: int, sig) -> subprocess.CompletedProcess:
+    """Start the CLI, send ``sig`` to it and its workers once ``at_least`` outputs exist, wait for it."""
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if out.is_dir() and sum(1 for p in out.iterdir() if not p.name.startswith(".")) >= at_least:
+                break
+            time.sleep(0.005)
+        os.killpg(proc.pid, sig)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return subprocess.CompletedProcess(command, proc.returncode, stdout, stderr)
+
+
+def test_interrupted_and_killed_mid_run_then_restarted_finishes_every_output(tmp_path):
     folder = tmp_path / "in"
     folder.mkdir()
-    for i in range(400):
+    for i in range(300):
         depth_png(folder / f"{i:03d}.png", i)
     out = tmp_path / "out"
     command = [sys.executable, "-c", "import sys; from surfnorm.cli import app; sys.argv[0] = 'surfnorm'; app()",
                "convert", str(folder), str(out), *CAM_ARGS, "--depth-scale", "1000", "--jobs", "2", "--format", "png16"]
     env = {**os.environ, "PYTHONPATH": SRC}
-    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if out.is_dir() and sum(1 for p in out.iterdir() if not p.name.startswith(".")) >= 10:
-                break
-            time.sleep(0.005)
-        os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its worker processes, at once
-    finally:
-        proc.wait()
-    assert proc.returncode == -signal.SIGKILL, "the run finished before it could be killed"
-    done_before = [p for p in out.iterdir() if not p.name.startswith(".")]
-    assert 10 <= len(done_before) < 400
+
+    def finished():
+        return [p for p in out.iterdir() if not p.name.startswith(".")]
+
+    # Ctrl-C: stops promptly with a one-line message, exit 130
+    first = _interrupt(command, env, out, 10, signal.SIGINT)
+    assert first.returncode == 130, first.stderr
+    assert "interrupted: finished outputs are complete; run the same command again" in first.stderr
+    assert "Traceback" not in first.stderr + first.stdout
+    after_int = len(finished())
+    assert 10 <= after_int < 300
+    # kill -9 of the CLI and its workers at once
+    second = _interrupt(command, env, out, after_int + 10, signal.SIGKILL)
+    assert second.returncode == -signal.SIGKILL, "the run finished before it could be killed"
+    done_before = finished()
+    assert after_int + 10 <= len(done_before) < 300
     (out / ".123.png.abc_12.tmp.png").write_bytes(b"half a png")  # as a kill during a write leaves it
     rerun = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
     assert rerun.returncode == 0, rerun.stderr
     assert "Traceback" not in rerun.stderr + rerun.stdout
-    assert f"{400 - len(done_before)} written, {len(done_before)} skipped" in rerun.stdout.replace("\n", " ")
+    assert f"{300 - len(done_before)} written, {len(done_before)} skipped" in rerun.stdout.replace("\n", " ")
     assert temporaries(out) == []
     outputs = sorted(out.iterdir())
-    assert len(outputs) == 400
+    assert len(outputs) == 300
     for o in outputs[::7] + done_before:  # every output decodes and equals a fresh estimate
         n = read_normals(o, fill=0.0)
         assert np.abs(n - expected_normals(folder / o.name)).max() < 4e-5
+
+
+# ---------------------------------------------------------------------------- CLI happy paths
+
+
+def test_cli_estimate_writes_what_the_library_computes(tmp_path):
+    import json
+
+    src = depth_png(tmp_path / "d.png", 4)
+    (tmp_path / "cam.json").write_text(json.dumps({"fx": 60, "fy": 60, "cx": 31.5, "cy": 23.5}))
+    mask = (np.arange(48 * 64).reshape(48, 64) % 5 != 0).astype(np.uint8) * 255
+    cv2.imwrite(str(tmp_path / "mask.png"), mask)
+    r = cli("estimate", src, tmp_path / "n", "--intrinsics", tmp_path / "cam.json", "--depth-scale", "1000",
+            "--mask", tmp_path / "mask.png", "--scale-invariant", "--method", "d2nt_v2")
+    assert r.exit_code == 0, r.output
+    expected = expected_normals(src, method="d2nt_v2", mask=mask > 0, scale_invariant=True)
+    np.testing.assert_array_equal(np.load(tmp_path / "n.npy"), expected)
+    assert cv2.imread(str(tmp_path / "n.png")).dtype == np.uint8
+    r = cli("estimate", src, tmp_path / "m", *CAM_ARGS, "--depth-scale", "1000", "--format", "png16")
+    assert r.exit_code == 0 and not (tmp_path / "m.npy").exists()
+    assert np.abs(read_normals(tmp_path / "m.png") - expected_normals(src)).max() < 4e-5
+
+
+def test_cli_estimate_disparity(tmp_path):
+    d = np.full((20, 30), 12.5, np.float32)
+    d[5, 5] = 0
+    np.save(tmp_path / "disp.npy", d)
+    r = cli("estimate", tmp_path / "disp.npy", tmp_path / "n", *CAM_ARGS, "--disparity", "--format", "npy")
+    assert r.exit_code == 0, r.output
+    n = np.load(tmp_path / "n.npy")
+    assert (n[5, 5] == 0).all() and np.allclose(n[10, 15], [0, 0, -1], atol=1e-6)
+
+
+def test_cli_convert_with_intrinsics_file_and_png8(tmp_path):
+    import json
+
+    (tmp_path / "in").mkdir()
+    for i in range(3):
+        depth_png(tmp_path / "in" / f"{i}.png", i)
+    (tmp_path / "cam.json").write_text(json.dumps({"K": CAM.matrix.tolist()}))
+    r = cli("convert", tmp_path / "in", tmp_path / "out", "-k", tmp_path / "cam.json", "--depth-scale", "1000", "-f", "png8")
+    assert r.exit_code == 0, r.output
+    assert "3 written, 0 skipped (output existed), 0 failed" in r.output.replace("\n", " ")
+    pic = cv2.imread(str(tmp_path / "out" / "1.png"), cv2.IMREAD_UNCHANGED)
+    assert pic.dtype == np.uint8 and pic.shape == (48, 64, 3)

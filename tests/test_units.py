@@ -82,8 +82,9 @@ def test_disparity_input(method):
                                atol=1e-4, equal_nan=True)
     inner = hit & (gt[..., 2] < -0.9)  # the part of the sphere that faces the camera
     assert inner.sum() > 100
-    # MNR copies a neighbour's normal: on this 12-pixel-radius sphere that is a one-pixel (about 3 degree) step
-    assert np.median(angle_deg(n[inner], gt[inner])) < (4.0 if mnr_recipe(method) else 0.5)
+    # a sanity check of the geometry (not inverted, not mirrored); on this 12-pixel-radius sphere the D2NT family
+    # is within 0.1 degree, 3F2N-like estimators about 1, and MNR, which copies a neighbour's normal, about 3
+    assert np.median(angle_deg(n[inner], gt[inner])) < (4.0 if mnr_recipe(method) else 2.0)
 
 
 def test_disparity_to_depth():

@@ -319,6 +319,13 @@ def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, 
                            check_bool("scale_invariant", scale_invariant), check_bool("overwrite", overwrite))
 
 
+def _worker_init():
+    """Workers ignore Ctrl-C: the parent handles it for the whole pool (see :func:`convert`)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _pool_context():
     """fork when this process has one thread (fast, and scripts need no ``if __name__ == "__main__"``);
     otherwise forkserver, because fork() would copy other threads' held locks (e.g. Rich's refresh thread)."""
@@ -394,9 +401,14 @@ def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", de
     if client is not None:
         from .distributed import run_on_dask
 
-        index = {t: i for i, t in enumerate(tasks)}
-        run_on_dask(tasks, settings, client, lambda r: done(index[ConvertTask(r.input, r.output)], r),
-                    shard_size=shard_size)
+        index = {(t.input, t.output): i for i, t in enumerate(tasks)}
+
+        def on_result(r: FileResult):
+            i = index.get((Path(r.input), Path(r.output)))
+            if i is not None and i not in results:
+                done(i, r)
+
+        run_on_dask(tasks, settings, client, on_result, shard_size=shard_size)
         for i, t in enumerate(tasks):  # a task the cluster never answered is an error, not a silent gap
             results.setdefault(i, FileResult(t.input, t.output, "error", f"{t.input}: no result from the Dask cluster"))
     elif jobs == 1 or len(tasks) == 1:
@@ -405,7 +417,8 @@ def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", de
     else:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=_pool_context()) as pool:
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=_pool_context(), initializer=_worker_init)
+        try:
             futures = {pool.submit(convert_file, t, settings): i for i, t in enumerate(tasks)}
             for fut in as_completed(futures):
                 i = futures[fut]
@@ -415,4 +428,13 @@ def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", de
                     t = tasks[i]
                     result = FileResult(t.input, t.output, "error", f"{t.input}: worker failed ({type(exc).__name__}: {exc})")
                 done(i, result)
+        except BaseException:
+            # Ctrl-C or an error in a callback: stop now instead of finishing the queue. A file being
+            # written is left as a temporary that the next run removes; finished outputs are complete.
+            workers = list((getattr(pool, "_processes", None) or {}).values())  # (shutdown forgets them)
+            pool.shutdown(wait=False, cancel_futures=True)
+            for process in workers:
+                process.terminate()
+            raise
+        pool.shutdown(wait=True)
     return ConvertSummary([results[i] for i in range(len(tasks))])

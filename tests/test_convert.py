@@ -226,15 +226,17 @@ def test_dask_client_is_handed_the_tasks(tmp_path, monkeypatch):
     srcs = [depth_png(tmp_path / f"{i}.png", i) for i in range(3)]
     calls = []
 
-    def run_on_dask(tasks, settings, client, on_result):
-        calls.append((list(tasks), settings, client))
+    def run_on_dask(tasks, settings, client, on_result, *, shard_size=None):
+        calls.append((list(tasks), settings, client, shard_size))
         for t in tasks[:2]:  # the fake cluster loses the last task
             on_result(convert_file(t, settings))
 
     monkeypatch.setitem(sys.modules, "surfnorm.distributed", types.SimpleNamespace(run_on_dask=run_on_dask))
     seen = []
-    summary = convert(srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client="CLIENT", progress=seen.append)
+    summary = convert(srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client="CLIENT", progress=seen.append,
+                      shard_size=5)
     assert calls[0][2] == "CLIENT" and len(calls[0][0]) == 3 and calls[0][1].depth_scale == 1000
+    assert calls[0][3] == 5
     assert [r.status for r in summary.results] == ["written", "written", "error"]
     assert summary.errors[0].message.endswith("2.png: no result from the Dask cluster")
     assert len(seen) == 2

@@ -161,10 +161,15 @@ def patched(client):
         client.register_plugin(plugin, name=PatchConvertFile.name)
         installed.append(plugin)
 
+    allowed = client.run_on_scheduler(_get_allowed_failures)
     yield install
     if installed:
         client.unregister_worker_plugin(PatchConvertFile.name)
-    client.run_on_scheduler(_set_allowed_failures, 3)
+    client.run_on_scheduler(_set_allowed_failures, allowed)
+
+
+def _get_allowed_failures(dask_scheduler=None):
+    return dask_scheduler.allowed_failures
 
 
 def _set_allowed_failures(n, dask_scheduler=None):

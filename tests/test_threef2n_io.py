@@ -34,7 +34,7 @@ def test_bad_files(tmp_path):
     with pytest.raises(DataFileError, match=r"short.bin: expected 1228800 bytes of float32 depth \(480x640\), got 100"):
         read_depth_bin(tmp_path / "short.bin")
     (tmp_path / "bad.bin.gz").write_bytes(b"not gzip")
-    with pytest.raises(DataFileError, match=r"bad.bin.gz: corrupt gzip stream"):
+    with pytest.raises(DataFileError, match=r"bad.bin.gz: truncated or corrupt gzip stream"):
         read_depth_bin(tmp_path / "bad.bin.gz")
     with pytest.raises(DataFileError, match=r"missing.bin: cannot read depth file"):
         read_depth_bin(tmp_path / "missing.bin")

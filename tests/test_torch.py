@@ -59,7 +59,19 @@ def assert_parity(depth, masks, Ks, method, options, names):
                            mask=None if masks is None else torch.from_numpy(masks)[:, None], **options))
     for i, name in enumerate(names):
         ref = surfnorm.estimate(depth[i], Ks[i], method=method, mask=None if masks is None else masks[i], **options)
-        err = np.abs(got[i] - ref).max()
+        g = got[i]
+        if method.startswith("3f2n"):
+            # 3F2N can land exactly on one neighbour's candidate, which makes the normal perpendicular to
+            # the line of sight: there rounding alone picks its sign (both backends are right), so compare
+            # such edge-on normals up to sign.
+            H, W = ref.shape[:2]
+            v, u = np.mgrid[0:H, 0:W]
+            ray = np.stack([(u - Ks[i][0, 2]) / Ks[i][0, 0], (v - Ks[i][1, 2]) / Ks[i][1, 1], np.ones((H, W))], -1)
+            ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+            edge_on = np.abs(np.einsum("hwc,hwc->hw", ref, ray)) < 1e-3
+            flip = edge_on & ((g * ref).sum(-1) < 0)
+            g = np.where(flip[..., None], -g, g)
+        err = np.abs(g - ref).max()
         assert err <= TOL, f"{method} {options} on {name}: max error {err:.2e}"
     return got
 

@@ -234,7 +234,7 @@ def test_jobs_give_the_same_numbers(tmp_path):
 def test_timing_interleaves_and_takes_the_median():
     frame = read_frame(sample_root(), "Easy/android/000001")
     calls = []
-    runs = {name: (lambda d, K, m, name=name: calls.append(name)) for name in ("a", "b", "c")}
+    runs = {name: (lambda d, K, m, clean=True, name=name: calls.append(name)) for name in ("a", "b", "c")}
     specs = [runner.Spec("peer", n) for n in runs]
     out = runner._time_one_frame(frame, specs, runs, repeats=4)
     assert calls[:6] == ["a", "a", "b", "b", "c", "c"]  # warm-up: two calls each

@@ -26,8 +26,11 @@ __all__ = ["Peer", "PEERS", "load_peers", "peer_versions", "single_thread"]
 class Peer:
     """A peer estimator: its report name, the library it needs, and a factory that imports it.
 
-    ``make()`` imports the library and returns ``run(depth, cam, mask) -> normals``;
-    it raises ImportError (or OSError for a missing system library) when unavailable.
+    ``make()`` imports the library and returns ``run(depth, cam, mask, clean=True) -> normals``;
+    it raises ImportError (or OSError for a missing system library) when unavailable. With
+    ``clean=False`` it returns the library's own output as is: the timing runs call it so, so
+    that a peer's time is its own call, not our conversion to unit, camera-facing normals
+    (``_clean``, about 30 ms a frame in NumPy, applied for the accuracy runs).
     """
 
     name: str
@@ -53,10 +56,10 @@ def _make_d2nt(version: str):
     def make():
         from d2nt import depth2normal
 
-        def run(depth, cam: Intrinsics, mask):
+        def run(depth, cam: Intrinsics, mask, clean=True):
             # The package counts pixels from 1 (u = 1..W), so its principal point is 1-based.
             K1 = np.array([[cam.fx, 0, cam.cx + 1.0], [0, cam.fy, cam.cy + 1.0], [0, 0, 1.0]])
-            return _clean(depth2normal(depth, K1, version))
+            return _clean(depth2normal(depth, K1, version)) if clean else depth2normal(depth, K1, version)
 
         return run
 
@@ -69,12 +72,12 @@ def _make_kornia():
     import torch
     from kornia.geometry.depth import depth_to_normals
 
-    def run(depth, cam: Intrinsics, mask):
+    def run(depth, cam: Intrinsics, mask, clean=True):
         d = torch.from_numpy(np.ascontiguousarray(depth, dtype=np.float32))[None, None]  # 1x1xHxW
         K = torch.from_numpy(cam.matrix.astype(np.float32))[None]  # 1x3x3
         with torch.no_grad():
             n = depth_to_normals(d, K)[0].permute(1, 2, 0).numpy()  # HxWx3, facing away: _clean flips
-        return _clean(n)
+        return _clean(n) if clean else n
 
     return run
 
@@ -86,7 +89,7 @@ def _make_open3d_pcd():
 
     search = o3d.geometry.KDTreeSearchParamKNN(knn=30)
 
-    def run(depth, cam: Intrinsics, mask):
+    def run(depth, cam: Intrinsics, mask, clean=True):
         H, W = depth.shape
         # Background passed as depth 0 so that the point cloud drops it (peers.md).
         z = np.where(mask, depth, 0.0).astype(np.float32)
@@ -99,7 +102,7 @@ def _make_open3d_pcd():
         pcd.orient_normals_towards_camera_location(np.zeros(3))
         out = np.zeros((H, W, 3), dtype=np.float32)
         out[keep] = np.asarray(pcd.normals, dtype=np.float32)
-        return _clean(out)
+        return _clean(out) if clean else out
 
     return run
 
@@ -107,11 +110,11 @@ def _make_open3d_pcd():
 def _make_open3d_tensor():
     import open3d as o3d
 
-    def run(depth, cam: Intrinsics, mask):
+    def run(depth, cam: Intrinsics, mask, clean=True):
         img = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth, dtype=np.float32)[..., None]))
         K = o3d.core.Tensor(cam.matrix.astype(np.float64))
         n = img.create_vertex_map(K).create_normal_map().as_tensor().numpy()  # HxWx3, not always unit length
-        return _clean(n)
+        return _clean(n) if clean else n
 
     return run
 
@@ -127,7 +130,7 @@ def _make_opencv(method_name: str):
         method = getattr(cv2, f"RgbdNormals_RGBD_NORMALS_METHOD_{method_name}")
         cache = {}
 
-        def run(depth, cam: Intrinsics, mask):
+        def run(depth, cam: Intrinsics, mask, clean=True):
             H, W = depth.shape
             K = cam.matrix.astype(np.float32)
             key = (H, W, K.tobytes())
@@ -136,7 +139,7 @@ def _make_opencv(method_name: str):
                 cache[key] = cv2.RgbdNormals.create(H, W, cv2.CV_32F, K, window_size=5, diff_threshold=50, method=method)
             pts = cv2.depthTo3d(np.ascontiguousarray(depth, dtype=np.float32), K)
             n = cache[key].apply(pts)
-            return _clean(np.asarray(n)[..., :3])
+            return _clean(np.asarray(n)[..., :3]) if clean else np.asarray(n)[..., :3]
 
         return run
 

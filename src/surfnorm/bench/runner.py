@@ -289,7 +289,8 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
     for spec in specs:
         if spec.kind == "peer":
             run = peer_runs[spec.method]
-            calls[spec.key] = (lambda run=run: run(frame.depth, frame.K, frame.mask))
+            # the peer's own output, unconverted: its time is its library call
+            calls[spec.key] = (lambda run=run: run(frame.depth, frame.K, frame.mask, clean=False))
         else:
             opts = dict(spec.options)
             calls[spec.key] = (lambda m=spec.method, o=opts: estimate(frame.depth, frame.K, method=m, **o))

@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from .methods import BORDER_OPTIONS, DAG_OPTIONS, Method, register
+from functools import partial
+
+from ._validate import check_choice as _check_choice, check_iterations as _check_iterations, check_window
+from .averaging import angle_weighted, area_weighted
+from .methods import BORDER_OPTIONS, DAG_OPTIONS, Method, Option, register
+from .plane_fit import plane_pca, plane_svd, vector_svd
+from .sda import BASES as _SDA_BASES, MAX_ITERATIONS as _SDA_MAX_ITERATIONS, sda_sne as _sda_sne
+from .three_filters import sne_roadseg as _sne_roadseg, three_filters as _three_filters
 from .translate import cp2tv, d2nt, d2nt_v3
 
 D2NT_PAPER = "Feng et al., D2NT: A High-Performing Depth-to-Normal Translator, ICRA 2023"
@@ -34,30 +41,26 @@ register(Method("cp2tv", "depth-to-normal",
 
 # --- 3F2N and SNE-RoadSeg (three_filters.py) -------------------------------------------------
 
-from .three_filters import sne_roadseg as _sne_roadseg, three_filters as _three_filters  # noqa: E402
 
 THREE_F2N_PAPER = "Fan et al., Three-Filters-to-Normal: An Accurate and Ultrafast Surface Normal Estimator, RA-L 2021"
 
 register(Method("3f2n_mean", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
                 "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours",
-                lambda z, valid, cam, out, *, border, fill: _three_filters(z, valid, cam, out, third="mean", border=border, fill=fill),
+                partial(_three_filters, third="mean"),
                 BORDER_OPTIONS))
 register(Method("3f2n_median", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
                 "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours",
-                lambda z, valid, cam, out, *, border, fill: _three_filters(z, valid, cam, out, third="median", border=border, fill=fill),
+                partial(_three_filters, third="median"),
                 BORDER_OPTIONS))
 register(Method("sne_roadseg", "depth-to-normal",
                 "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
                 "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
                 "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
-                lambda z, valid, cam, out, *, border, fill: _sne_roadseg(z, valid, cam, out, border=border, fill=fill),
+                _sne_roadseg,
                 BORDER_OPTIONS))
 
 # --- SDA-SNE (sda.py) ----------------------------------------------------------------------------
 
-from ._validate import check_choice as _check_choice, check_iterations as _check_iterations  # noqa: E402
-from .methods import Option  # noqa: E402
-from .sda import BASES as _SDA_BASES, MAX_ITERATIONS as _SDA_MAX_ITERATIONS, sda_sne as _sda_sne  # noqa: E402
 
 SDA_OPTIONS = {
     "iterations": Option(3, _check_iterations,
@@ -78,10 +81,6 @@ register(Method("sda_sne", "energy minimisation",
                 SDA_OPTIONS))
 
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
-from ._validate import check_window  # noqa: E402
-from .averaging import angle_weighted, area_weighted  # noqa: E402
-from .methods import Option  # noqa: E402
-from .plane_fit import plane_pca, plane_svd, vector_svd  # noqa: E402
 
 WINDOW_OPTIONS = {
     "window": Option(3, check_window, "side of the square pixel neighbourhood whose points are fitted (odd, >= 3)"),

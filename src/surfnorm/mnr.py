@@ -66,35 +66,34 @@ def self_smoothness_row(s_h, s_v, one_d, s_self):
 
 @pixel
 def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, out_row):
-    """MNR at one pixel of row v, any neighbours missing (the rule of :func:`mnr_choice` on precomputed scores)."""
+    """MNR at one pixel of row v, any neighbours missing (the rule of :func:`mnr_choice` on precomputed scores).
+
+    Every candidate is read (at clamped columns) before the choice, which
+    then only selects among values (see :func:`surfnorm.gradients.clamp`).
+    """
     W = out_row.shape[0]
-    if has_mid[x]:
-        best_s, k = np.float32(np.inf), 4
-        if x >= 1 and has_mid[x - 1] and s_h[x - 1] < best_s:
-            best_s, k = s_h[x - 1], 0
-        if x + 1 < W and has_mid[x + 1] and s_h[x + 1] < best_s:
-            best_s, k = s_h[x + 1], 1
-        if v >= 1 and has_up[x] and s_up[x] < best_s:
-            best_s, k = s_up[x], 2
-        if v + 1 < H and has_dn[x] and s_dn[x] < best_s:
-            best_s, k = s_dn[x], 3
-        if s_self[x] < best_s:
-            k = 4
-        for c in range(3):
-            if k == 0:
-                out_row[x, c] = n_mid[x - 1, c]
-            elif k == 1:
-                out_row[x, c] = n_mid[x + 1, c]
-            elif k == 2:
-                out_row[x, c] = n_up[x, c]
-            elif k == 3:
-                out_row[x, c] = n_dn[x, c]
-            else:
-                out_row[x, c] = n_mid[x, c]
-    else:
-        out_row[x, 0] = fill
-        out_row[x, 1] = fill
-        out_row[x, 2] = fill
+    x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)
+    ok_l = (x >= 1) & has_mid[x_l]
+    ok_r = (x + 1 < W) & has_mid[x_r]
+    ok_a = (v >= 1) & has_up[x]
+    ok_b = (v + 1 < H) & has_dn[x]
+    s_l, s_r, s_a, s_b, s_c = s_h[x_l], s_h[x_r], s_up[x], s_dn[x], s_self[x]
+    best_s, k = np.float32(np.inf), 4
+    if ok_l & (s_l < best_s):
+        best_s, k = s_l, 0
+    if ok_r & (s_r < best_s):
+        best_s, k = s_r, 1
+    if ok_a & (s_a < best_s):
+        best_s, k = s_a, 2
+    if ok_b & (s_b < best_s):
+        best_s, k = s_b, 3
+    if s_c < best_s:
+        k = 4
+    keep = has_mid[x]
+    for c in range(3):
+        n_l, n_r, n_a, n_b, n_c = n_mid[x_l, c], n_mid[x_r, c], n_up[x, c], n_dn[x, c], n_mid[x, c]
+        n_k = n_l if k == 0 else n_r if k == 1 else n_a if k == 2 else n_b if k == 3 else n_c
+        out_row[x, c] = n_k if keep else fill
 
 
 @njit

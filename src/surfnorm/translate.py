@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from ._config import njit, pixel
-from .gradients import (dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
+from .gradients import (clamp, dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
                         softmin_row, stencil, usable)
 from .mnr import mnr_row, self_smoothness_row
 
@@ -32,34 +32,22 @@ __all__ = ["d2nt", "d2nt_v3", "cp2tv"]
 
 @pixel
 def write_unit(out, v, u, n_x, n_y, n_z, fill):
-    """Store n / |n| at (v, u), or the fill value when n has no direction."""
-    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-    ok = norm > 0 and math.isfinite(norm)
-    if ok:
-        out[v, u, 0] = n_x / norm
-        out[v, u, 1] = n_y / norm
-        out[v, u, 2] = n_z / norm
-    else:
-        out[v, u, 0] = fill
-        out[v, u, 1] = fill
-        out[v, u, 2] = fill
-    return ok
+    """Store n / |n| at (v, u), or the fill value when n has no direction; returns whether stored.
 
-
-@pixel
-def store_unit(out_row, u, n_x, n_y, n_z, fill):
-    """:func:`write_unit` into a row (W, 3), written with selects so that a loop of it vectorises."""
+    Written with selects, not branches (see :func:`surfnorm.gradients.clamp`).
+    """
     norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
     ok = (norm > 0) & (norm < np.inf)
-    out_row[u, 0] = n_x / norm if ok else fill
-    out_row[u, 1] = n_y / norm if ok else fill
-    out_row[u, 2] = n_z / norm if ok else fill
+    u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
+    out[v, u, 0] = u_x if ok else fill
+    out[v, u, 1] = u_y if ok else fill
+    out[v, u, 2] = u_z if ok else fill
     return ok
 
 
 @pixel
 def store_unit_flat(out_flat, i, n_x, n_y, n_z, fill):
-    """:func:`store_unit` into a flat run of pixels (x, y, z, x, y, z, ...).
+    """:func:`store_pixel` into a flat run of pixels (x, y, z, x, y, z, ...).
 
     LLVM cannot tell that out[u, 0], out[u, 1], out[u, 2] of a 2-D view do not
     overlap (its strides are run-time values), so it vectorises only the flat form.
@@ -92,19 +80,24 @@ def centred_columns(W, c_x):
 
 
 @pixel
+def store_pixel(out_row, u, n_x, n_y, n_z, ok, fill):
+    """Store n / |n| at u of a row if ``ok`` and n has a direction, else the fill value; returns whether stored."""
+    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+    ok = ok & (norm > 0) & (norm < np.inf)
+    u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
+    out_row[u, 0] = u_x if ok else fill
+    out_row[u, 1] = u_y if ok else fill
+    out_row[u, 2] = u_z if ok else fill
+    return ok
+
+
+@pixel
 def d2nt_fd_pixel(z, valid, v, u, f_x, f_y, u_c, v_c, reflect, fill, out_row):
     """The general rule at one pixel: per pixel gradients (one-sided at gaps) -> eq. 9 -> unit length."""
-    ok = False
-    if valid[v, u]:
-        z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
-        z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
-        if ok_u and ok_v:
-            n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, u_c, v_c)
-            ok = store_unit(out_row, u, n_x, n_y, n_z, fill)
-    if not ok:
-        out_row[u, 0] = fill
-        out_row[u, 1] = fill
-        out_row[u, 2] = fill
+    z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
+    z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
+    n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, u_c, v_c)
+    store_pixel(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
 
 
 @njit
@@ -145,16 +138,28 @@ def dag_pixel_gradient(z, valid, v, u, dv, du, p_b, p_f, ratio):
     lambda_b Delta_b z + lambda_f Delta_f z; one-sided where only one
     neighbour is usable. Returns (gradient, ok).
     """
+    H, W = z.shape
+    v_b, u_b, v_f, u_f = clamp(v - dv, H), clamp(u - du, W), clamp(v + dv, H), clamp(u + du, W)
     has_b = usable(valid, v - dv, u - du)
     has_f = usable(valid, v + dv, u + du)
-    lambda_b = np.float32(1.0) if has_b else np.float32(0.0)
-    lambda_f = np.float32(1.0) if has_f else np.float32(0.0)
-    if has_b and has_f:
-        lambda_b, lambda_f = softmin_pair(p_b, p_f, ratio)
-    z_p = z[v, u]
-    delta_b = z_p - z[v - dv, u - du] if has_b else np.float32(0.0)
-    delta_f = z[v + dv, u + du] - z_p if has_f else np.float32(0.0)
-    return lambda_b * delta_b + lambda_f * delta_f, has_b or has_f
+    lambda_b, lambda_f = softmin_pair(p_b, p_f, ratio)
+    if not (has_b & has_f):
+        lambda_b = np.float32(1.0) if has_b else np.float32(0.0)
+        lambda_f = np.float32(1.0) if has_f else np.float32(0.0)
+    z_p, z_b, z_f = z[v, u], z[v_b, u_b], z[v_f, u_f]  # read unconditionally: see gradients.clamp
+    delta_b = (z_p - z_b) if has_b else np.float32(0.0)
+    delta_f = (z_f - z_p) if has_f else np.float32(0.0)
+    return lambda_b * delta_b + lambda_f * delta_f, has_b | has_f
+
+
+@pixel
+def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row):
+    """D2NT with DAG gradients at one pixel, any neighbours missing; returns whether it got a normal."""
+    W = z.shape[1]
+    z_u, ok_u = dag_pixel_gradient(z, valid, v, u, 0, 1, p_h[max(u - 1, 0)], p_h[min(u + 1, W - 1)], ratio)
+    z_v, ok_v = dag_pixel_gradient(z, valid, v, u, 1, 0, p_up[u], p_dn[u], ratio)
+    n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, u_c, v_c)
+    return store_pixel(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
 
 
 @njit
@@ -180,18 +185,7 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
         for x in range(u, a):
-            ok = False
-            if valid[v, x]:
-                z_u, ok_u = dag_pixel_gradient(z, valid, v, x, 0, 1, p_h[max(x - 1, 0)], p_h[min(x + 1, W - 1)], ratio)
-                z_v, ok_v = dag_pixel_gradient(z, valid, v, x, 1, 0, p_up[x], p_dn[x], ratio)
-                if ok_u and ok_v:
-                    n_x, n_y, n_z = d2nt_normal(z[v, x], z_u, z_v, f_x, f_y, u_c[x], v_c)
-                    ok = store_unit(out_row, x, n_x, n_y, n_z, fill)
-            if not ok:
-                out_row[x, 0] = fill
-                out_row[x, 1] = fill
-                out_row[x, 2] = fill
-            ok_row[x] = ok
+            ok_row[x] = dag_pixel(z, valid, v, x, p_h, p_up, p_dn, f_x, f_y, u_c[x], v_c, ratio, fill, out_row)
         if b > a:  # 3x3 all valid: both neighbours exist along both axes (views start at a: see laplacian_row)
             left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
             p_l, p_r, p_a, p_b = p_h[a - 1:b - 1], p_h[a + 1:b + 1], p_up[a:b], p_dn[a:b]
@@ -330,16 +324,10 @@ def tangent(z, valid, v, u, dv, du, f_x, f_y, c_x, c_y, reflect):
 
 @pixel
 def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
-    ok = False
-    if valid[v, u]:
-        ux, uy, uz, ok_u = tangent(z, valid, v, u, 0, 1, f_x, f_y, c_x, c_y, reflect)
-        vx, vy, vz, ok_v = tangent(z, valid, v, u, 1, 0, f_x, f_y, c_x, c_y, reflect)
-        if ok_u and ok_v:  # n = t_v x t_u
-            ok = store_unit(out_row, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, fill)
-    if not ok:
-        out_row[u, 0] = fill
-        out_row[u, 1] = fill
-        out_row[u, 2] = fill
+    ux, uy, uz, ok_u = tangent(z, valid, v, u, 0, 1, f_x, f_y, c_x, c_y, reflect)
+    vx, vy, vz, ok_v = tangent(z, valid, v, u, 1, 0, f_x, f_y, c_x, c_y, reflect)
+    # n = t_v x t_u
+    store_pixel(out_row, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, valid[v, u] & ok_u & ok_v, fill)
 
 
 @njit

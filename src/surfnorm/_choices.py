@@ -7,3 +7,11 @@ BORDERS = ("one-sided", "reflect")
 
 #: The four discrete Laplace filters of Table II, by name.
 DLF_NAMES = ("1d", "alpha", "beta", "gamma")
+
+#: SDA-SNE: how the gradients become normals: CP2TV on depth, or 3F2N's median on inverse depth.
+SDA_BASES = ("cp2tv", "3f2n")
+
+#: SDA-SNE: safety cap on the passes of ``iterations=None`` (run until stable). On the
+#: 3F2N sample the authors' stop test fires after 6 to 228 passes (planar
+#: scenes take longest, because extending a run wins ties against keeping).
+SDA_MAX_ITERATIONS = 1000

@@ -56,6 +56,7 @@ import math
 
 import numpy as np
 
+from ._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from ._config import njit, pixel
 from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, median_nz, write_unit
 
@@ -64,13 +65,8 @@ __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
 #: B, the weight of the state penalty in the energies of candidates 0 and 1 (authors' code: 1e10).
 SDA_PENALTY = 1e10
 
-#: Safety cap on the passes of ``iterations=None`` (run until stable). On the
-#: 3F2N sample the authors' stop test fires after 6 to 228 passes (planar
-#: scenes take longest, because extending a run wins ties against keeping).
-MAX_ITERATIONS = 1000
-
-#: How the gradients become normals: CP2TV on depth, or 3F2N's median on inverse depth.
-BASES = ("cp2tv", "3f2n")
+#: The iteration cap of ``iterations=None``, and the bases (defined beside the other choices, in _choices.py).
+MAX_ITERATIONS, BASES = SDA_MAX_ITERATIONS, SDA_BASES
 
 _NO_STATE = np.int8(-1)  # the state of a pixel without gradient (or outside the image)
 _INF = np.inf

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._config import njit, pixel
+from ._config import njit, pixel, row
 from .gradients import box_row, dlf_code, fast_row, laplacian_row, segment, smoothness, usable
 
 __all__ = ["mnr"]
@@ -96,7 +96,7 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
         out_row[x, c] = n_k if keep else fill
 
 
-@njit
+@row
 def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, col, runs, choice,
             out_row):
     """MNR of row v: each pixel with a normal takes the normal of the smoothest of [left, right, up, down, self].

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from ._config import njit, pixel
+from ._config import njit, pixel, row
 from .gradients import (clamp, dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
                         softmin_row, stencil, usable)
 from .mnr import mnr_row, self_smoothness_row
@@ -100,32 +100,38 @@ def d2nt_fd_pixel(z, valid, v, u, f_x, f_y, u_c, v_c, reflect, fill, out_row):
     store_pixel(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
 
 
+@row
+def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_row):
+    """Row v of D2NT with finite-difference gradients: per pixel gradients -> eq. 9 -> unit length."""
+    H, W = z.shape
+    n_runs = fast_row(valid, v, col, runs)
+    up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
+    out_flat = out_row.reshape(3 * W)
+    two = np.float32(2.0)
+    u = 0
+    for k in range(n_runs + 1):
+        a, b = segment(runs, n_runs, k, W)
+        for x in range(u, a):
+            d2nt_fd_pixel(z, valid, v, x, f_x, f_y, u_c[x], v_c, reflect, fill, out_row)
+        if b > a:  # 3x3 all valid: central differences, no checks (views start at a: see laplacian_row)
+            left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
+            u_cs, run_out = u_c[a:b], out_flat[3 * a:3 * b]
+            for i in range(b - a):
+                z_u = (right[i] - left[i]) / two
+                z_v = (below[i] - above[i]) / two
+                n_x, n_y, n_z = d2nt_normal(centre[i], z_u, z_v, f_x, f_y, u_cs[i], v_c)
+                store_unit_flat(run_out, i, n_x, n_y, n_z, fill)
+        u = b
+
+
 @njit
 def _d2nt_fd_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """D2NT with finite-difference gradients: one pass, per pixel gradients -> eq. 9 -> unit length."""
+    """D2NT with finite-difference gradients: one pass, row by row."""
     H, W = z.shape
     u_c = centred_columns(W, c_x)
     col, runs = np.empty(W, np.bool_), np.empty((W // 2 + 1, 2), np.int64)
-    two = np.float32(2.0)
     for v in range(H):
-        v_c = np.float32(v - c_y)
-        n_runs = fast_row(valid, v, col, runs)
-        up, mid, dn, out_row = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)], out[v]
-        out_flat = out_row.reshape(3 * W)
-        u = 0
-        for k in range(n_runs + 1):
-            a, b = segment(runs, n_runs, k, W)
-            for x in range(u, a):
-                d2nt_fd_pixel(z, valid, v, x, f_x, f_y, u_c[x], v_c, reflect, fill, out_row)
-            if b > a:  # 3x3 all valid: central differences, no checks (views start at a: see laplacian_row)
-                left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
-                u_cs, run_out = u_c[a:b], out_flat[3 * a:3 * b]
-                for i in range(b - a):
-                    z_u = (right[i] - left[i]) / two
-                    z_v = (below[i] - above[i]) / two
-                    n_x, n_y, n_z = d2nt_normal(centre[i], z_u, z_v, f_x, f_y, u_cs[i], v_c)
-                    store_unit_flat(run_out, i, n_x, n_y, n_z, fill)
-            u = b
+        d2nt_fd_row(z, valid, v, f_x, f_y, u_c, np.float32(v - c_y), reflect, fill, col, runs, out[v])
 
 
 # --- D2NT with the DAG filter (d2nt_v2, and the first stage of d2nt_v3) ----------------------
@@ -162,7 +168,7 @@ def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, 
     return store_pixel(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
 
 
-@njit
+@row
 def prepare_dag_row(z, valid, r, dlf, tau, col, runs_r, s, p_v_r):
     """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness."""
     n_runs = fast_row(valid, r, col, runs_r)
@@ -171,7 +177,7 @@ def prepare_dag_row(z, valid, r, dlf, tau, col, runs_r, s, p_v_r):
     return n_runs
 
 
-@njit
+@row
 def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row, ok_row):
     """Unit D2NT normals of row v with DAG gradients; ok_row[u] says whether (v, u) got one.
 
@@ -330,40 +336,46 @@ def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
     store_pixel(out_row, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, valid[v, u] & ok_u & ok_v, fill)
 
 
+@row
+def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out_row):
+    """Row v of CP2TV; ``u_c`` holds u - c_x in float64, as back_project computes it (3D points are float64)."""
+    H, W = z.shape
+    f_x64, f_y64 = np.float64(f_x), np.float64(f_y)
+    two = np.float32(2.0)
+    n_runs = fast_row(valid, v, col, runs)
+    up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
+    out_flat = out_row.reshape(3 * W)
+    v_c, v_up, v_dn = v - c_y, (v - 1) - c_y, (v + 1) - c_y
+    u = 0
+    for k in range(n_runs + 1):
+        a, b = segment(runs, n_runs, k, W)
+        for x in range(u, a):
+            cp2tv_pixel(z, valid, v, x, f_x, f_y, c_x, c_y, reflect, fill, out_row)
+        if b > a:  # central differences of back-projected neighbours, no checks (views: see laplacian_row)
+            left, right, above, below = mid[a - 1:b - 1], mid[a + 1:b + 1], up[a:b], dn[a:b]
+            uc_l, uc_r, uc_c, run_out = u_c[a - 1:b - 1], u_c[a + 1:b + 1], u_c[a:b], out_flat[3 * a:3 * b]
+            for i in range(b - a):
+                z_l, z_r, z_u, z_d = left[i], right[i], above[i], below[i]
+                t_ux = (z_r * uc_r[i] / f_x64 - z_l * uc_l[i] / f_x64) / two
+                t_uy = (z_r * v_c / f_y64 - z_l * v_c / f_y64) / two
+                t_uz = (z_r - z_l) / two
+                t_vx = (z_d * uc_c[i] / f_x64 - z_u * uc_c[i] / f_x64) / two
+                t_vy = (z_d * v_dn / f_y64 - z_u * v_up / f_y64) / two
+                t_vz = (z_d - z_u) / two
+                store_unit_flat(run_out, i, t_vy * t_uz - t_vz * t_uy, t_vz * t_ux - t_vx * t_uz,
+                                t_vx * t_uy - t_vy * t_ux, fill)
+        u = b
+
+
 @njit
 def _cp2tv_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
     H, W = z.shape
-    # u - c_x, v - c_y in float64, as back_project computes them (3D points are float64)
     u_c = np.empty(W, np.float64)
     for u in range(W):
         u_c[u] = u - c_x
-    f_x64, f_y64 = np.float64(f_x), np.float64(f_y)
     col, runs = np.empty(W, np.bool_), np.empty((W // 2 + 1, 2), np.int64)
-    two = np.float32(2.0)
     for v in range(H):
-        n_runs = fast_row(valid, v, col, runs)
-        up, mid, dn, out_row = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)], out[v]
-        out_flat = out_row.reshape(3 * W)
-        v_c, v_up, v_dn = v - c_y, (v - 1) - c_y, (v + 1) - c_y
-        u = 0
-        for k in range(n_runs + 1):
-            a, b = segment(runs, n_runs, k, W)
-            for x in range(u, a):
-                cp2tv_pixel(z, valid, v, x, f_x, f_y, c_x, c_y, reflect, fill, out_row)
-            if b > a:  # central differences of back-projected neighbours, no checks (views: see laplacian_row)
-                left, right, above, below = mid[a - 1:b - 1], mid[a + 1:b + 1], up[a:b], dn[a:b]
-                uc_l, uc_r, uc_c, run_out = u_c[a - 1:b - 1], u_c[a + 1:b + 1], u_c[a:b], out_flat[3 * a:3 * b]
-                for i in range(b - a):
-                    z_l, z_r, z_u, z_d = left[i], right[i], above[i], below[i]
-                    t_ux = (z_r * uc_r[i] / f_x64 - z_l * uc_l[i] / f_x64) / two
-                    t_uy = (z_r * v_c / f_y64 - z_l * v_c / f_y64) / two
-                    t_uz = (z_r - z_l) / two
-                    t_vx = (z_d * uc_c[i] / f_x64 - z_u * uc_c[i] / f_x64) / two
-                    t_vy = (z_d * v_dn / f_y64 - z_u * v_up / f_y64) / two
-                    t_vz = (z_d - z_u) / two
-                    store_unit_flat(run_out, i, t_vy * t_uz - t_vz * t_uy, t_vz * t_ux - t_vx * t_uz,
-                                    t_vx * t_uy - t_vy * t_ux, fill)
-            u = b
+        cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out[v])
 
 
 def cp2tv(z, valid, cam, out, *, border="one-sided", fill=0.0):

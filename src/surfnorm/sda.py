@@ -56,7 +56,7 @@ import math
 
 import numpy as np
 
-from ._config import njit, pixel
+from ._config import njit, pixel, select
 from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, median_nz, write_unit
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
@@ -82,7 +82,7 @@ _P = 3  # padding of the working arrays: every read of a step stays inside, and 
 @pixel
 def state_cost(s, target):
     """|s - target| for a state code, inf for a pixel without one."""
-    return abs(np.float64(s) - target) if s >= 0 else _INF
+    return select(s >= 0, abs(np.float64(s) - target), _INF)
 
 
 # Helpers below take scalars only: a Numba helper that takes arrays and branches keeps reference
@@ -192,54 +192,50 @@ def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8):
     """(index, energy) of the cheapest of nine candidates, the lowest index on ties; keep (2) if all are inf."""
     k = 0
     best = e0
-    k = 1 if e1 < best else k
-    best = e1 if e1 < best else best
-    k = 2 if e2 < best else k
-    best = e2 if e2 < best else best
-    k = 3 if e3 < best else k
-    best = e3 if e3 < best else best
-    k = 4 if e4 < best else k
-    best = e4 if e4 < best else best
-    k = 5 if e5 < best else k
-    best = e5 if e5 < best else best
-    k = 6 if e6 < best else k
-    best = e6 if e6 < best else best
-    k = 7 if e7 < best else k
-    best = e7 if e7 < best else best
-    k = 8 if e8 < best else k
-    best = e8 if e8 < best else best
-    return (2 if best == _INF else k), best
+    k, best = select(e1 < best, 1, k), select(e1 < best, e1, best)
+    k, best = select(e2 < best, 2, k), select(e2 < best, e2, best)
+    k, best = select(e3 < best, 3, k), select(e3 < best, e3, best)
+    k, best = select(e4 < best, 4, k), select(e4 < best, e4, best)
+    k, best = select(e5 < best, 5, k), select(e5 < best, e5, best)
+    k, best = select(e6 < best, 6, k), select(e6 < best, e6, best)
+    k, best = select(e7 < best, 7, k), select(e7 < best, e7, best)
+    k, best = select(e8 < best, 8, k), select(e8 < best, e8, best)
+    return select(best == _INF, 2, k), best
 
 
 @pixel
 def pick(k, c0, c1, c2, c3, c4, c5, c6, c7, c8):
     """Candidate number k (a chain of selects, no branches)."""
     g = c2
-    g = c0 if k == 0 else g
-    g = c1 if k == 1 else g
-    g = c3 if k == 3 else g
-    g = c4 if k == 4 else g
-    g = c5 if k == 5 else g
-    g = c6 if k == 6 else g
-    g = c7 if k == 7 else g
-    g = c8 if k == 8 else g
+    g = select(k == 0, c0, g)
+    g = select(k == 1, c1, g)
+    g = select(k == 3, c3, g)
+    g = select(k == 4, c4, g)
+    g = select(k == 5, c5, g)
+    g = select(k == 6, c6, g)
+    g = select(k == 7, c7, g)
+    g = select(k == 8, c8, g)
     return g
 
 
-@njit
+@njit(noalias=True)
 def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2):
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
     Every inner pixel of the second set is written. Returns True if some pixel
     took another candidate than keep (index 2). Written without branches (all
-    nine candidates are formed, one is selected) so that LLVM vectorises it;
-    every array read here is surfnorm's own (depth is zeroed where invalid).
+    nine candidates are formed, one is selected with :func:`select`) so that
+    LLVM vectorises it; every array read here is surfnorm's own (depth is zeroed
+    where invalid). The two sets must be distinct arrays (``noalias``), and the
+    loop runs over i = u - _P from 0, so that every column index is i plus a
+    constant (LLVM then sees consecutive addresses, not gathers).
     """
     Hp, Wp = s.shape
     B = SDA_PENALTY
     moved = 0
     for v in range(_P, Hp - _P):
-        for u in range(_P, Wp - _P):
+        for i in range(Wp - 2 * _P):
+            u = i + _P
             valid_p = ok[v, u]
             flags = con[v, u]
             z_p = s[v, u]
@@ -255,8 +251,8 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             e6 = (p_up + a_u[v - 1, u + 1]) + e_v[v - 1, u + 1]
             e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
             e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
-            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, e5 if has_gv else _INF,
-                                   e6 if has_gv else _INF, e7 if has_gv else _INF, e8 if has_gv else _INF)
+            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, select(has_gv, e5, _INF),
+                                   select(has_gv, e6, _INF), select(has_gv, e7, _INF), select(has_gv, e8, _INF))
             new_gu = pick(k_u,
                           (gu_p + c * z_p) - c * (s[v, u - 1] + g_u[v, u - 1]),
                           (gu_p - c * z_p) + c * (s[v, u + 1] - g_u[v, u + 1]),
@@ -277,8 +273,8 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             e6 = (q_l + a_v[v + 1, u - 1]) + e_u[v + 1, u - 1]
             e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
             e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
-            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, e5 if has_gu else _INF,
-                                   e6 if has_gu else _INF, e7 if has_gu else _INF, e8 if has_gu else _INF)
+            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, select(has_gu, e5, _INF),
+                                   select(has_gu, e6, _INF), select(has_gu, e7, _INF), select(has_gu, e8, _INF))
             new_gv = pick(k_v,
                           (gv_p + c * z_p) - c * (s[v - 1, u] + g_v[v - 1, u]),
                           (gv_p - c * z_p) + c * (s[v + 1, u] - g_v[v + 1, u]),
@@ -290,12 +286,12 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
                           (g_v[v, u + 1] + g_u[v - 1, u + 1]) - gu_p,
                           (g_v[v, u + 1] - g_u[v + 1, u + 1]) + gu_p)
             # ---- write; an invalid pixel stays missing ----
-            g_u2[v, u] = new_gu if valid_p else 0.0
-            e_u2[v, u] = best_u if valid_p else _INF
-            s_u2[v, u] = np.int8(k_u) if (valid_p & (best_u < _INF)) else _NO_STATE
-            g_v2[v, u] = new_gv if valid_p else 0.0
-            e_v2[v, u] = best_v if valid_p else _INF
-            s_v2[v, u] = np.int8(k_v) if (valid_p & (best_v < _INF)) else _NO_STATE
+            g_u2[v, u] = select(valid_p, new_gu, 0.0)
+            e_u2[v, u] = select(valid_p, best_u, _INF)
+            s_u2[v, u] = select(valid_p & (best_u < _INF), np.int8(k_u), _NO_STATE)
+            g_v2[v, u] = select(valid_p, new_gv, 0.0)
+            e_v2[v, u] = select(valid_p, best_v, _INF)
+            s_v2[v, u] = select(valid_p & (best_v < _INF), np.int8(k_v), _NO_STATE)
             moved += np.int64(valid_p & ((k_u != 2) | (k_v != 2)))
     return moved > 0
 

@@ -103,7 +103,7 @@ def laplacian(s_b, s_p, s_f, has_b, has_f):
 def continuity(lap_1, lap_2):
     """con = 1 - sign(L[p + d] L[p + 2d]): 0 for one smooth curve, 1 if either is 0, 2 if the signs differ."""
     prod = lap_1 * lap_2
-    return 1 - ((1 if prod > 0.0 else 0) - (1 if prod < 0.0 else 0))
+    return 1 - (np.int64(prod > 0.0) - np.int64(prod < 0.0))
 
 
 @pixel
@@ -112,26 +112,17 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
 
     Central (S_f - S_b) / 2 with energy A_p; with ``reflect`` a neighbour mirrored at the image border
     (``mirrored``: the missing neighbour lies outside the image, the other is valid) makes it 0, as in the authors' code. Forward S_f - S_p with energy A_f, backward
-    S_p - S_b with A_b. The first wins ties.
+    S_p - S_b with A_b. The first wins ties. (Selects, no branches: the loop of :func:`_sda_init` vectorises.)
     """
-    g = 0.0
-    e = _INF
-    state = _NO_STATE
-    if has_b and has_f:
-        g = 0.5 * s_f - 0.5 * s_b
-        e = a_p
-        state = np.int8(2)
-    elif reflect and mirrored:
-        e = a_p
-        state = np.int8(2)
-    if has_f and a_f < e:
-        g = s_f - s_p
-        e = a_f
-        state = np.int8(1)
-    if has_b and a_b < e:
-        g = s_p - s_b
-        e = a_b
-        state = np.int8(0)
+    central = has_b & has_f
+    has_central = central | (reflect & mirrored)
+    g = select(central, 0.5 * s_f - 0.5 * s_b, 0.0)
+    e = select(has_central, a_p, _INF)
+    state = select(has_central, np.int8(2), _NO_STATE)
+    forward = has_f & (a_f < e)
+    g, e, state = select(forward, s_f - s_p, g), select(forward, a_f, e), select(forward, np.int8(1), state)
+    backward = has_b & (a_b < e)
+    g, e, state = select(backward, s_p - s_b, g), select(backward, a_b, e), select(backward, np.int8(0), state)
     return g, e, state
 
 
@@ -155,36 +146,38 @@ def _sda_laplacians(s, ok, l_u, l_v, a_u, a_v):
                 a_v[v, u] = _INF
 
 
-@njit
+@njit(noalias=True)
 def _sda_init(s, ok, reflect, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v):
-    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel."""
+    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel.
+
+    Branch-free over i = u - _P (see :func:`_sda_step`); an invalid pixel gets no flags and no gradient.
+    """
     Hp, Wp = s.shape
+    n = Wp - 2 * _P
     for v in range(_P, Hp - _P):
-        for u in range(_P, Wp - _P):
-            if ok[v, u]:
-                con[v, u] = np.uint8(continuity(l_u[v, u - 1], l_u[v, u - 2]) | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
-                                     | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
-                                     | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
-                g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
-                                            a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
-                                            (u == _P and ok[v, u + 1]) or (u == Wp - _P - 1 and ok[v, u - 1]), reflect)
-                g_u[v, u] = g
-                e_u[v, u] = e
-                s_u[v, u] = st
-                g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
-                                            a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
-                                            (v == _P and ok[v + 1, u]) or (v == Hp - _P - 1 and ok[v - 1, u]), reflect)
-                g_v[v, u] = g
-                e_v[v, u] = e
-                s_v[v, u] = st
-            else:
-                con[v, u] = 0
-                g_u[v, u] = 0.0
-                g_v[v, u] = 0.0
-                e_u[v, u] = _INF
-                e_v[v, u] = _INF
-                s_u[v, u] = _NO_STATE
-                s_v[v, u] = _NO_STATE
+        # Three loops per row, each of which LLVM vectorises (fused, it did not).
+        for i in range(n):
+            u = i + _P
+            flags = np.uint8(continuity(l_u[v, u - 1], l_u[v, u - 2]) | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
+                             | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
+                             | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
+            con[v, u] = select(ok[v, u], flags, np.uint8(0))
+        for i in range(n):
+            u = i + _P
+            g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
+                                        a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
+                                        ((u == _P) & ok[v, u + 1]) | ((u == Wp - _P - 1) & ok[v, u - 1]), reflect)
+            g_u[v, u] = select(ok[v, u], g, 0.0)
+            e_u[v, u] = select(ok[v, u], e, _INF)
+            s_u[v, u] = select(ok[v, u], st, _NO_STATE)
+        for i in range(n):
+            u = i + _P
+            g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
+                                        a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
+                                        ((v == _P) & ok[v + 1, u]) | ((v == Hp - _P - 1) & ok[v - 1, u]), reflect)
+            g_v[v, u] = select(ok[v, u], g, 0.0)
+            e_v[v, u] = select(ok[v, u], e, _INF)
+            s_v[v, u] = select(ok[v, u], st, _NO_STATE)
 
 
 @pixel
@@ -348,16 +341,18 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
     return (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
 
 
-@njit
+@njit(noalias=True)
 def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
     """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)).
 
     ``s`` (depth, zero where invalid), gradients and energies are padded by _P; a gradient with
-    infinite energy does not exist. (No helper that takes arrays and branches here: see the note above ``laplacian``.)
+    infinite energy does not exist. Branch-free, into a flat view of each row of ``out`` (C-contiguous),
+    so that the loop vectorises (see :func:`surfnorm.translate.store_unit_flat`).
     """
     H, W = out.shape[0], out.shape[1]
     for v in range(H):
         v_c = v - c_y
+        out_flat = out[v].reshape(3 * W)
         for u in range(W):
             gu = g_u[v + _P, u + _P]
             gv = g_v[v + _P, u + _P]
@@ -366,9 +361,10 @@ def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
             n_z = -((s[v + _P, u + _P] + v_c * gv) + (u - c_x) * gu)
             norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
             ok = (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF) & (norm > 0.0) & (norm < _INF)
-            out[v, u, 0] = n_x / norm if ok else fill
-            out[v, u, 1] = n_y / norm if ok else fill
-            out[v, u, 2] = n_z / norm if ok else fill
+            u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
+            out_flat[3 * u] = select(ok, u_x, fill)
+            out_flat[3 * u + 1] = select(ok, u_y, fill)
+            out_flat[3 * u + 2] = select(ok, u_z, fill)
 
 
 @njit

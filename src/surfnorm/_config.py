@@ -11,13 +11,33 @@ from __future__ import annotations
 
 import numba
 import numba.extending
+from numba.core.compiler import CompilerBase, DefaultPassBuilder
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
-def njit(*args, **kwargs):
-    """``numba.njit`` with the project's settings (compiled lazily, on first call)."""
+class _NoAliasCompiler(CompilerBase):
+    """Numba's nopython pipeline with the ``noalias`` flag set: LLVM may assume that the arrays
+    passed in do not overlap (one written through one argument is never read through another)."""
+
+    def define_pipelines(self):
+        self.state.flags.noalias = True
+        pm = DefaultPassBuilder.define_nopython_pipeline(self.state)
+        pm.finalize()
+        return [pm]
+
+
+def njit(*args, noalias=False, **kwargs):
+    """``numba.njit`` with the project's settings (compiled lazily, on first call).
+
+    ``noalias=True``: the caller promises that no array argument overlaps another
+    one that the kernel writes. Without it LLVM must check at run time that every
+    written array is apart from every read one, and gives up vectorising a loop
+    that reads many arrays ("too many memory checks").
+    """
     options = {**NJIT, **kwargs}
+    if noalias:
+        options["pipeline_class"] = _NoAliasCompiler
     if args and callable(args[0]):
         return numba.njit(**options)(args[0])
     return numba.njit(*args, **options)
@@ -47,6 +67,29 @@ def pixel(func):
     Numba IR level, so kernels stay written as calls to readable helpers.
     """
     return numba.njit(inline="always", **NJIT)(func)
+
+
+@numba.extending.intrinsic
+def select(typingctx, cond, a, b):
+    """``a if cond else b`` as one LLVM select (no branch, so a loop using it stays vectorisable).
+
+    Numba lowers a conditional expression to branches; LLVM turns those back into
+    selects only while few values depend on them (measured: a chain of them
+    became a ``switch`` and the loop stayed scalar). Both values are computed.
+    """
+    if not isinstance(cond, numba.types.Boolean):
+        return None
+    common = typingctx.unify_types(a, b)
+    if common is None:
+        return None
+
+    def codegen(context, builder, signature, args):
+        _, ta, tb = signature.args
+        va = context.cast(builder, args[1], ta, common)
+        vb = context.cast(builder, args[2], tb, common)
+        return builder.select(args[0], va, vb)
+
+    return numba.core.typing.signature(common, cond, a, b), codegen
 
 
 @numba.extending.intrinsic

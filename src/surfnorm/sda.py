@@ -57,7 +57,7 @@ import math
 import numpy as np
 
 from ._choices import SDA_BASES, SDA_MAX_ITERATIONS
-from ._config import njit, pixel
+from ._config import njit, pixel, select
 from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, median_nz, write_unit
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
@@ -78,7 +78,7 @@ _P = 3  # padding of the working arrays: every read of a step stays inside, and 
 @pixel
 def state_cost(s, target):
     """|s - target| for a state code, inf for a pixel without one."""
-    return abs(np.float64(s) - target) if s >= 0 else _INF
+    return select(s >= 0, abs(np.float64(s) - target), _INF)
 
 
 # Helpers below take scalars only: a Numba helper that takes arrays and branches keeps reference
@@ -99,7 +99,7 @@ def laplacian(s_b, s_p, s_f, has_b, has_f):
 def continuity(lap_1, lap_2):
     """con = 1 - sign(L[p + d] L[p + 2d]): 0 for one smooth curve, 1 if either is 0, 2 if the signs differ."""
     prod = lap_1 * lap_2
-    return 1 - ((1 if prod > 0.0 else 0) - (1 if prod < 0.0 else 0))
+    return 1 - (np.int64(prod > 0.0) - np.int64(prod < 0.0))
 
 
 @pixel
@@ -108,26 +108,17 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
 
     Central (S_f - S_b) / 2 with energy A_p; with ``reflect`` a neighbour mirrored at the image border
     (``mirrored``: the missing neighbour lies outside the image, the other is valid) makes it 0, as in the authors' code. Forward S_f - S_p with energy A_f, backward
-    S_p - S_b with A_b. The first wins ties.
+    S_p - S_b with A_b. The first wins ties. (Selects, no branches: the loop of :func:`_sda_init` vectorises.)
     """
-    g = 0.0
-    e = _INF
-    state = _NO_STATE
-    if has_b and has_f:
-        g = 0.5 * s_f - 0.5 * s_b
-        e = a_p
-        state = np.int8(2)
-    elif reflect and mirrored:
-        e = a_p
-        state = np.int8(2)
-    if has_f and a_f < e:
-        g = s_f - s_p
-        e = a_f
-        state = np.int8(1)
-    if has_b and a_b < e:
-        g = s_p - s_b
-        e = a_b
-        state = np.int8(0)
+    central = has_b & has_f
+    has_central = central | (reflect & mirrored)
+    g = select(central, 0.5 * s_f - 0.5 * s_b, 0.0)
+    e = select(has_central, a_p, _INF)
+    state = select(has_central, np.int8(2), _NO_STATE)
+    forward = has_f & (a_f < e)
+    g, e, state = select(forward, s_f - s_p, g), select(forward, a_f, e), select(forward, np.int8(1), state)
+    backward = has_b & (a_b < e)
+    g, e, state = select(backward, s_p - s_b, g), select(backward, a_b, e), select(backward, np.int8(0), state)
     return g, e, state
 
 
@@ -151,36 +142,38 @@ def _sda_laplacians(s, ok, l_u, l_v, a_u, a_v):
                 a_v[v, u] = _INF
 
 
-@njit
+@njit(noalias=True)
 def _sda_init(s, ok, reflect, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v):
-    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel."""
+    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel.
+
+    Branch-free over i = u - _P (see :func:`_sda_step`); an invalid pixel gets no flags and no gradient.
+    """
     Hp, Wp = s.shape
+    n = Wp - 2 * _P
     for v in range(_P, Hp - _P):
-        for u in range(_P, Wp - _P):
-            if ok[v, u]:
-                con[v, u] = np.uint8(continuity(l_u[v, u - 1], l_u[v, u - 2]) | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
-                                     | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
-                                     | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
-                g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
-                                            a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
-                                            (u == _P and ok[v, u + 1]) or (u == Wp - _P - 1 and ok[v, u - 1]), reflect)
-                g_u[v, u] = g
-                e_u[v, u] = e
-                s_u[v, u] = st
-                g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
-                                            a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
-                                            (v == _P and ok[v + 1, u]) or (v == Hp - _P - 1 and ok[v - 1, u]), reflect)
-                g_v[v, u] = g
-                e_v[v, u] = e
-                s_v[v, u] = st
-            else:
-                con[v, u] = 0
-                g_u[v, u] = 0.0
-                g_v[v, u] = 0.0
-                e_u[v, u] = _INF
-                e_v[v, u] = _INF
-                s_u[v, u] = _NO_STATE
-                s_v[v, u] = _NO_STATE
+        # Three loops per row, each of which LLVM vectorises (fused, it did not).
+        for i in range(n):
+            u = i + _P
+            flags = np.uint8(continuity(l_u[v, u - 1], l_u[v, u - 2]) | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
+                             | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
+                             | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
+            con[v, u] = select(ok[v, u], flags, np.uint8(0))
+        for i in range(n):
+            u = i + _P
+            g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
+                                        a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
+                                        ((u == _P) & ok[v, u + 1]) | ((u == Wp - _P - 1) & ok[v, u - 1]), reflect)
+            g_u[v, u] = select(ok[v, u], g, 0.0)
+            e_u[v, u] = select(ok[v, u], e, _INF)
+            s_u[v, u] = select(ok[v, u], st, _NO_STATE)
+        for i in range(n):
+            u = i + _P
+            g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
+                                        a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
+                                        ((v == _P) & ok[v + 1, u]) | ((v == Hp - _P - 1) & ok[v - 1, u]), reflect)
+            g_v[v, u] = select(ok[v, u], g, 0.0)
+            e_v[v, u] = select(ok[v, u], e, _INF)
+            s_v[v, u] = select(ok[v, u], st, _NO_STATE)
 
 
 @pixel
@@ -188,54 +181,50 @@ def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8):
     """(index, energy) of the cheapest of nine candidates, the lowest index on ties; keep (2) if all are inf."""
     k = 0
     best = e0
-    k = 1 if e1 < best else k
-    best = e1 if e1 < best else best
-    k = 2 if e2 < best else k
-    best = e2 if e2 < best else best
-    k = 3 if e3 < best else k
-    best = e3 if e3 < best else best
-    k = 4 if e4 < best else k
-    best = e4 if e4 < best else best
-    k = 5 if e5 < best else k
-    best = e5 if e5 < best else best
-    k = 6 if e6 < best else k
-    best = e6 if e6 < best else best
-    k = 7 if e7 < best else k
-    best = e7 if e7 < best else best
-    k = 8 if e8 < best else k
-    best = e8 if e8 < best else best
-    return (2 if best == _INF else k), best
+    k, best = select(e1 < best, 1, k), select(e1 < best, e1, best)
+    k, best = select(e2 < best, 2, k), select(e2 < best, e2, best)
+    k, best = select(e3 < best, 3, k), select(e3 < best, e3, best)
+    k, best = select(e4 < best, 4, k), select(e4 < best, e4, best)
+    k, best = select(e5 < best, 5, k), select(e5 < best, e5, best)
+    k, best = select(e6 < best, 6, k), select(e6 < best, e6, best)
+    k, best = select(e7 < best, 7, k), select(e7 < best, e7, best)
+    k, best = select(e8 < best, 8, k), select(e8 < best, e8, best)
+    return select(best == _INF, 2, k), best
 
 
 @pixel
 def pick(k, c0, c1, c2, c3, c4, c5, c6, c7, c8):
     """Candidate number k (a chain of selects, no branches)."""
     g = c2
-    g = c0 if k == 0 else g
-    g = c1 if k == 1 else g
-    g = c3 if k == 3 else g
-    g = c4 if k == 4 else g
-    g = c5 if k == 5 else g
-    g = c6 if k == 6 else g
-    g = c7 if k == 7 else g
-    g = c8 if k == 8 else g
+    g = select(k == 0, c0, g)
+    g = select(k == 1, c1, g)
+    g = select(k == 3, c3, g)
+    g = select(k == 4, c4, g)
+    g = select(k == 5, c5, g)
+    g = select(k == 6, c6, g)
+    g = select(k == 7, c7, g)
+    g = select(k == 8, c8, g)
     return g
 
 
-@njit
+@njit(noalias=True)
 def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2):
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
     Every inner pixel of the second set is written. Returns True if some pixel
     took another candidate than keep (index 2). Written without branches (all
-    nine candidates are formed, one is selected) so that LLVM vectorises it;
-    every array read here is surfnorm's own (depth is zeroed where invalid).
+    nine candidates are formed, one is selected with :func:`select`) so that
+    LLVM vectorises it; every array read here is surfnorm's own (depth is zeroed
+    where invalid). The two sets must be distinct arrays (``noalias``), and the
+    loop runs over i = u - _P from 0, so that every column index is i plus a
+    constant (LLVM then sees consecutive addresses, not gathers).
     """
     Hp, Wp = s.shape
     B = SDA_PENALTY
     moved = 0
     for v in range(_P, Hp - _P):
-        for u in range(_P, Wp - _P):
+        for i in range(Wp - 2 * _P):
+            u = i + _P
             valid_p = ok[v, u]
             flags = con[v, u]
             z_p = s[v, u]
@@ -251,8 +240,8 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             e6 = (p_up + a_u[v - 1, u + 1]) + e_v[v - 1, u + 1]
             e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
             e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
-            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, e5 if has_gv else _INF,
-                                   e6 if has_gv else _INF, e7 if has_gv else _INF, e8 if has_gv else _INF)
+            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, select(has_gv, e5, _INF),
+                                   select(has_gv, e6, _INF), select(has_gv, e7, _INF), select(has_gv, e8, _INF))
             new_gu = pick(k_u,
                           (gu_p + c * z_p) - c * (s[v, u - 1] + g_u[v, u - 1]),
                           (gu_p - c * z_p) + c * (s[v, u + 1] - g_u[v, u + 1]),
@@ -273,8 +262,8 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             e6 = (q_l + a_v[v + 1, u - 1]) + e_u[v + 1, u - 1]
             e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
             e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
-            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, e5 if has_gu else _INF,
-                                   e6 if has_gu else _INF, e7 if has_gu else _INF, e8 if has_gu else _INF)
+            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, select(has_gu, e5, _INF),
+                                   select(has_gu, e6, _INF), select(has_gu, e7, _INF), select(has_gu, e8, _INF))
             new_gv = pick(k_v,
                           (gv_p + c * z_p) - c * (s[v - 1, u] + g_v[v - 1, u]),
                           (gv_p - c * z_p) + c * (s[v + 1, u] - g_v[v + 1, u]),
@@ -286,12 +275,12 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
                           (g_v[v, u + 1] + g_u[v - 1, u + 1]) - gu_p,
                           (g_v[v, u + 1] - g_u[v + 1, u + 1]) + gu_p)
             # ---- write; an invalid pixel stays missing ----
-            g_u2[v, u] = new_gu if valid_p else 0.0
-            e_u2[v, u] = best_u if valid_p else _INF
-            s_u2[v, u] = np.int8(k_u) if (valid_p & (best_u < _INF)) else _NO_STATE
-            g_v2[v, u] = new_gv if valid_p else 0.0
-            e_v2[v, u] = best_v if valid_p else _INF
-            s_v2[v, u] = np.int8(k_v) if (valid_p & (best_v < _INF)) else _NO_STATE
+            g_u2[v, u] = select(valid_p, new_gu, 0.0)
+            e_u2[v, u] = select(valid_p, best_u, _INF)
+            s_u2[v, u] = select(valid_p & (best_u < _INF), np.int8(k_u), _NO_STATE)
+            g_v2[v, u] = select(valid_p, new_gv, 0.0)
+            e_v2[v, u] = select(valid_p, best_v, _INF)
+            s_v2[v, u] = select(valid_p & (best_v < _INF), np.int8(k_v), _NO_STATE)
             moved += np.int64(valid_p & ((k_u != 2) | (k_v != 2)))
     return moved > 0
 
@@ -348,16 +337,18 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
     return (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
 
 
-@njit
+@njit(noalias=True)
 def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
     """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)).
 
     ``s`` (depth, zero where invalid), gradients and energies are padded by _P; a gradient with
-    infinite energy does not exist. (No helper that takes arrays and branches here: see the note above ``laplacian``.)
+    infinite energy does not exist. Branch-free, into a flat view of each row of ``out`` (C-contiguous),
+    so that the loop vectorises (see :func:`surfnorm.translate.store_unit_flat`).
     """
     H, W = out.shape[0], out.shape[1]
     for v in range(H):
         v_c = v - c_y
+        out_flat = out[v].reshape(3 * W)
         for u in range(W):
             gu = g_u[v + _P, u + _P]
             gv = g_v[v + _P, u + _P]
@@ -366,9 +357,10 @@ def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
             n_z = -((s[v + _P, u + _P] + v_c * gv) + (u - c_x) * gu)
             norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
             ok = (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF) & (norm > 0.0) & (norm < _INF)
-            out[v, u, 0] = n_x / norm if ok else fill
-            out[v, u, 1] = n_y / norm if ok else fill
-            out[v, u, 2] = n_z / norm if ok else fill
+            u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
+            out_flat[3 * u] = select(ok, u_x, fill)
+            out_flat[3 * u + 1] = select(ok, u_y, fill)
+            out_flat[3 * u + 2] = select(ok, u_z, fill)
 
 
 @njit

@@ -196,6 +196,13 @@ def truncated_softmin(s_1, s_2, tau, truncate):
 
 
 @pixel
+def copy_row(src, dst):
+    """dst[:] = src, element by element (a slice assignment may allocate, which row functions may not)."""
+    for u in range(dst.shape[0]):
+        dst[u] = src[u]
+
+
+@pixel
 def inside(valid, v, u):
     """True if (v, u) lies inside the image."""
     H, W = valid.shape

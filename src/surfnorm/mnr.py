@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._config import njit, pixel, row
-from .gradients import box_row, dlf_code, fast_row, laplacian_row, segment, smoothness, usable
+from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment, smoothness, usable
 
 __all__ = ["mnr"]
 
@@ -61,7 +61,7 @@ def self_smoothness_row(s_h, s_v, one_d, s_self):
         for u in range(s_h.shape[0]):
             s_self[u] = np.float32(0.5) * (s_h[u] + s_v[u])
     else:
-        s_self[:] = s_h
+        copy_row(s_h, s_self)
 
 
 @pixel

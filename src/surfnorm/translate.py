@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from ._config import njit, pixel, row
-from .gradients import (clamp, dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
+from .gradients import (clamp, copy_row, dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
                         softmin_row, stencil, usable)
 from .mnr import mnr_row, self_smoothness_row
 
@@ -234,6 +234,43 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, fill, out):
                 np.float32(v - c_y), ratio, fill, out[v], ok_row)
 
 
+@row
+def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, ratio, mnr_dlf, fill, fill_counts, col, runs, n_runs,
+                    p_v, sm_v, s, p_h, ok_row, raw, has):
+    """d2nt_v3, step 1 for row q: row data of row q + 1, then the unrefined normals of row q (slots: see the kernel)."""
+    H, W = z.shape
+    if q + 1 < H:
+        j = (q + 1) % 4
+        n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, col, runs[j], s, p_v[j])
+        laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, 1, sm_v[j])
+    if q < H:
+        j = q % 4
+        if dlf == 0:
+            laplacian_row(z, valid, q, runs[j], n_runs[j], 0, 0, s)
+            softmin_row(s, tau, p_h)
+        else:
+            copy_row(p_v[j], p_h)
+        dag_row(z, valid, q, runs[j], n_runs[j], p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4], f_x, f_y, u_c,
+                np.float32(q - c_y), ratio, fill, raw[q % 3], ok_row)
+        has_q, valid_q = has[q % 3], valid[q]
+        for u in range(W):
+            has_q[u] = ok_row[u] | (valid_q[u] & fill_counts)
+
+
+@row
+def v3_refine_row(z, valid, v, mnr_dlf, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice, out_row):
+    """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row."""
+    H = z.shape[0]
+    j = v % 4
+    if mnr_dlf == 0:
+        laplacian_row(z, valid, v, runs[j], n_runs[j], 0, 0, sm_h)
+    else:
+        copy_row(sm_v[j], sm_h)
+    self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
+    mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
+            has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, fill, col, mruns, choice, out_row)
+
+
 @njit
 def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill, out):
     """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep.
@@ -259,34 +296,12 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill
     n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, col, runs[0], s, p_v[0])
     laplacian_row(z, valid, 0, runs[0], n_runs[0], mnr_dlf, 1, sm_v[0])
     for r in range(-1, H):
-        q = r + 1  # estimate row q = v + 1 (needs weights of rows q - 1 .. q + 1), then refine row v = r
-        if q + 1 < H:
-            j = (q + 1) % 4
-            n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, col, runs[j], s, p_v[j])
-            laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, 1, sm_v[j])
-        if q < H:
-            j = q % 4
-            if dlf == 0:
-                laplacian_row(z, valid, q, runs[j], n_runs[j], 0, 0, s)
-                softmin_row(s, tau, p_h)
-            else:
-                p_h[:] = p_v[j]
-            dag_row(z, valid, q, runs[j], n_runs[j], p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4], f_x, f_y, u_c,
-                    np.float32(q - c_y), ratio, fill, raw[q % 3], ok_row)
-            has_q, valid_q = has[q % 3], valid[q]
-            for u in range(W):
-                has_q[u] = ok_row[u] | (valid_q[u] & fill_counts)
-        v = r
-        if v >= 0:
-            j = v % 4
-            if mnr_dlf == 0:
-                laplacian_row(z, valid, v, runs[j], n_runs[j], 0, 0, sm_h)
-            else:
-                sm_h[:] = sm_v[j]
-            self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
-            mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
-                    has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, fill, col, mruns, choice,
-                    out[v])
+        # estimate row q = r + 1 (needs the weights of rows q - 1 .. q + 1), then refine row v = r
+        v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, ratio, mnr_dlf, fill, fill_counts, col, runs,
+                        n_runs, p_v, sm_v, s, p_h, ok_row, raw, has)
+        if r >= 0:
+            v3_refine_row(z, valid, r, mnr_dlf, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice,
+                          out[r])
 
 
 def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0):

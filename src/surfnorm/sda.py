@@ -48,6 +48,14 @@ leaves it out. Invalid depth is never read: an invalid pixel is treated like
 a pixel outside the image (no candidate reads it; a Laplacian mirrors across
 it; a central difference needs both neighbours). A pixel that ends without a
 gradient along an axis gets the fill value.
+
+Near-ties. Every comparison above is exact in the paper-faithful mode. The
+scale-invariant mode passes ``tie_tol`` = :data:`surfnorm.units.TIE_TOLERANCE`:
+a Laplacian with |L| <= tie_tol |S_p| counts as 0 (for the continuity signs
+and the energies), and a candidate (initial or of the dynamic programming)
+beats an earlier one only if cheaper by more than tie_tol |S_p|, so that depth
+in another unit (rounded differently in float32) breaks ties the same way;
+see :mod:`surfnorm.units` for the choice of the value.
 """
 
 from __future__ import annotations
@@ -107,12 +115,13 @@ def continuity(lap_1, lap_2):
 
 
 @pixel
-def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, reflect):
+def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, reflect, tol):
     """Cheapest of central / forward / backward difference: (gradient, energy, state 2 / 1 / 0).
 
     Central (S_f - S_b) / 2 with energy A_p; with ``reflect`` a neighbour mirrored at the image border
     (``mirrored``: the missing neighbour lies outside the image, the other is valid) makes it 0, as in the authors' code. Forward S_f - S_p with energy A_f, backward
-    S_p - S_b with A_b. The first wins ties.
+    S_p - S_b with A_b. The first wins ties, and near-ties: a later candidate wins only if cheaper by more
+    than ``tol`` (0 in the paper-faithful mode; see :data:`surfnorm.units.TIE_TOLERANCE`).
     """
     g = 0.0
     e = _INF
@@ -124,11 +133,11 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
     elif reflect and mirrored:
         e = a_p
         state = np.int8(2)
-    if has_f and a_f < e:
+    if has_f and a_f < e - tol:
         g = s_f - s_p
         e = a_f
         state = np.int8(1)
-    if has_b and a_b < e:
+    if has_b and a_b < e - tol:
         g = s_p - s_b
         e = a_b
         state = np.int8(0)
@@ -136,16 +145,21 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
 
 
 @njit
-def _sda_laplacians(s, ok, l_u, l_v, a_u, a_v):
-    """Signed Laplacians L (1 where missing, as the authors' padding) and roughness A = |L| (inf where missing)."""
+def _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v):
+    """Signed Laplacians L (1 where missing, as the authors' padding) and roughness A = |L| (inf where missing).
+
+    |L| <= ``tol`` |S_p| counts as exactly 0 (``tol`` = 0: only an exact 0; see :data:`surfnorm.units.TIE_TOLERANCE`)."""
     Hp, Wp = s.shape
     for v in range(1, Hp - 1):
         for u in range(1, Wp - 1):
             if ok[v, u]:
+                tol_p = tol * abs(s[v, u])
                 lap, has = laplacian(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1])
+                lap = 0.0 if abs(lap) <= tol_p else lap
                 l_u[v, u] = lap
                 a_u[v, u] = abs(lap) if has else _INF
                 lap, has = laplacian(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u])
+                lap = 0.0 if abs(lap) <= tol_p else lap
                 l_v[v, u] = lap
                 a_v[v, u] = abs(lap) if has else _INF
             else:
@@ -156,7 +170,7 @@ def _sda_laplacians(s, ok, l_u, l_v, a_u, a_v):
 
 
 @njit
-def _sda_init(s, ok, reflect, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v):
+def _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v):
     """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel."""
     Hp, Wp = s.shape
     for v in range(_P, Hp - _P):
@@ -167,13 +181,15 @@ def _sda_init(s, ok, reflect, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, 
                                      | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
                 g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
                                             a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
-                                            (u == _P and ok[v, u + 1]) or (u == Wp - _P - 1 and ok[v, u - 1]), reflect)
+                                            (u == _P and ok[v, u + 1]) or (u == Wp - _P - 1 and ok[v, u - 1]), reflect,
+                                            tol * abs(s[v, u]))
                 g_u[v, u] = g
                 e_u[v, u] = e
                 s_u[v, u] = st
                 g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
                                             a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
-                                            (v == _P and ok[v + 1, u]) or (v == Hp - _P - 1 and ok[v - 1, u]), reflect)
+                                            (v == _P and ok[v + 1, u]) or (v == Hp - _P - 1 and ok[v - 1, u]), reflect,
+                                            tol * abs(s[v, u]))
                 g_v[v, u] = g
                 e_v[v, u] = e
                 s_v[v, u] = st
@@ -188,26 +204,29 @@ def _sda_init(s, ok, reflect, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, 
 
 
 @pixel
-def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8):
-    """(index, energy) of the cheapest of nine candidates, the lowest index on ties; keep (2) if all are inf."""
+def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8, tol):
+    """(index, energy) of the cheapest of nine candidates, the lowest index on ties; keep (2) if all are inf.
+
+    A later candidate wins only if cheaper by more than ``tol`` (0: any amount; see :data:`surfnorm.units.TIE_TOLERANCE`).
+    """
     k = 0
     best = e0
-    k = 1 if e1 < best else k
-    best = e1 if e1 < best else best
-    k = 2 if e2 < best else k
-    best = e2 if e2 < best else best
-    k = 3 if e3 < best else k
-    best = e3 if e3 < best else best
-    k = 4 if e4 < best else k
-    best = e4 if e4 < best else best
-    k = 5 if e5 < best else k
-    best = e5 if e5 < best else best
-    k = 6 if e6 < best else k
-    best = e6 if e6 < best else best
-    k = 7 if e7 < best else k
-    best = e7 if e7 < best else best
-    k = 8 if e8 < best else k
-    best = e8 if e8 < best else best
+    k = 1 if e1 < best - tol else k
+    best = e1 if e1 < best - tol else best
+    k = 2 if e2 < best - tol else k
+    best = e2 if e2 < best - tol else best
+    k = 3 if e3 < best - tol else k
+    best = e3 if e3 < best - tol else best
+    k = 4 if e4 < best - tol else k
+    best = e4 if e4 < best - tol else best
+    k = 5 if e5 < best - tol else k
+    best = e5 if e5 < best - tol else best
+    k = 6 if e6 < best - tol else k
+    best = e6 if e6 < best - tol else best
+    k = 7 if e7 < best - tol else k
+    best = e7 if e7 < best - tol else best
+    k = 8 if e8 < best - tol else k
+    best = e8 if e8 < best - tol else best
     return (2 if best == _INF else k), best
 
 
@@ -227,7 +246,7 @@ def pick(k, c0, c1, c2, c3, c4, c5, c6, c7, c8):
 
 
 @njit
-def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2):
+def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2):
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
     Every inner pixel of the second set is written. Returns True if some pixel
@@ -243,6 +262,7 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             valid_p = ok[v, u]
             flags = con[v, u]
             z_p = s[v, u]
+            tol_p = tol * abs(z_p)
             gu_p = g_u[v, u]
             gv_p = g_v[v, u]
             # ---- G_u: energies (see the module docstring) ----
@@ -256,7 +276,7 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
             e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
             k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, e5 if has_gv else _INF,
-                                   e6 if has_gv else _INF, e7 if has_gv else _INF, e8 if has_gv else _INF)
+                                   e6 if has_gv else _INF, e7 if has_gv else _INF, e8 if has_gv else _INF, tol_p)
             new_gu = pick(k_u,
                           (gu_p + c * z_p) - c * (s[v, u - 1] + g_u[v, u - 1]),
                           (gu_p - c * z_p) + c * (s[v, u + 1] - g_u[v, u + 1]),
@@ -278,7 +298,7 @@ def _sda_step(s, ok, c, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2,
             e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
             e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
             k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, e5 if has_gu else _INF,
-                                   e6 if has_gu else _INF, e7 if has_gu else _INF, e8 if has_gu else _INF)
+                                   e6 if has_gu else _INF, e7 if has_gu else _INF, e8 if has_gu else _INF, tol_p)
             new_gv = pick(k_v,
                           (gv_p + c * z_p) - c * (s[v - 1, u] + g_v[v - 1, u]),
                           (gv_p - c * z_p) + c * (s[v + 1, u] - g_v[v + 1, u]),
@@ -309,7 +329,7 @@ def _padded(shape, dtype, margin_value):
     return arr
 
 
-def _run_sda(signal, valid, iterations, border):
+def _run_sda(signal, valid, iterations, border, tie_tol=0.0):
     """The dynamic programming on padded arrays. Returns [g_u, g_v, e_u, e_v, signal] padded, and the passes applied."""
     H, W = signal.shape
     shape = (H + 2 * _P, W + 2 * _P)
@@ -326,28 +346,28 @@ def _run_sda(signal, valid, iterations, border):
              _padded(shape, np.int8, _NO_STATE), _padded(shape, np.int8, _NO_STATE)] for _ in range(2)]
     l_u = np.ones(shape)
     l_v = np.ones(shape)
-    _sda_laplacians(s, ok, l_u, l_v, a_u, a_v)
-    _sda_init(s, ok, border == "reflect", l_u, l_v, a_u, a_v, con, *sets[0])
+    _sda_laplacians(s, ok, tie_tol, l_u, l_v, a_u, a_v)
+    _sda_init(s, ok, border == "reflect", tie_tol, l_u, l_v, a_u, a_v, con, *sets[0])
     cap = MAX_ITERATIONS if iterations is None else iterations
     passes = 0
     cur = 0
     for i in range(1, cap + 1):
-        if not _sda_step(s, ok, 1.0 / (i + 1), a_u, a_v, con, *sets[cur], *sets[1 - cur]):
+        if not _sda_step(s, ok, 1.0 / (i + 1), tie_tol, a_u, a_v, con, *sets[cur], *sets[1 - cur]):
             break
         cur = 1 - cur
         passes = i
     return sets[cur][:4] + [s], passes
 
 
-def sda_gradients(signal, valid, *, iterations=3, border="one-sided"):
+def sda_gradients(signal, valid, *, iterations=3, border="one-sided", tie_tol=0.0):
     """SDA gradients of ``signal`` (H, W) along u and v, and the number of passes that ran.
 
     Returns ``(g_u, g_v, passes)``: float64 (H, W) arrays, NaN where a pixel
     has no gradient, and how many passes of the dynamic programming were
     applied (the pass whose stop test fired is not counted). ``iterations``
-    None runs until stable, at most :data:`MAX_ITERATIONS` passes.
+    None runs until stable, at most :data:`MAX_ITERATIONS` passes. ``tie_tol``: see :data:`surfnorm.units.TIE_TOLERANCE`.
     """
-    (g_u, g_v, e_u, e_v, _), passes = _run_sda(np.asarray(signal, dtype=np.float64), valid, iterations, border)
+    (g_u, g_v, e_u, e_v, _), passes = _run_sda(np.asarray(signal, dtype=np.float64), valid, iterations, border, tie_tol)
     inner = (slice(_P, -_P), slice(_P, -_P))
     return (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
 
@@ -394,15 +414,18 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect,
                 fill_pixel(out, v, u, fill)
 
 
-def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0):
-    """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), into ``out``."""
+def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0, tie_tol=0.0):
+    """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), into ``out``.
+
+    ``tie_tol`` 0 (the paper-faithful mode) compares exactly; the scale-invariant mode passes
+    :data:`surfnorm.units.TIE_TOLERANCE` (see there)."""
     f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
     if base == "3f2n":
         with np.errstate(divide="ignore", invalid="ignore"):
             signal = 1.0 / z.astype(np.float64)  # read only where valid
-        (g_u, g_v, e_u, e_v, _), _ = _run_sda(signal, valid, iterations, border)
+        (g_u, g_v, e_u, e_v, _), _ = _run_sda(signal, valid, iterations, border, tie_tol)
         _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, border == "reflect", np.float32(fill), out)
     else:
-        (g_u, g_v, e_u, e_v, s), _ = _run_sda(z.astype(np.float64), valid, iterations, border)
+        (g_u, g_v, e_u, e_v, s), _ = _run_sda(z.astype(np.float64), valid, iterations, border, tie_tol)
         _cp2tv_kernel(s, g_u, g_v, e_u, e_v, *f, np.float32(fill), out)
     return out

@@ -23,8 +23,12 @@ def _sign(x):
     return int(x > 0) - int(x < 0)
 
 
-def sda(signal, valid, *, iterations=3, border="one-sided", cap=1000):
-    """Returns (G_u, G_v, passes) as float64 arrays, NaN where a pixel has no gradient."""
+def sda(signal, valid, *, iterations=3, border="one-sided", cap=1000, tie_tol=0.0):
+    """Returns (G_u, G_v, passes) as float64 arrays, NaN where a pixel has no gradient.
+
+    ``tie_tol`` (the scale-invariant mode's near-ties): at pixel p, a Laplacian with |L| <= tie_tol |S_p|
+    is 0, and a candidate replaces the best one so far only if its energy is lower by more than tie_tol |S_p|.
+    """
     ok = np.asarray(valid, dtype=bool)
     H, W = ok.shape
     S = np.asarray(signal, dtype=np.float64).tolist()  # plain Python floats
@@ -44,7 +48,8 @@ def sda(signal, valid, *, iterations=3, border="one-sided", cap=1000):
             return None
         b = f if b is None else b
         f = b if f is None else f
-        return -b + 2 * S[v][u] - f
+        L = -b + 2 * S[v][u] - f
+        return 0.0 if abs(L) <= tie_tol * abs(S[v][u]) else L
 
     Lu = [[None] * W for _ in range(H)]
     Lv = [[None] * W for _ in range(H)]
@@ -79,7 +84,7 @@ def sda(signal, valid, *, iterations=3, border="one-sided", cap=1000):
             cands.append((S[v][u] - S[v - dv][u - du], A[v - dv][u - du], 0))
         best = (0.0, INF, INF)
         for c in cands:
-            if c[1] < best[1]:
+            if c[1] < best[1] - tie_tol * abs(S[v][u]):
                 best = c
         return best
 
@@ -154,8 +159,11 @@ def sda(signal, valid, *, iterations=3, border="one-sided", cap=1000):
                 ]
                 for cands, G, E, s in ((eu, nGu, nEu, nsu), (ev, nGv, nEv, nsv)):
                     energies = [e for e, _ in cands]
-                    best = min(energies)
-                    k = energies.index(best) if best < INF else 2
+                    k, best = 0, energies[0]
+                    for j in range(1, 9):  # the first of the cheapest; a near-tie counts as a tie
+                        if energies[j] < best - tie_tol * abs(z):
+                            k, best = j, energies[j]
+                    k = k if best < INF else 2
                     moved |= k != 2
                     G[v][u] = cands[k][1]()
                     E[v][u] = best

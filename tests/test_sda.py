@@ -11,6 +11,7 @@ from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.metrics import mean_angular_error
 from surfnorm.reference import official_figures
 from surfnorm.sda import MAX_ITERATIONS, sda_gradients
+from surfnorm.units import TIE_TOLERANCE
 
 from . import naive_sda, naive_three_filters
 from . import surfaces
@@ -43,6 +44,26 @@ def test_gradients_and_passes_agree_with_naive_reference(holes):
     np.testing.assert_allclose(g_u, n_u, rtol=0, atol=1e-12)
     np.testing.assert_allclose(g_v, n_v, rtol=0, atol=1e-12)
     assert np.isnan(g_u[~valid]).all() and np.isnan(g_v[~valid]).all()
+
+
+@pytest.mark.parametrize("holes", [False, True])
+def test_near_ties_agree_with_naive_reference(holes):
+    """The scale-invariant mode's tolerance (tie_tol): on millimetre depth scaled to another unit, full of near-ties."""
+    depth, valid = random_depth("discontinuous", holes, seed=33)
+    mm = np.rint(np.where(valid, depth, 0.0) * 1000)  # integer millimetres: ramps, exact ties, one-step Laplacians
+    z = (mm * 0.0254).astype(np.float32).astype(np.float64)  # the same in inches-and-a-bit, rounded
+    for tol in (0.0, TIE_TOLERANCE):
+        g_u, g_v, passes = sda_gradients(z, valid, iterations=None, tie_tol=tol)
+        n_u, n_v, n_passes = naive_sda.sda(z, valid, iterations=None, tie_tol=tol)
+        assert passes == n_passes
+        np.testing.assert_allclose(g_u, n_u, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(g_v, n_v, rtol=0, atol=1e-12)
+    # and the tolerance is what makes the two units agree
+    # (z's float32 rounding moves a gradient by a few 1e-5; another choice moves it by 1e-3 and more)
+    mm_u = sda_gradients(mm, valid, iterations=None, tie_tol=TIE_TOLERANCE)[0]
+    np.testing.assert_allclose(g_u, mm_u * 0.0254, rtol=0, atol=1e-4)
+    exact = sda_gradients(z, valid, iterations=None)[0] - sda_gradients(mm, valid, iterations=None)[0] * 0.0254
+    assert np.nanmax(np.abs(exact)) > 0.1  # exact comparisons break the ties differently
 
 
 @pytest.mark.parametrize("border", ["one-sided", "reflect"])

@@ -33,9 +33,11 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
     return [Intrinsics.from_matrix(arr)] * n
 
 
-def _run(method, refined, options, z, valid, cam, out=None):
+def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
+    if tie_tol and method.ties:
+        options = dict(options, tie_tol=tie_tol)
     if not refined:
         # A recipe ending with MNR (d2nt_v3) refines inside its own run, fused: no full-size temporary.
         return method.run(z, valid, cam, out, **options)
@@ -107,14 +109,17 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     z = as_depth(depth)
     user_mask = as_mask(mask, z.shape)
     if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
-        from .units import relative_depth
+        from .units import TIE_TOLERANCE, relative_depth
 
         # Invalid pixels become 0 in the rescaled depth, and a value that over/underflows float32 when
         # rescaled is not finite and positive, so the validity computed below from z covers both.
         z = relative_depth(z, valid_pixels(z, user_mask), disparity=disparity)
+        tie_tol = TIE_TOLERANCE
+    else:
+        tie_tol = 0.0
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam)
+        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam, tie_tol=tie_tol)
     cams = _intrinsics_list(K, z.shape[0])
     workers = threads if threads is not None else (os.cpu_count() or 1)
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
@@ -125,7 +130,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
         # Everything per frame (validity, kernel) runs here, so frames proceed in parallel:
         # the kernels release the GIL (nogil=True).
         frame_mask = None if user_mask is None else user_mask[i]
-        _run(method_obj, refined, dict(clean), z[i], _valid(z[i], frame_mask), cams[i], out[i])
+        _run(method_obj, refined, dict(clean), z[i], _valid(z[i], frame_mask), cams[i], out[i], tie_tol)
 
     if workers == 1 or z.shape[0] == 1:
         for i in range(z.shape[0]):

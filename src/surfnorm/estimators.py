@@ -94,9 +94,10 @@ register(Method("sda_sne", "energy minimisation",
                 "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
                 "Dynamic Programming, 3DV 2022",
                 "depth gradients chosen by multi-directional dynamic programming, then CP2TV",
-                lambda z, valid, cam, out, *, iterations, base, border, fill:
-                    _sda_sne(z, valid, cam, out, iterations=iterations, base=base, border=border, fill=fill),
-                SDA_OPTIONS))
+                lambda z, valid, cam, out, *, iterations, base, border, fill, tie_tol=0.0:
+                    _sda_sne(z, valid, cam, out, iterations=iterations, base=base, border=border, fill=fill,
+                             tie_tol=tie_tol),
+                SDA_OPTIONS, ties=True))
 
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
 

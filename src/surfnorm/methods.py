@@ -67,6 +67,7 @@ class Method:
     run: Callable
     options: dict = field(default_factory=dict)
     mnr: bool = False  # the recipe ends with MNR, which run does itself (fused), taking mnr_dlf
+    ties: bool = False  # run takes ``tie_tol`` (near-ties as ties), which the scale-invariant mode passes
 
 
 @dataclass(frozen=True)

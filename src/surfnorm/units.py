@@ -24,10 +24,43 @@ millimetres it picks one at every bump.
     kernels, with m the median of its valid depth (after the mask), so tau is
     relative: ``tau * m / REFERENCE_DEPTH`` in the caller's unit, i.e. 1 % of
     the median depth with the defaults. :data:`REFERENCE_DEPTH` = 100 makes
-    the two modes agree on a frame whose median valid depth is 100 units,
+    the two modes agree on a frame whose median valid depth is 100 units
+    (all but SDA-SNE's near-ties, see "Ties" below),
     about the typical depth of the 3F2N objects (their median foreground
     depths run from 11 to 397, median 130). Normals are then the same, to
     float precision, for any uniform unit of depth.
+
+Ties
+----
+Rescaling alone is not enough for methods that *compare* depth-derived
+values exactly. SDA-SNE (:mod:`surfnorm.sda`) takes the sign of 1D
+Laplacians (its continuity term) and the cheapest of several candidate
+energies, the first on ties. Integer millimetres give exact ties (a zero
+Laplacian on a ramp, two equal energies); the same depth in metres is
+rounded to float32, and after rescaling those ties are near-ties of either
+sign, so the dynamic programming went the other way on 5 % of the pixels of
+a sensor frame. So in this mode SDA-SNE treats a Laplacian with
+|L| <= :data:`TIE_TOLERANCE` * |S_p| as exactly 0 and lets a later candidate
+win only if cheaper by more than :data:`TIE_TOLERANCE` * |S_p| (S_p the
+rescaled signal at the pixel: depth, or inverse depth with ``base="3f2n"``).
+The paper-faithful mode compares exactly (tolerance 0), bit for bit as before.
+
+Why 1.5e-6 (relative to the pixel's depth). Below it: the two units' rescaled
+depths differ by at most 3 float32 half-ulps per pixel (the input rounding
+and the two final roundings; the median's rounding is common to all pixels
+and cancels in a Laplacian), so a Laplacian -z_b + 2 z_p - z_f differs by at
+most 12 half-ulps = 6 * 2^-23 |z| = 7.2e-7 |z| (measured on the 3F2N sample
+as mm vs m: at most 4.7e-7); 1.5e-6 is twice that. Above it: the finest
+relative step a 16-bit depth image can hold is 1/65535 = 1.5e-5 of its depth
+(at full range; coarser nearer), ten times the tolerance, and real sensors
+resolve far less (1 mm at 1 m is 1e-3). Measured (``benchmarks/unit_ties.py``,
+12 frames of the 3F2N sample as rint(1000 z) vs z): pixels whose normals
+differ between the units, 13.7 % with exact comparisons, 0.003 % with 7e-7,
+0.001 % with 1e-6, 0.0002 % with 1.5e-6, 0.17 % with 3e-6 and 0.09 % with
+1e-5: those frames' depths reach 475 units, where one "millimetre" step is
+2.1e-6 of the depth (no 16-bit sensor has such steps), so a larger tolerance
+straddles it. Quantising the rescaled depth instead would straddle grid
+boundaries everywhere, not only at steps near the tolerance.
 
 The median is taken over the pixels you call valid: with a real background
 it is the scene's median depth; where the background is a placeholder (the
@@ -49,10 +82,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["REFERENCE_DEPTH", "relative_depth"]
+__all__ = ["REFERENCE_DEPTH", "TIE_TOLERANCE", "relative_depth"]
 
 #: Median valid depth that a frame is rescaled to in the scale-invariant mode (see the module docstring).
 REFERENCE_DEPTH = 100.0
+
+#: Relative tolerance of near-ties in the scale-invariant mode (see the module docstring, "Ties").
+TIE_TOLERANCE = 1.5e-6
 
 
 def _relative_frame(z: np.ndarray, valid: np.ndarray, disparity: bool) -> np.ndarray:

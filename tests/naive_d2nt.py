@@ -149,9 +149,14 @@ def d2nt_dag(z, valid, cam, *, dlf="1d", tau=1.0, truncate=True, fill=0.0):
     return d2nt_normals(z, zu, zv, valid & ok_u & ok_v, cam, fill)
 
 
-def mnr(z, valid, normals, *, dlf="alpha", fill=0.0):
-    """MNR (Sec. III-C as simplified in Sec. IV-A and the authors' code)."""
+def mnr(z, valid, normals, *, dlf="alpha", fill=0.0, tie_tol=0.0):
+    """MNR (Sec. III-C as simplified in Sec. IV-A and the authors' code).
+
+    ``tie_tol`` (scale-invariant mode): a candidate must be smoother than the
+    best so far by more than tie_tol * z_p to replace it (float32 arithmetic).
+    """
     z = clean(z, valid)
+    tol = F32(tie_tol) * z
     with np.errstate(all="ignore"):
         sq = np.einsum("hwc,hwc->hw", normals, normals)
     has = valid & np.isfinite(sq) & (sq > 0)
@@ -165,10 +170,10 @@ def mnr(z, valid, normals, *, dlf="alpha", fill=0.0):
     best_dv, best_du = np.zeros(z.shape, int), np.zeros(z.shape, int)
     for dv, du, s in offsets:  # left, right, up, down: strict < keeps the first on ties
         s_q = np.where(shifted(has, dv, du, False), shifted(s, dv, du, 0), F32(np.inf))
-        better = s_q < best_s
+        better = s_q < best_s - tol
         best_s = np.where(better, s_q, best_s)
         best_dv, best_du = np.where(better, dv, best_dv), np.where(better, du, best_du)
-    self_better = s_self < best_s
+    self_better = s_self < best_s - tol
     best_dv, best_du = np.where(self_better, 0, best_dv), np.where(self_better, 0, best_du)
     H, W = z.shape
     vv, uu = np.mgrid[0:H, 0:W]
@@ -177,9 +182,9 @@ def mnr(z, valid, normals, *, dlf="alpha", fill=0.0):
     return out
 
 
-def d2nt_v3(z, valid, cam, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0):
+def d2nt_v3(z, valid, cam, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0):
     raw = d2nt_dag(z, valid, cam, dlf=dlf, tau=tau, truncate=truncate, fill=fill)
-    return mnr(z, valid, raw, dlf=mnr_dlf, fill=fill)
+    return mnr(z, valid, raw, dlf=mnr_dlf, fill=fill, tie_tol=tie_tol)
 
 
 def cp2tv(z, valid, cam, *, border="one-sided", fill=0.0):

@@ -46,7 +46,7 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
     mnr_dlf = options["mnr_dlf"]
     run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
     raw = method.run(z, valid, cam, np.empty(out.shape, np.float32), **run_options)
-    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"])
+    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol)
 
 
 def _valid(z, mask):

@@ -41,8 +41,8 @@ def _d2nt_dag(z, valid, cam, out, *, dlf, tau, truncate, fill):
     return d2nt(z, valid, cam, out, gradient="dag", dlf=dlf, tau=tau, truncate=truncate, fill=fill)
 
 
-def _d2nt_v3(z, valid, cam, out, *, dlf, tau, truncate, mnr_dlf, fill):
-    return d2nt_v3(z, valid, cam, out, dlf=dlf, tau=tau, truncate=truncate, mnr_dlf=mnr_dlf, fill=fill)
+def _d2nt_v3(z, valid, cam, out, *, dlf, tau, truncate, mnr_dlf, fill, tie_tol=0.0):
+    return d2nt_v3(z, valid, cam, out, dlf=dlf, tau=tau, truncate=truncate, mnr_dlf=mnr_dlf, fill=fill, tie_tol=tie_tol)
 
 
 register(Method("d2nt_basic", "depth-to-normal", D2NT_PAPER + ", eq. 9",
@@ -50,7 +50,8 @@ register(Method("d2nt_basic", "depth-to-normal", D2NT_PAPER + ", eq. 9",
 register(Method("d2nt_v2", "depth-to-normal", D2NT_PAPER + ", eq. 9-14",
                 "D2NT with discontinuity-aware gradient (DAG) filter", _d2nt_dag, DAG_OPTIONS))
 register(Method("d2nt_v3", "depth-to-normal", D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
-                "D2NT with DAG filter and MRF-based normal refinement (MNR)", _d2nt_v3, DAG_OPTIONS, mnr=True))
+                "D2NT with DAG filter and MRF-based normal refinement (MNR)", _d2nt_v3, DAG_OPTIONS, mnr=True,
+                ties=True))
 register(Method("cp2tv", "depth-to-normal",
                 "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
                 "cross product of two finite-difference tangent vectors",

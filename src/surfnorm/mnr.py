@@ -65,11 +65,13 @@ def self_smoothness_row(s_h, s_v, one_d, s_self):
 
 
 @pixel
-def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, out_row):
+def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, tol, fill, out_row):
     """MNR at one pixel of row v, any neighbours missing (the rule of :func:`mnr_choice` on precomputed scores).
 
-    Every candidate is read (at clamped columns) before the choice, which
-    then only selects among values (see :func:`surfnorm.gradients.clamp`).
+    A candidate replaces the best so far only if smoother by more than
+    ``tol`` (0: strictly smoother; see :func:`mnr_row`). Every candidate is
+    read (at clamped columns) before the choice, which then only selects
+    among values (see :func:`surfnorm.gradients.clamp`).
     """
     W = out_row.shape[0]
     x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)
@@ -79,15 +81,15 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
     ok_b = (v + 1 < H) & has_dn[x]
     s_l, s_r, s_a, s_b, s_c = s_h[x_l], s_h[x_r], s_up[x], s_dn[x], s_self[x]
     best_s, k = np.float32(np.inf), 4
-    if ok_l & (s_l < best_s):
+    if ok_l & (s_l < best_s - tol):
         best_s, k = s_l, 0
-    if ok_r & (s_r < best_s):
+    if ok_r & (s_r < best_s - tol):
         best_s, k = s_r, 1
-    if ok_a & (s_a < best_s):
+    if ok_a & (s_a < best_s - tol):
         best_s, k = s_a, 2
-    if ok_b & (s_b < best_s):
+    if ok_b & (s_b < best_s - tol):
         best_s, k = s_b, 3
-    if s_c < best_s:
+    if s_c < best_s - tol:
         k = 4
     keep = has_mid[x]
     for c in range(3):
@@ -97,14 +99,18 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
 
 
 @row
-def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, col, runs, choice,
-            out_row):
+def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, z_row, tie_tol, fill, col,
+            runs, choice, out_row):
     """MNR of row v: each pixel with a normal takes the normal of the smoothest of [left, right, up, down, self].
 
     n_*: normals (W, 3) of rows v - 1, v, v + 1; has_*: whether they exist;
     s_h: smoothness of row v scoring left/right; s_up, s_dn: of rows v -+ 1
     scoring up/down; s_self: the score of p itself. Strict ``<`` in that order
     keeps the first candidate on ties, as ``argmin`` in the authors' code.
+    With ``tie_tol`` > 0 (the scale-invariant mode) a candidate must be
+    smoother than the best so far by more than tie_tol * z_p (z_row: depth of
+    row v), so near-ties also keep the first (see :mod:`surfnorm.units`,
+    "Ties"); 0 subtracts nothing, bit for bit the exact rule.
     ``col``, ``runs``, ``choice`` (3 W int32) are scratch.
     """
     W = out_row.shape[0]
@@ -115,28 +121,31 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
         for x in range(u, a):
-            mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, fill, out_row)
+            mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self,
+                      tie_tol * z_row[x], fill, out_row)
         if b > a:  # all four neighbours have normals: branch-free argmin (views start at a: see laplacian_row)
             s_l, s_r, s_a, s_b, s_c = s_h[a - 1:b - 1], s_h[a + 1:b + 1], s_up[a:b], s_dn[a:b], s_self[a:b]
+            z_p = z_row[a:b]
             n_l, n_r = mid_flat[3 * (a - 1):3 * (b - 1)], mid_flat[3 * (a + 1):3 * (b + 1)]
             n_a, n_b, n_c = up_flat[3 * a:3 * b], dn_flat[3 * a:3 * b], mid_flat[3 * a:3 * b]
             run_out = out_flat[3 * a:3 * b]
             run_choice = choice[3 * a:3 * b]
             for i in range(b - a):
+                tol = tie_tol * z_p[i]
                 best_s, best = inf, 4
                 s_q = s_l[i]
-                best = 0 if s_q < best_s else best
-                best_s = s_q if s_q < best_s else best_s
+                best = 0 if s_q < best_s - tol else best
+                best_s = s_q if s_q < best_s - tol else best_s
                 s_q = s_r[i]
-                best = 1 if s_q < best_s else best
-                best_s = s_q if s_q < best_s else best_s
+                best = 1 if s_q < best_s - tol else best
+                best_s = s_q if s_q < best_s - tol else best_s
                 s_q = s_a[i]
-                best = 2 if s_q < best_s else best
-                best_s = s_q if s_q < best_s else best_s
+                best = 2 if s_q < best_s - tol else best
+                best_s = s_q if s_q < best_s - tol else best_s
                 s_q = s_b[i]
-                best = 3 if s_q < best_s else best
-                best_s = s_q if s_q < best_s else best_s
-                best = 4 if s_c[i] < best_s else best
+                best = 3 if s_q < best_s - tol else best
+                best_s = s_q if s_q < best_s - tol else best_s
+                best = 4 if s_c[i] < best_s - tol else best
                 run_choice[3 * i] = best
                 run_choice[3 * i + 1] = best
                 run_choice[3 * i + 2] = best
@@ -151,7 +160,7 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
 
 
 @njit
-def _mnr_kernel(z, valid, has_normal, normals, dlf, fill, out):
+def _mnr_kernel(z, valid, has_normal, normals, dlf, tie_tol, fill, out):
     """MNR of a whole normal map, row by row; smoothness computed once per pixel into rolling rows."""
     H, W = z.shape
     col = np.empty(W, np.bool_)
@@ -174,7 +183,7 @@ def _mnr_kernel(z, valid, has_normal, normals, dlf, fill, out):
         self_smoothness_row(s_h, s_v[j], dlf == 0, s_self)
         up, dn = max(v - 1, 0), min(v + 1, H - 1)
         mnr_row(v, H, normals[up], normals[v], normals[dn], has_normal[up], has_normal[v], has_normal[dn],
-                s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self, fill, col, mruns, choice, out[v])
+                s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self, z[v], tie_tol, fill, col, mruns, choice, out[v])
 
 
 def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -184,8 +193,11 @@ def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(valid & np.isfinite(sq) & (sq > 0))
 
 
-def mnr(z, valid, normals, out, *, dlf="alpha", fill=0.0):
-    """MNR on ``normals`` (H, W, 3) guided by depth ``z``, into ``out`` (must not alias ``normals``)."""
+def mnr(z, valid, normals, out, *, dlf="alpha", fill=0.0, tie_tol=0.0):
+    """MNR on ``normals`` (H, W, 3) guided by depth ``z``, into ``out`` (must not alias ``normals``).
+
+    ``tie_tol``: relative near-tie tolerance of the scale-invariant mode (see :func:`mnr_row`).
+    """
     has_normal = has_normal_map(normals, valid)
-    _mnr_kernel(z, valid, has_normal, normals, dlf_code(dlf), np.float32(fill), out)
+    _mnr_kernel(z, valid, has_normal, normals, dlf_code(dlf), np.float32(tie_tol), np.float32(fill), out)
     return out

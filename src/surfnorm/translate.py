@@ -258,7 +258,8 @@ def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, ratio, mnr_dlf, f
 
 
 @row
-def v3_refine_row(z, valid, v, mnr_dlf, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice, out_row):
+def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice,
+                  out_row):
     """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row."""
     H = z.shape[0]
     j = v % 4
@@ -268,11 +269,12 @@ def v3_refine_row(z, valid, v, mnr_dlf, fill, runs, n_runs, sm_v, sm_h, s_self, 
         copy_row(sm_v[j], sm_h)
     self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
     mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
-            has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, fill, col, mruns, choice, out_row)
+            has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, z[v], tie_tol, fill, col, mruns,
+            choice, out_row)
 
 
 @njit
-def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill, out):
+def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, tie_tol, fill, out):
     """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep.
 
     The unrefined normals live only in a rolling buffer of 3 rows: row v + 1
@@ -300,8 +302,8 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, fill
         v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, ratio, mnr_dlf, fill, fill_counts, col, runs,
                         n_runs, p_v, sm_v, s, p_h, ok_row, raw, has)
         if r >= 0:
-            v3_refine_row(z, valid, r, mnr_dlf, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice,
-                          out[r])
+            v3_refine_row(z, valid, r, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns,
+                          choice, out[r])
 
 
 def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0):
@@ -315,11 +317,14 @@ def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True,
     return out
 
 
-def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0):
-    """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3)."""
+def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0):
+    """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3).
+
+    ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.mnr.mnr_row`).
+    """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
     _d2nt_v3_kernel(z, valid, *f, dlf_code(dlf), np.float32(tau), softmin_ratio(tau, truncate), dlf_code(mnr_dlf),
-                    np.float32(fill), out)
+                    np.float32(tie_tol), np.float32(fill), out)
     return out
 
 

@@ -43,7 +43,12 @@ a sensor frame. So in this mode SDA-SNE treats a Laplacian with
 |L| <= :data:`TIE_TOLERANCE` * |S_p| as exactly 0 and lets a later candidate
 win only if cheaper by more than :data:`TIE_TOLERANCE` * |S_p| (S_p the
 rescaled signal at the pixel: depth, or inverse depth with ``base="3f2n"``).
-The paper-faithful mode compares exactly (tolerance 0), bit for bit as before.
+MNR (``d2nt_v3`` and any ``+mnr``) takes the arg-min of smoothness values,
+the first on ties, with the same trouble (2 % of a frame's pixels took
+another, equally smooth, neighbour's normal in another unit); in this mode a
+candidate replaces the best so far only if smoother by more than
+:data:`TIE_TOLERANCE` * z_p. The paper-faithful mode compares exactly
+(tolerance 0), bit for bit as before.
 
 Why 1.5e-6 (relative to the pixel's depth). Below it: the two units' rescaled
 depths differ by at most 3 float32 half-ulps per pixel (the input rounding

@@ -10,7 +10,8 @@ outside the timed region (one call first). Our time is the public front door
 is ``d2nt.depth2normal``. The two are called alternately, so both see the
 same machine load, and each figure is the median of ``--repeats`` runs.
 
-Also measured: ``import surfnorm`` and the first estimate in a fresh process
+Also measured: every other registered estimator on the shipped frames (no peer; the targets of the
+issues), ``import surfnorm`` and the first estimate in a fresh process
 with a warm compile cache (subprocesses), the peak memory of one d2nt_v3 call
 (tracemalloc for NumPy arrays, and the growth of the process's peak RSS, which
 also sees Numba's own allocations), and the throughput of a stack of 16
@@ -45,6 +46,9 @@ REPO = Path(__file__).resolve().parents[1]
 # Ours, with the options that compute what the authors' version computes (their FD reflects at the border).
 METHODS = {"d2nt_basic": {"border": "reflect"}, "d2nt_v2": {}, "d2nt_v3": {}, "cp2tv": {}}
 TARGET_MS = {"d2nt_basic": 1.2, "d2nt_v2": 2.5, "d2nt_v3": 4.0}
+# Every other estimator, with the targets of the issues (3F2N median: speed issue; the rest: baselines issue).
+BASELINE_TARGET_MS = {"3f2n_median": 4.0, "3f2n_mean": None, "sne_roadseg": None, "sda_sne": 20.0, "plane_svd": 30.0,
+                      "plane_pca": 30.0, "vector_svd": 30.0, "area_weighted": 30.0, "angle_weighted": 30.0}
 
 
 def seeded_frame(seed=0, h=480, w=640, holes=0.0):
@@ -105,6 +109,19 @@ def time_frames(repeats, quick):
                          "ratio": t[1] / t[0] if len(t) > 1 else None, "repeats": repeats})
             print(f"  {name:22s} {method:11s} ours {t[0] * 1e3:7.3f} ms"
                   + (f"  authors {t[1] * 1e3:7.2f} ms  ratio {t[1] / t[0]:5.1f}x" if len(t) > 1 else ""), flush=True)
+    return rows
+
+
+def time_baselines(repeats, quick):
+    """Median ms of every other registered estimator on the shipped frames, one thread (no peer in this table)."""
+    rows = []
+    frames = inputs()[:3]
+    for method in (["3f2n_median", "sda_sne"] if quick else BASELINE_TARGET_MS):
+        per_frame = [interleaved([lambda: surfnorm.estimate(z, cam, method=method, threads=1)], repeats)[0] * 1e3
+                     for _, z, cam in frames]
+        rows.append({"method": method, "median_ms": statistics.median(per_frame), "per_frame_ms": per_frame,
+                     "target_ms": BASELINE_TARGET_MS[method], "repeats": repeats})
+        print(f"  {method:14s} {statistics.median(per_frame):8.2f} ms", flush=True)
     return rows
 
 
@@ -216,6 +233,9 @@ def markdown(record):
                  for x in ([r["ratio"] for r in shipped if r["ratio"]], [r["ratio"] for r in rs if r["ratio"]])]
         lines.append(f"| {method} | {statistics.median(r['ours_ms'] for r in shipped):.3f} | "
                      f"{TARGET_MS.get(method, '-')} | {ratio[0]} | {ratio[1]} |")
+    lines += ["", "| every other estimator (480x640, shipped frames) | median ours (ms) | target (ms) |", "|---|---:|---:|"]
+    for b in record["baselines"]:
+        lines.append(f"| {b['method']} | {b['median_ms']:.2f} | {b['target_ms'] or '-'} |")
     s = record["startup"]
     lines += ["", "| start-up and memory | measured | target |", "|---|---:|---:|",
               f"| `import surfnorm` (in-process, median of fresh interpreters) | {s['import_s']:.3f} s | 0.3 s |",
@@ -249,6 +269,8 @@ def main():
     load_before = [round(x, 2) for x in os.getloadavg()]
     print("single frames (interleaved with the authors' package):", flush=True)
     frames = time_frames(repeats, args.quick)
+    print("every other estimator:", flush=True)
+    baselines = time_baselines(max(10, repeats // 2), args.quick)
     print("start-up (fresh interpreters):", flush=True)
     (imp,), imp_wall = subprocess_seconds(IMPORT_CODE, 3 if args.quick else 9)
     (t_imp, t_first, t_both), _ = subprocess_seconds(FIRST_CALL_CODE.format(method="d2nt_v3"), 3 if args.quick else 9)
@@ -267,7 +289,7 @@ def main():
     batch = time_batches(max(10, repeats // 3) if not args.quick else 3, args.quick)
     record = {"about": __doc__.splitlines()[0], "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
               "machine": machine(), "repeats": repeats, "load_before": load_before,
-              "load_after": [round(x, 2) for x in os.getloadavg()], "frames": frames,
+              "load_after": [round(x, 2) for x in os.getloadavg()], "frames": frames, "baselines": baselines,
               "startup": {"import_s": imp, "import_process_s": imp_wall, "first_call_s": t_first,
                           "import_and_first_s": t_both},
               "memory": memory, "batch": batch}

@@ -328,6 +328,7 @@ _PITCH = 136  # >= _TILE + 2, a multiple of 8
 _M, _SX, _SY, _SZ, _S00, _S01, _S02, _S11, _S12, _S22 = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 _T1, _T2, _T3, _G0, _G1, _G2, _LAM, _ACT = 10, 11, 12, 13, 14, 15, 16, 17
 _WORK_ROWS = 18
+_PLANE_PCA, _PLANE_SVD, _VECTOR_SVD = 0, 1, 2  # ``kind`` of the tiled kernel
 
 
 @njit
@@ -387,12 +388,15 @@ def tile_moments(R, i):
 
 
 @pixel
-def tile_prepare(R, n, svd, work):
+def tile_prepare(R, n, kind, work):
     """Sweep 1: moments, scatter matrix, coefficients of the characteristic polynomial, start of Newton."""
     for i in range(n):
         m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, w_p = tile_moments(R, i)
-        s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
-        if svd:
+        if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
+            s_00, s_01, s_02, s_11, s_12, s_22 = s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
+        else:
+            s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+        if kind == _PLANE_SVD:
             c_x = p_x + s_x / m  # centroid
             c_y = p_y + s_y / m
             c_z = p_z + s_z / m
@@ -420,13 +424,13 @@ def tile_prepare(R, n, svd, work):
 
 
 @pixel
-def tile_newton(n, svd, work):
+def tile_newton(n, kind, work):
     """Sweep 2: Newton steps from 0 for every pixel still moving, with the per-pixel stopping rule."""
     for _ in range(_NEWTON_STEPS):
         moving = 0
         for i in range(n):
             lam = work[_LAM * _PITCH + i]
-            if svd:
+            if kind == _PLANE_SVD:
                 step = plane_svd_step(work[_M * _PITCH + i], work[_T1 * _PITCH + i], work[_T2 * _PITCH + i],
                                       work[_T3 * _PITCH + i], work[_G0 * _PITCH + i], work[_G1 * _PITCH + i],
                                       work[_G2 * _PITCH + i], lam)
@@ -441,7 +445,7 @@ def tile_newton(n, svd, work):
 
 
 @pixel
-def tile_finish(R, n, svd, fill, work, out_flat):
+def tile_finish(R, n, kind, fill, work, out_flat):
     """Sweep 3: the normal (null vector of the shifted matrix), facing the camera, or the fill value."""
     for i in range(n):
         c = 4 * _PITCH + i + 1
@@ -450,7 +454,7 @@ def tile_finish(R, n, svd, fill, work, out_flat):
         lam = work[_LAM * _PITCH + i]
         s_00, s_01, s_02 = work[_S00 * _PITCH + i], work[_S01 * _PITCH + i], work[_S02 * _PITCH + i]
         s_11, s_12, s_22 = work[_S11 * _PITCH + i], work[_S12 * _PITCH + i], work[_S22 * _PITCH + i]
-        if svd:
+        if kind == _PLANE_SVD:
             c_x = p_x + work[_SX * _PITCH + i] / m  # centroid
             c_y = p_y + work[_SY * _PITCH + i] / m
             c_z = p_z + work[_SZ * _PITCH + i] / m
@@ -471,8 +475,8 @@ def tile_finish(R, n, svd, fill, work, out_flat):
 
 
 @njit
-def _tiled_fit_kernel(P_t, svd, fill, out):
-    """PlanePCA (svd False) or PlaneSVD (svd True) over the 3x3 window, from the tiled cloud."""
+def _tiled_fit_kernel(P_t, kind, fill, out):
+    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over the 3x3 window, from the tiled cloud."""
     H, W = out.shape[:2]
     n_tiles = P_t.shape[0]
     flat = P_t.reshape(P_t.size)
@@ -484,10 +488,10 @@ def _tiled_fit_kernel(P_t, svd, fill, out):
         for o_v in range(H):
             start = t * tile_size + o_v * 4 * _PITCH  # padded rows o_v .. o_v + 2
             R = flat[start:start + 12 * _PITCH]
-            tile_prepare(R, n, svd, work)
-            tile_newton(n, svd, work)
+            tile_prepare(R, n, kind, work)
+            tile_newton(n, kind, work)
             out_flat = out[o_v].reshape(3 * W)[3 * c0:3 * (c0 + n)]
-            tile_finish(R, n, svd, fill, work, out_flat)
+            tile_finish(R, n, kind, fill, work, out_flat)
 
 
 def tiled_cloud(z, valid, cam):
@@ -498,9 +502,9 @@ def tiled_cloud(z, valid, cam):
     return P_t
 
 
-def _run_fit(kernel, svd, z, valid, cam, out, window, fill):
+def _run_fit(kernel, kind, z, valid, cam, out, window, fill):
     if int(window) == 3 and out.flags.c_contiguous:
-        _tiled_fit_kernel(tiled_cloud(z, valid, cam), svd, np.float32(fill), out)
+        _tiled_fit_kernel(tiled_cloud(z, valid, cam), kind, np.float32(fill), out)
         return out
     return _run(kernel, z, valid, cam, out, window, fill)
 
@@ -514,14 +518,14 @@ def _run(kernel, z, valid, cam, out, window, fill):
 
 def plane_svd(z, valid, cam, out, *, window=3, fill=0.0):
     """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch."""
-    return _run_fit(_plane_svd_kernel, True, z, valid, cam, out, window, fill)
+    return _run_fit(_plane_svd_kernel, _PLANE_SVD, z, valid, cam, out, window, fill)
 
 
 def plane_pca(z, valid, cam, out, *, window=3, fill=0.0):
     """PlanePCA (Table I): smallest eigenvector of the covariance of Q^+ about its centroid."""
-    return _run_fit(_plane_pca_kernel, False, z, valid, cam, out, window, fill)
+    return _run_fit(_plane_pca_kernel, _PLANE_PCA, z, valid, cam, out, window, fill)
 
 
 def vector_svd(z, valid, cam, out, *, window=3, fill=0.0):
     """VectorSVD (Table I): smallest right singular vector of the matrix of the vectors q - p."""
-    return _run(_vector_svd_kernel, z, valid, cam, out, window, fill)
+    return _run_fit(_vector_svd_kernel, _VECTOR_SVD, z, valid, cam, out, window, fill)

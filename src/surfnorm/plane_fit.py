@@ -123,6 +123,24 @@ def window_moments(P, valid, v, u, h):
 
 
 @pixel
+def characteristic(a_00, a_01, a_02, a_11, a_12, a_22):
+    """(t_1, t_2, t_3): det(A - l I) = t_3 - t_2 l + t_1 l^2 - l^3 for the symmetric 3x3 matrix A."""
+    t_1 = a_00 + a_11 + a_22
+    t_2 = a_00 * a_11 - a_01 * a_01 + a_00 * a_22 - a_02 * a_02 + a_11 * a_22 - a_12 * a_12
+    t_3 = (a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02)
+           + a_02 * (a_01 * a_12 - a_11 * a_02))
+    return t_1, t_2, t_3
+
+
+@pixel
+def newton_step(t_1, t_2, t_3, lam):
+    """One Newton step on det(A - l I) at l = lam (0 where the slope is not negative)."""
+    f = t_3 + lam * (-t_2 + lam * (t_1 - lam))
+    f_prime = -t_2 + lam * (2.0 * t_1 - 3.0 * lam)
+    return -f / f_prime if f_prime < 0.0 else 0.0
+
+
+@pixel
 def smallest_eigenvalue(a_00, a_01, a_02, a_11, a_12, a_22):
     """Smallest eigenvalue of the symmetric positive semi-definite 3x3 matrix A.
 
@@ -131,15 +149,10 @@ def smallest_eigenvalue(a_00, a_01, a_02, a_11, a_12, a_22):
     every step is positive and lands short of it (monotone convergence, quadratic once close).
     Cheaper than the trigonometric closed form (no acos, cos) and as accurate.
     """
-    t_1 = a_00 + a_11 + a_22
-    t_2 = a_00 * a_11 - a_01 * a_01 + a_00 * a_22 - a_02 * a_02 + a_11 * a_22 - a_12 * a_12
-    t_3 = (a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02)
-           + a_02 * (a_01 * a_12 - a_11 * a_02))
+    t_1, t_2, t_3 = characteristic(a_00, a_01, a_02, a_11, a_12, a_22)
     lam = 0.0
     for _ in range(_NEWTON_STEPS):
-        f = t_3 + lam * (-t_2 + lam * (t_1 - lam))
-        f_prime = -t_2 + lam * (2.0 * t_1 - 3.0 * lam)
-        step = -f / f_prime if f_prime < 0.0 else 0.0
+        step = newton_step(t_1, t_2, t_3, lam)
         if not step > _NEWTON_TOL * lam:  # converged, or rounding says so (also stops on NaN)
             break
         lam += step
@@ -159,12 +172,12 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
     l_a = x_a * x_a + y_a * y_a + z_a * z_a
     l_b = x_b * x_b + y_b * y_b + z_b * z_b
     l_c = x_c * x_c + y_c * y_c + z_c * z_c
-    n_x, n_y, n_z, l = x_a, y_a, z_a, l_a
-    if l_b > l:
-        n_x, n_y, n_z, l = x_b, y_b, z_b, l_b
-    if l_c > l:
-        n_x, n_y, n_z, l = x_c, y_c, z_c, l_c
-    ok = l > 0.0 and math.isfinite(l)
+    # selects, not branches, so that loops of this vectorise
+    use_b = l_b > l_a
+    n_x, n_y, n_z, l = (x_b if use_b else x_a), (y_b if use_b else y_a), (z_b if use_b else z_a), (l_b if use_b else l_a)
+    use_c = l_c > l
+    n_x, n_y, n_z, l = (x_c if use_c else n_x), (y_c if use_c else n_y), (z_c if use_c else n_z), (l_c if use_c else l)
+    ok = (l > 0.0) & (l < np.inf)  # positive and finite (false for NaN)
     norm = math.sqrt(l) if ok else 1.0
     return n_x / norm, n_y / norm, n_z / norm, ok
 
@@ -192,13 +205,8 @@ def scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
 
 
 @pixel
-def plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
-    """Smallest eigenvalue of M = [Q^+, 1]^T [Q^+, 1] by Newton's method on its characteristic polynomial.
-
-    f(l) = (m - l) D(l) - m l G(l) with D(l) = det(S - l I) = t_3 - t_2 l + t_1 l^2 - l^3 and
-    G(l) = c^T adj(S - l I) c = g_0 + g_1 l + g_2 l^2. From l = 0 (f(0) = m det S >= 0) Newton's
-    steps are positive and never pass the smallest root.
-    """
+def plane_svd_characteristic(c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
+    """(t_1, t_2, t_3, g_0, g_1, g_2) of det(M - l I) = (m - l) D(l) - m l G(l) (see :func:`plane_svd_lambda`)."""
     t_1 = s_00 + s_11 + s_22
     t_2 = s_00 * s_11 - s_01 * s_01 + s_00 * s_22 - s_02 * s_02 + s_11 * s_22 - s_12 * s_12
     a_00, a_11, a_22 = s_11 * s_22 - s_12 * s_12, s_00 * s_22 - s_02 * s_02, s_00 * s_11 - s_01 * s_01  # adj(S)
@@ -211,15 +219,33 @@ def plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
              + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z))
     g_1 = c_s_c - t_1 * c_c
     g_2 = c_c
+    return t_1, t_2, t_3, g_0, g_1, g_2
+
+
+@pixel
+def plane_svd_step(m, t_1, t_2, t_3, g_0, g_1, g_2, lam):
+    """One Newton step on det(M - l I) at l = lam (0 where the slope is not negative)."""
+    d = t_3 + lam * (-t_2 + lam * (t_1 - lam))
+    d_prime = -t_2 + lam * (2.0 * t_1 - 3.0 * lam)
+    g = g_0 + lam * (g_1 + lam * g_2)
+    g_prime = g_1 + 2.0 * lam * g_2
+    f = (m - lam) * d - m * lam * g
+    f_prime = -d + (m - lam) * d_prime - m * g - m * lam * g_prime
+    return -f / f_prime if f_prime < 0.0 else 0.0
+
+
+@pixel
+def plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
+    """Smallest eigenvalue of M = [Q^+, 1]^T [Q^+, 1] by Newton's method on its characteristic polynomial.
+
+    f(l) = (m - l) D(l) - m l G(l) with D(l) = det(S - l I) = t_3 - t_2 l + t_1 l^2 - l^3 and
+    G(l) = c^T adj(S - l I) c = g_0 + g_1 l + g_2 l^2. From l = 0 (f(0) = m det S >= 0) Newton's
+    steps are positive and never pass the smallest root.
+    """
+    t_1, t_2, t_3, g_0, g_1, g_2 = plane_svd_characteristic(c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
     lam = 0.0
     for _ in range(_NEWTON_STEPS):
-        d = t_3 + lam * (-t_2 + lam * (t_1 - lam))
-        d_prime = -t_2 + lam * (2.0 * t_1 - 3.0 * lam)
-        g = g_0 + lam * (g_1 + lam * g_2)
-        g_prime = g_1 + 2.0 * lam * g_2
-        f = (m - lam) * d - m * lam * g
-        f_prime = -d + (m - lam) * d_prime - m * g - m * lam * g_prime
-        step = -f / f_prime if f_prime < 0.0 else 0.0
+        step = plane_svd_step(m, t_1, t_2, t_3, g_0, g_1, g_2, lam)
         if not step > _NEWTON_TOL * lam:  # converged, or rounding says so (also stops on NaN)
             break
         lam += step
@@ -282,6 +308,207 @@ def _plane_svd_kernel(P, valid, h, fill, out):
             write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
+# ---- fast path for the 3x3 window: column tiles with a constant row pitch -------------------------
+#
+# LLVM vectorises a loop over pixels only if it can rule out (at run time) that its stores overwrite
+# its loads; every pair of arrays, or of rows of a 2-D array (their distance is a run-time stride),
+# costs one such check, and past a handful it gives up. So the cloud is laid out in column tiles of
+# _TILE pixels whose rows have the constant pitch _PITCH: P_t[t, v, k, :] holds x, y, z and the
+# weight w (1.0 valid, 0.0 not) of padded row v, columns c0 - 1 .. c0 + _TILE of tile t. The three
+# rows around a pixel are then one block with offsets known at compile time, and so is the
+# per-row scratch ``work`` (moments, polynomial coefficients, eigenvalue): each loop has one load
+# and one store block. A row of a tile is swept three times: moments -> coefficients (vectorised),
+# Newton steps on all pixels at once with a mask (vectorised, until none moves), null vector ->
+# output (vectorised). Each pixel does the same operations in the same order as the per-pixel
+# kernels above (same sums, same Newton steps, same stopping rule), so the results are the same bits.
+
+_TILE = 128
+_PITCH = 136  # >= _TILE + 2, a multiple of 8
+# rows of ``work``
+_M, _SX, _SY, _SZ, _S00, _S01, _S02, _S11, _S12, _S22 = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+_T1, _T2, _T3, _G0, _G1, _G2, _LAM, _ACT = 10, 11, 12, 13, 14, 15, 16, 17
+_WORK_ROWS = 18
+_PLANE_PCA, _PLANE_SVD, _VECTOR_SVD = 0, 1, 2  # ``kind`` of the tiled kernel
+
+
+@njit
+def _tiled_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, P_t):
+    """The point cloud of eq. 3 (as :func:`_point_cloud_kernel`, same arithmetic) in the tiled layout."""
+    H, W = z.shape
+    n_tiles = P_t.shape[0]
+    x_ray = np.empty(W + 2)
+    for j in range(W + 2):
+        x_ray[j] = (j - 1 - c_x) / f_x
+    for t in range(n_tiles):
+        c0 = t * _TILE
+        n = min(W - c0, _TILE) + 2  # padded columns c0 - 1 .. c0 + n - 2 of the image
+        for pv in range(H + 2):
+            row = P_t[t, pv]
+            v = pv - 1
+            row[:, :] = 0.0
+            if v < 0 or v >= H:
+                continue
+            y_ray = (v - c_y) / f_y
+            for j in range(n):
+                u = c0 - 1 + j
+                if u >= 0 and u < W and valid[v, u]:
+                    d = np.float64(z[v, u])
+                    row[0, j] = d * x_ray[c0 + j]
+                    row[1, j] = d * y_ray
+                    row[2, j] = d
+                    row[3, j] = 1.0
+
+
+@pixel
+def tile_moments(R, i):
+    """window_moments of pixel i of a tile row: R is the flat block of the three padded rows around it."""
+    c = 4 * _PITCH + i + 1  # the pixel itself: row 1, padded column i + 1
+    p_x, p_y, p_z = R[c], R[c + _PITCH], R[c + 2 * _PITCH]
+    m = 0.0
+    s_x = s_y = s_z = 0.0
+    s_xx = s_xy = s_xz = s_yy = s_yz = s_zz = 0.0
+    for r in range(3):
+        for d_u in range(3):
+            q = 4 * r * _PITCH + i + d_u
+            w = R[q + 3 * _PITCH]
+            r_x = (R[q] - p_x) * w
+            r_y = (R[q + _PITCH] - p_y) * w
+            r_z = (R[q + 2 * _PITCH] - p_z) * w
+            m += w
+            s_x += r_x
+            s_y += r_y
+            s_z += r_z
+            s_xx += r_x * r_x
+            s_xy += r_x * r_y
+            s_xz += r_x * r_z
+            s_yy += r_y * r_y
+            s_yz += r_y * r_z
+            s_zz += r_z * r_z
+    return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, R[c + 3 * _PITCH]
+
+
+@pixel
+def tile_prepare(R, n, kind, work):
+    """Sweep 1: moments, scatter matrix, coefficients of the characteristic polynomial, start of Newton."""
+    for i in range(n):
+        m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, w_p = tile_moments(R, i)
+        if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
+            s_00, s_01, s_02, s_11, s_12, s_22 = s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
+        else:
+            s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+        if kind == _PLANE_SVD:
+            c_x = p_x + s_x / m  # centroid
+            c_y = p_y + s_y / m
+            c_z = p_z + s_z / m
+            t_1, t_2, t_3, g_0, g_1, g_2 = plane_svd_characteristic(c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
+            work[_G0 * _PITCH + i] = g_0
+            work[_G1 * _PITCH + i] = g_1
+            work[_G2 * _PITCH + i] = g_2
+        else:
+            t_1, t_2, t_3 = characteristic(s_00, s_01, s_02, s_11, s_12, s_22)
+        work[_M * _PITCH + i] = m
+        work[_SX * _PITCH + i] = s_x
+        work[_SY * _PITCH + i] = s_y
+        work[_SZ * _PITCH + i] = s_z
+        work[_S00 * _PITCH + i] = s_00
+        work[_S01 * _PITCH + i] = s_01
+        work[_S02 * _PITCH + i] = s_02
+        work[_S11 * _PITCH + i] = s_11
+        work[_S12 * _PITCH + i] = s_12
+        work[_S22 * _PITCH + i] = s_22
+        work[_T1 * _PITCH + i] = t_1
+        work[_T2 * _PITCH + i] = t_2
+        work[_T3 * _PITCH + i] = t_3
+        work[_LAM * _PITCH + i] = 0.0
+        work[_ACT * _PITCH + i] = 1.0 if (w_p != 0.0) & (m >= 3) else 0.0
+
+
+@pixel
+def tile_newton(n, kind, work):
+    """Sweep 2: Newton steps from 0 for every pixel still moving, with the per-pixel stopping rule."""
+    for _ in range(_NEWTON_STEPS):
+        moving = 0
+        for i in range(n):
+            lam = work[_LAM * _PITCH + i]
+            if kind == _PLANE_SVD:
+                step = plane_svd_step(work[_M * _PITCH + i], work[_T1 * _PITCH + i], work[_T2 * _PITCH + i],
+                                      work[_T3 * _PITCH + i], work[_G0 * _PITCH + i], work[_G1 * _PITCH + i],
+                                      work[_G2 * _PITCH + i], lam)
+            else:
+                step = newton_step(work[_T1 * _PITCH + i], work[_T2 * _PITCH + i], work[_T3 * _PITCH + i], lam)
+            go = (work[_ACT * _PITCH + i] != 0.0) & (step > _NEWTON_TOL * lam)
+            work[_LAM * _PITCH + i] = lam + step if go else lam
+            work[_ACT * _PITCH + i] = 1.0 if go else 0.0
+            moving += np.int64(go)
+        if moving == 0:
+            break
+
+
+@pixel
+def tile_finish(R, n, kind, fill, work, out_flat):
+    """Sweep 3: the normal (null vector of the shifted matrix), facing the camera, or the fill value."""
+    for i in range(n):
+        c = 4 * _PITCH + i + 1
+        p_x, p_y, p_z, w_p = R[c], R[c + _PITCH], R[c + 2 * _PITCH], R[c + 3 * _PITCH]
+        m = work[_M * _PITCH + i]
+        lam = work[_LAM * _PITCH + i]
+        s_00, s_01, s_02 = work[_S00 * _PITCH + i], work[_S01 * _PITCH + i], work[_S02 * _PITCH + i]
+        s_11, s_12, s_22 = work[_S11 * _PITCH + i], work[_S12 * _PITCH + i], work[_S22 * _PITCH + i]
+        if kind == _PLANE_SVD:
+            c_x = p_x + work[_SX * _PITCH + i] / m  # centroid
+            c_y = p_y + work[_SY * _PITCH + i] / m
+            c_z = p_z + work[_SZ * _PITCH + i] / m
+            mu = m * lam / (m - lam)
+            n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
+                                            s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
+                                            s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+        else:
+            n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
+        ok = ok & (w_p != 0.0) & (m >= 3)
+        flip = n_x * p_x + n_y * p_y + n_z * p_z > 0.0
+        n_x = -n_x if flip else n_x
+        n_y = -n_y if flip else n_y
+        n_z = -n_z if flip else n_z
+        out_flat[3 * i] = np.float32(n_x) if ok else fill
+        out_flat[3 * i + 1] = np.float32(n_y) if ok else fill
+        out_flat[3 * i + 2] = np.float32(n_z) if ok else fill
+
+
+@njit
+def _tiled_fit_kernel(P_t, kind, fill, out):
+    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over the 3x3 window, from the tiled cloud."""
+    H, W = out.shape[:2]
+    n_tiles = P_t.shape[0]
+    flat = P_t.reshape(P_t.size)
+    tile_size = (H + 2) * 4 * _PITCH
+    work = np.empty(_WORK_ROWS * _PITCH)
+    for t in range(n_tiles):
+        c0 = t * _TILE
+        n = min(W - c0, _TILE)
+        for o_v in range(H):
+            start = t * tile_size + o_v * 4 * _PITCH  # padded rows o_v .. o_v + 2
+            R = flat[start:start + 12 * _PITCH]
+            tile_prepare(R, n, kind, work)
+            tile_newton(n, kind, work)
+            out_flat = out[o_v].reshape(3 * W)[3 * c0:3 * (c0 + n)]
+            tile_finish(R, n, kind, fill, work, out_flat)
+
+
+def tiled_cloud(z, valid, cam):
+    """The cloud of :func:`point_cloud` (pad 1) in the tiled layout of the 3x3 fast path, with weights."""
+    H, W = z.shape
+    P_t = np.empty((-(-W // _TILE), H + 2, 4, _PITCH), dtype=np.float64)
+    _tiled_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), P_t)
+    return P_t
+
+
+def _run_fit(kernel, kind, z, valid, cam, out, window, fill):
+    if int(window) == 3 and out.flags.c_contiguous:
+        _tiled_fit_kernel(tiled_cloud(z, valid, cam), kind, np.float32(fill), out)
+        return out
+    return _run(kernel, z, valid, cam, out, window, fill)
+
+
 def _run(kernel, z, valid, cam, out, window, fill):
     h = int(window) // 2
     P, P_valid = point_cloud(z, valid, cam, pad=h)
@@ -291,14 +518,14 @@ def _run(kernel, z, valid, cam, out, window, fill):
 
 def plane_svd(z, valid, cam, out, *, window=3, fill=0.0):
     """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch."""
-    return _run(_plane_svd_kernel, z, valid, cam, out, window, fill)
+    return _run_fit(_plane_svd_kernel, _PLANE_SVD, z, valid, cam, out, window, fill)
 
 
 def plane_pca(z, valid, cam, out, *, window=3, fill=0.0):
     """PlanePCA (Table I): smallest eigenvector of the covariance of Q^+ about its centroid."""
-    return _run(_plane_pca_kernel, z, valid, cam, out, window, fill)
+    return _run_fit(_plane_pca_kernel, _PLANE_PCA, z, valid, cam, out, window, fill)
 
 
 def vector_svd(z, valid, cam, out, *, window=3, fill=0.0):
     """VectorSVD (Table I): smallest right singular vector of the matrix of the vectors q - p."""
-    return _run(_vector_svd_kernel, z, valid, cam, out, window, fill)
+    return _run_fit(_vector_svd_kernel, _VECTOR_SVD, z, valid, cam, out, window, fill)

@@ -346,6 +346,105 @@ def median_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
 
 
 @pixel
+def median_span(z, v, a, b, f_x, f_y, c_x, c_y, rows):
+    """:func:`median_run` over pixels a..b-1 of row v, written on views that start at the span, so
+    that the loop index starts at 0 and LLVM vectorises it wherever the span starts."""
+    up, mid, dn = z[v - 1, a - 1:b + 1], z[v, a - 1:b + 1], z[v + 1, a - 1:b + 1]  # 1-D, so contiguous
+    rows_x, rows_y, rows_z = rows[0, a:b], rows[1, a:b], rows[2, a:b]
+    v_c = v - c_y
+    for i in range(b - a):
+        u_c = (a + i) - c_x
+        g_u, g_v = interior_gradients(np.float64(mid[i]), np.float64(mid[i + 2]),
+                                      np.float64(up[i + 1]), np.float64(dn[i + 1]))
+        # interior_candidates, on the row views
+        z_p = np.float64(mid[i + 1])
+        zx_p = u_c * z_p
+        zy_p = v_c * z_p
+        a0 = nz_or_inf(np.float64(up[i]), u_c - 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p)
+        a1 = nz_or_inf(np.float64(up[i + 1]), u_c, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p)
+        a2 = nz_or_inf(np.float64(up[i + 2]), u_c + 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p)
+        a3 = nz_or_inf(np.float64(mid[i]), u_c - 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p)
+        a4 = nz_or_inf(np.float64(mid[i + 2]), u_c + 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p)
+        a5 = nz_or_inf(np.float64(dn[i]), u_c - 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p)
+        a6 = nz_or_inf(np.float64(dn[i + 1]), u_c, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p)
+        a7 = nz_or_inf(np.float64(dn[i + 2]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p)
+        count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
+        s0, s1, s2, s3, s4, s5, s6, s7 = sort8(a0, a1, a2, a3, a4, a5, a6, a7)
+        n_x, n_y, n_z = finish(f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count,
+                               u_c, v_c, f_x, f_y)
+        rows_x[i] = n_x
+        rows_y[i] = n_y
+        rows_z[i] = n_z
+
+
+#: Flat spans shorter than this are computed like any other pixels (not worth a separate loop).
+_MIN_FLAT_SPAN = 16
+
+
+@pixel
+def equal_neighbours(z, v, a, b):
+    """How many pixels a..b-1 of row v have the depth of their right neighbour (a cheap bound on
+    :func:`flat_pixels`: a flat span of n pixels holds n + 1 such pairs)."""
+    mid = z[v, a - 1:b + 1]
+    count = 0
+    for i in range(b - a):
+        count += np.int64(mid[i + 1] == mid[i + 2])
+    return count
+
+
+@pixel
+def flat_pixels(z, v, a, b, flat):
+    """flat[i] = the 8 neighbours of pixel (v, a + i) have exactly its depth.
+
+    Such a pixel has no candidate (every dZ is 0), so its 3F2N normal is the authors' fallback
+    (0, 0, -1), whatever the rest of the arithmetic would give.
+    """
+    up, mid, dn = z[v - 1, a - 1:b + 1], z[v, a - 1:b + 1], z[v + 1, a - 1:b + 1]
+    for i in range(b - a):
+        c = mid[i + 1]
+        flat[i] = ((up[i] == c) & (up[i + 1] == c) & (up[i + 2] == c) & (mid[i] == c) & (mid[i + 2] == c)
+                   & (dn[i] == c) & (dn[i + 1] == c) & (dn[i + 2] == c))
+
+
+@pixel
+def median_run_split(z, v, a, b, f_x, f_y, c_x, c_y, rows, flat, fronto, out):
+    """3F2N-median normals of pixels a..b-1 of row v (all fully valid neighbourhoods) into ``out``.
+
+    Long spans of flat pixels (:func:`flat_pixels`) get (0, 0, -1) directly (``fronto`` holds that
+    normal for a whole row, x, y, z, x, y, z, ...): the same numbers, without the arithmetic (e.g. on
+    a constant background). The rest goes through :func:`median_span` and :func:`store_run`.
+    """
+    if equal_neighbours(z, v, a, b) <= _MIN_FLAT_SPAN:
+        median_run(z, v, a, b, f_x, f_y, c_x, c_y, rows)
+        store_run(out, v, a, b, rows)
+        return
+    flat_pixels(z, v, a, b, flat)
+    out_flat = out[v].reshape(3 * out.shape[1])
+    i = a
+    while i < b:
+        s = i  # find the next flat span [s, e) of at least _MIN_FLAT_SPAN pixels
+        e = b
+        while s < b:
+            if flat[s - a]:
+                e = s
+                while e < b and flat[e - a]:
+                    e += 1
+                if e - s >= _MIN_FLAT_SPAN:
+                    break
+                s = e
+            else:
+                s += 1
+        if s >= b:
+            s = b
+            e = b
+        if s > i:
+            median_span(z, v, i, s, f_x, f_y, c_x, c_y, rows)
+            store_run(out, v, i, s, rows)
+        out_flat[3 * s:3 * e] = fronto[3 * s:3 * e]
+        i = e
+
+
+@pixel
 def mean_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
     """3F2N-mean normals of pixels u0..u1-1 of row v (all fully valid neighbourhoods) into ``rows``."""
     v_c = v - c_y
@@ -405,11 +504,13 @@ def _tf2n_median_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill,
     """
     H, W = z.shape
     rows = np.empty((3, W), dtype=np.float32)  # a run's normals, component by component
+    flat = np.empty(W, dtype=np.bool_)
+    fronto = np.zeros(3 * W, dtype=np.float32)  # (0, 0, -1) for a whole row
+    fronto[2::3] = -1.0
     buf = np.empty(8)
     for v in range(H):
         if row_is_dense(rows_valid, v):
-            median_run(z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows)
-            store_run(out, v, 1, W - 1, rows)
+            median_run_split(z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
             generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
             generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
             continue
@@ -417,8 +518,7 @@ def _tf2n_median_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill,
         while u < W:
             if all_nine_valid(valid, v, u):
                 end = run_end(valid, v, u)
-                median_run(z, v, u, end, f_x, f_y, c_x, c_y, rows)
-                store_run(out, v, u, end, rows)
+                median_run_split(z, v, u, end, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
                 u = end
             else:
                 generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)

@@ -62,6 +62,8 @@ from __future__ import annotations
 
 import math
 
+import numba
+import numba.extending
 import numpy as np
 
 from ._choices import SDA_BASES, SDA_MAX_ITERATIONS
@@ -87,6 +89,46 @@ _P = 3  # padding of the working arrays: every read of a step stays inside, and 
 def state_cost(s, target):
     """|s - target| for a state code, inf for a pixel without one."""
     return select(s >= 0, abs(np.float64(s) - target), _INF)
+
+
+# Near-ties. In the kernels ``tol`` is a float (the scale-invariant mode) or None (exact comparisons):
+# Numba compiles a version of each kernel per type, so the paper-faithful mode runs without the
+# tolerance's arithmetic (tol = 0.0 gives the same numbers, in about 1.2x the time per pass).
+# Plain Python below (the meaning); the overloads are what the kernels inline.
+
+
+def minus_tol(x, tol):
+    """x - tol; x when tol is None. A later candidate e beats the best so far if e < minus_tol(best, tol)."""
+    return x if tol is None else x - tol
+
+
+def tolerance_at(tol, s_p):
+    """The tolerance at a pixel of signal ``s_p``: tol |s_p| (None stays None)."""
+    return None if tol is None else tol * abs(s_p)
+
+
+def snap(lap, tol_p):
+    """A Laplacian with |lap| <= tol_p counts as exactly 0 (tol_p None: unchanged)."""
+    return lap if tol_p is None or abs(lap) > tol_p else 0.0
+
+
+def _exact(tol):
+    return isinstance(tol, numba.types.NoneType)
+
+
+@numba.extending.overload(minus_tol, inline="always")
+def _minus_tol(x, tol):
+    return (lambda x, tol: x) if _exact(tol) else (lambda x, tol: x - tol)
+
+
+@numba.extending.overload(tolerance_at, inline="always")
+def _tolerance_at(tol, s_p):
+    return (lambda tol, s_p: None) if _exact(tol) else (lambda tol, s_p: tol * abs(s_p))
+
+
+@numba.extending.overload(snap, inline="always")
+def _snap(lap, tol_p):
+    return (lambda lap, tol_p: lap) if _exact(tol_p) else (lambda lap, tol_p: select(abs(lap) <= tol_p, 0.0, lap))
 
 
 # Helpers below take scalars only: a Numba helper that takes arrays and branches keeps reference
@@ -117,7 +159,7 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
     Central (S_f - S_b) / 2 with energy A_p; with ``reflect`` a neighbour mirrored at the image border
     (``mirrored``: the missing neighbour lies outside the image, the other is valid) makes it 0, as in the authors' code. Forward S_f - S_p with energy A_f, backward
     S_p - S_b with A_b. The first wins ties, and near-ties: a later candidate wins only if cheaper by more
-    than ``tol`` (0 in the paper-faithful mode; see :data:`surfnorm.units.TIE_TOLERANCE`). (Selects, no
+    than ``tol`` (None in the paper-faithful mode: exact; see :data:`surfnorm.units.TIE_TOLERANCE`). (Selects, no
     branches: the loop of :func:`_sda_init` vectorises.)
     """
     central = has_b & has_f
@@ -125,9 +167,9 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
     g = select(central, 0.5 * s_f - 0.5 * s_b, 0.0)
     e = select(has_central, a_p, _INF)
     state = select(has_central, np.int8(2), _NO_STATE)
-    forward = has_f & (a_f < e - tol)
+    forward = has_f & (a_f < minus_tol(e, tol))
     g, e, state = select(forward, s_f - s_p, g), select(forward, a_f, e), select(forward, np.int8(1), state)
-    backward = has_b & (a_b < e - tol)
+    backward = has_b & (a_b < minus_tol(e, tol))
     g, e, state = select(backward, s_p - s_b, g), select(backward, a_b, e), select(backward, np.int8(0), state)
     return g, e, state
 
@@ -136,18 +178,18 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
 def _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v):
     """Signed Laplacians L (1 where missing, as the authors' padding) and roughness A = |L| (inf where missing).
 
-    |L| <= ``tol`` |S_p| counts as exactly 0 (``tol`` = 0: only an exact 0; see :data:`surfnorm.units.TIE_TOLERANCE`)."""
+    |L| <= ``tol`` |S_p| counts as exactly 0 (``tol`` None: only an exact 0; see :data:`surfnorm.units.TIE_TOLERANCE`)."""
     Hp, Wp = s.shape
     for v in range(1, Hp - 1):
         for u in range(1, Wp - 1):
             if ok[v, u]:
-                tol_p = tol * abs(s[v, u])
+                tol_p = tolerance_at(tol, s[v, u])
                 lap, has = laplacian(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1])
-                lap = select(abs(lap) <= tol_p, 0.0, lap)
+                lap = snap(lap, tol_p)
                 l_u[v, u] = lap
                 a_u[v, u] = abs(lap) if has else _INF
                 lap, has = laplacian(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u])
-                lap = select(abs(lap) <= tol_p, 0.0, lap)
+                lap = snap(lap, tol_p)
                 l_v[v, u] = lap
                 a_v[v, u] = abs(lap) if has else _INF
             else:
@@ -178,7 +220,7 @@ def _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, 
             g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
                                         a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
                                         ((u == _P) & ok[v, u + 1]) | ((u == Wp - _P - 1) & ok[v, u - 1]), reflect,
-                                        tol * abs(s[v, u]))
+                                        tolerance_at(tol, s[v, u]))
             g_u[v, u] = select(ok[v, u], g, 0.0)
             e_u[v, u] = select(ok[v, u], e, _INF)
             s_u[v, u] = select(ok[v, u], st, _NO_STATE)
@@ -187,28 +229,38 @@ def _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, 
             g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
                                         a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
                                         ((v == _P) & ok[v + 1, u]) | ((v == Hp - _P - 1) & ok[v - 1, u]), reflect,
-                                        tol * abs(s[v, u]))
+                                        tolerance_at(tol, s[v, u]))
             g_v[v, u] = select(ok[v, u], g, 0.0)
             e_v[v, u] = select(ok[v, u], e, _INF)
             s_v[v, u] = select(ok[v, u], st, _NO_STATE)
 
 
 @pixel
+def challenge(j, e_j, k, best, bar, tol):
+    """Candidate j (energy e_j) against the best so far, (k, best) with bar = best - tol: it wins if e_j < bar.
+
+    Returns the new (k, best, bar). Carrying bar, rather than forming best - tol at each comparison, keeps
+    the subtractions off the chain of comparisons (measured: passes about 4 % faster with a tolerance).
+    """
+    wins = e_j < bar
+    return select(wins, j, k), select(wins, e_j, best), select(wins, minus_tol(e_j, tol), bar)
+
+
+@pixel
 def cheapest(e0, e1, e2, e3, e4, e5, e6, e7, e8, tol):
     """(index, energy) of the cheapest of nine candidates, the lowest index on ties; keep (2) if all are inf.
 
-    A later candidate wins only if cheaper by more than ``tol`` (0: any amount; see :data:`surfnorm.units.TIE_TOLERANCE`).
+    A later candidate wins only if cheaper by more than ``tol`` (None: any amount; see :data:`surfnorm.units.TIE_TOLERANCE`).
     """
-    k = 0
-    best = e0
-    k, best = select(e1 < best - tol, 1, k), select(e1 < best - tol, e1, best)
-    k, best = select(e2 < best - tol, 2, k), select(e2 < best - tol, e2, best)
-    k, best = select(e3 < best - tol, 3, k), select(e3 < best - tol, e3, best)
-    k, best = select(e4 < best - tol, 4, k), select(e4 < best - tol, e4, best)
-    k, best = select(e5 < best - tol, 5, k), select(e5 < best - tol, e5, best)
-    k, best = select(e6 < best - tol, 6, k), select(e6 < best - tol, e6, best)
-    k, best = select(e7 < best - tol, 7, k), select(e7 < best - tol, e7, best)
-    k, best = select(e8 < best - tol, 8, k), select(e8 < best - tol, e8, best)
+    k, best, bar = 0, e0, minus_tol(e0, tol)
+    k, best, bar = challenge(1, e1, k, best, bar, tol)
+    k, best, bar = challenge(2, e2, k, best, bar, tol)
+    k, best, bar = challenge(3, e3, k, best, bar, tol)
+    k, best, bar = challenge(4, e4, k, best, bar, tol)
+    k, best, bar = challenge(5, e5, k, best, bar, tol)
+    k, best, bar = challenge(6, e6, k, best, bar, tol)
+    k, best, bar = challenge(7, e7, k, best, bar, tol)
+    k, best, bar = challenge(8, e8, k, best, bar, tol)
     return select(best == _INF, 2, k), best
 
 
@@ -248,7 +300,7 @@ def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, 
             valid_p = ok[v, u]
             flags = con[v, u]
             z_p = s[v, u]
-            tol_p = tol * abs(z_p)  # near-ties at p (0 in the paper-faithful mode)
+            tol_p = tolerance_at(tol, z_p)  # near-ties at p (None in the paper-faithful mode)
             gu_p = g_u[v, u]
             gv_p = g_v[v, u]
             # ---- G_u: energies (see the module docstring) ----
@@ -315,6 +367,11 @@ def _padded(shape, dtype, margin_value):
     return arr
 
 
+def _kernel_tol(tie_tol):
+    """The kernels' ``tol``: None for exact comparisons (tie_tol 0), which Numba compiles without the tolerance."""
+    return float(tie_tol) if tie_tol else None
+
+
 def _run_sda(signal, valid, iterations, border, tie_tol=0.0):
     """The dynamic programming on padded arrays. Returns [g_u, g_v, e_u, e_v, signal] padded, and the passes applied."""
     H, W = signal.shape
@@ -332,13 +389,14 @@ def _run_sda(signal, valid, iterations, border, tie_tol=0.0):
              _padded(shape, np.int8, _NO_STATE), _padded(shape, np.int8, _NO_STATE)] for _ in range(2)]
     l_u = np.ones(shape)
     l_v = np.ones(shape)
-    _sda_laplacians(s, ok, tie_tol, l_u, l_v, a_u, a_v)
-    _sda_init(s, ok, border == "reflect", tie_tol, l_u, l_v, a_u, a_v, con, *sets[0])
+    tol = _kernel_tol(tie_tol)
+    _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v)
+    _sda_init(s, ok, border == "reflect", tol, l_u, l_v, a_u, a_v, con, *sets[0])
     cap = MAX_ITERATIONS if iterations is None else iterations
     passes = 0
     cur = 0
     for i in range(1, cap + 1):
-        if not _sda_step(s, ok, 1.0 / (i + 1), tie_tol, a_u, a_v, con, *sets[cur], *sets[1 - cur]):
+        if not _sda_step(s, ok, 1.0 / (i + 1), tol, a_u, a_v, con, *sets[cur], *sets[1 - cur]):
             break
         cur = 1 - cur
         passes = i

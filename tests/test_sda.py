@@ -10,6 +10,7 @@ import surfnorm
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.metrics import mean_angular_error
 from surfnorm.reference import official_figures
+from surfnorm import sda
 from surfnorm.sda import MAX_ITERATIONS, sda_gradients
 from surfnorm.units import TIE_TOLERANCE
 
@@ -64,6 +65,27 @@ def test_near_ties_agree_with_naive_reference(holes):
     np.testing.assert_allclose(g_u, mm_u * 0.0254, rtol=0, atol=1e-4)
     exact = sda_gradients(z, valid, iterations=None)[0] - sda_gradients(mm, valid, iterations=None)[0] * 0.0254
     assert np.nanmax(np.abs(exact)) > 0.1  # exact comparisons break the ties differently
+
+
+def test_exact_comparisons_are_a_tolerance_of_zero(monkeypatch):
+    """tie_tol 0 runs kernels compiled without the tolerance (tol None); compiled with a float tol of 0.0 they give the same bits."""
+    K = surfaces.camera(W, H)
+    depth, valid = random_depth("discontinuous", True, seed=33)
+    depth = (np.rint(depth * 1000) * 0.0254).astype(np.float32)  # near-ties, as above
+
+    def run():
+        z = np.where(valid, depth, 0.0).astype(np.float64)
+        return (sda_gradients(z, valid, iterations=None),
+                [surfnorm.estimate(depth, K, method="sda_sne", base=base, border=border, iterations=None)
+                 for base in ("cp2tv", "3f2n") for border in ("one-sided", "reflect")])
+
+    exact = run()
+    monkeypatch.setattr(sda, "_kernel_tol", lambda tie_tol: float(tie_tol))
+    assert sda._kernel_tol(0.0) == 0.0
+    zero = run()
+    assert exact[0][2] == zero[0][2] > 0
+    for a, b in zip(exact[0][:2] + tuple(exact[1]), zero[0][:2] + tuple(zero[1])):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("border", ["one-sided", "reflect"])

@@ -11,6 +11,7 @@ than the wall clock on a shared machine. Also checks that both give the same bit
 """
 
 import argparse
+import inspect
 import os
 import subprocess
 import sys
@@ -36,7 +37,8 @@ def load_old(rev):
     text = subprocess.run(["git", "show", f"{rev}:src/surfnorm/sda.py"], cwd=ROOT, check=True,
                           capture_output=True, text=True).stdout
     text = text.replace("from ._config import", "from surfnorm._config import").replace(
-        "from .three_filters import", "from surfnorm.three_filters import")
+        "from .three_filters import", "from surfnorm.three_filters import").replace(
+        "from ._choices import", "from surfnorm._choices import")
     folder = tempfile.mkdtemp(prefix="sda-old-")
     Path(folder, "sda_old.py").write_text(text)
     sys.path.insert(0, folder)
@@ -61,13 +63,15 @@ def stages(mod, z, valid, cam, clock):
              mod._padded(shape, np.int8, -1), mod._padded(shape, np.int8, -1)] for _ in range(2)]
     l_u, l_v = np.ones(shape), np.ones(shape)
     t.append(clock())
-    mod._sda_laplacians(s, ok, l_u, l_v, a_u, a_v)
+    # Kernels since the scale-invariant near-tie tolerance take it after these arguments (None: exact, the default).
+    tol = (None,) if "tol" in inspect.signature(mod._sda_step.py_func).parameters else ()
+    mod._sda_laplacians(s, ok, *tol, l_u, l_v, a_u, a_v)
     t.append(clock())
-    mod._sda_init(s, ok, False, l_u, l_v, a_u, a_v, con, *sets[0])
+    mod._sda_init(s, ok, False, *tol, l_u, l_v, a_u, a_v, con, *sets[0])
     t.append(clock())
     cur = 0
     for i in range(1, 4):
-        mod._sda_step(s, ok, 1.0 / (i + 1), a_u, a_v, con, *sets[cur], *sets[1 - cur])
+        mod._sda_step(s, ok, 1.0 / (i + 1), *tol, a_u, a_v, con, *sets[cur], *sets[1 - cur])
         cur = 1 - cur
         t.append(clock())
     out = np.empty(z.shape + (3,), np.float32)

@@ -128,12 +128,30 @@ def _make_row(term):
         the stride is a run-time value and the loop stayed scalar).
         """
         W = out.shape[1] // 3
-        x_u, x_m, x_d = X[v - 1], X[v], X[v + 1]
-        y_u, y_m, y_d = Y[v - 1], Y[v], Y[v + 1]
-        z_u, z_m, z_d = Z[v - 1], Z[v], Z[v + 1]
-        k_u, k_m, k_d = OK[v - 1], OK[v], OK[v + 1]
-        o = out[v - 1]
+        # Only the columns [a, b) from the first to the last valid pixel of the row are computed: an
+        # invalid pixel gets the fill value whatever its neighbours (a masked-out background costs nothing).
+        k_row = OK[v]
+        a, b = W, W
         for u in range(W):
+            if k_row[u + 1] != 0:
+                a = u
+                break
+        for u in range(W - 1, a - 1, -1):
+            if k_row[u + 1] != 0:
+                b = u + 1
+                break
+        row_out = out[v - 1]
+        for i in range(3 * a):
+            row_out[i] = fill
+        for i in range(3 * b, 3 * W):
+            row_out[i] = fill
+        # Views from column a - 1 (padded a), so that the loop index starts at 0.
+        x_u, x_m, x_d = X[v - 1, a:], X[v, a:], X[v + 1, a:]
+        y_u, y_m, y_d = Y[v - 1, a:], Y[v, a:], Y[v + 1, a:]
+        z_u, z_m, z_d = Z[v - 1, a:], Z[v, a:], Z[v + 1, a:]
+        k_u, k_m, k_d = OK[v - 1, a:], OK[v, a:], OK[v + 1, a:]
+        o = row_out[3 * a:]
+        for u in range(b - a):
             p_x, p_y, p_z = x_m[u + 1], y_m[u + 1], z_m[u + 1]
             # RING: right, up-right, up, up-left, left, down-left, down, down-right
             r0 = offset(x_m[u + 2], y_m[u + 2], z_m[u + 2], k_m[u + 2], p_x, p_y, p_z)

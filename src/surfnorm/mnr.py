@@ -21,38 +21,9 @@ from __future__ import annotations
 import numpy as np
 
 from ._config import njit, pixel, row
-from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment, smoothness, usable
+from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment
 
 __all__ = ["mnr"]
-
-# (dv, du, axis of the 1D DLF) of the candidate neighbours, in tie-break order.
-_NEIGHBOURS = ((0, -1, 0), (0, 1, 0), (-1, 0, 1), (1, 0, 1))
-
-
-@pixel
-def mnr_choice(z, valid, has_normal, v, u, dlf):
-    """The pixel (v', u') whose normal p = (v, u) takes: the smoothest of its 4-neighbours and itself.
-
-    The rule at one pixel, written out; the kernels apply it row by row from
-    smoothness values computed once per pixel (:func:`mnr_row`).
-    """
-    best_v, best_u = v, u
-    best_s = np.float32(np.inf)
-    for k in range(4):
-        dv, du, axis = _NEIGHBOURS[k]
-        q_v, q_u = v + dv, u + du
-        if usable(has_normal, q_v, q_u):
-            s = smoothness(z, valid, q_v, q_u, dlf, axis)
-            if s < best_s:
-                best_s, best_v, best_u = s, q_v, q_u
-    if dlf == 0:
-        s_p = np.float32(0.5) * (smoothness(z, valid, v, u, 0, 0) + smoothness(z, valid, v, u, 0, 1))
-    else:
-        s_p = smoothness(z, valid, v, u, dlf, 0)
-    if s_p < best_s:
-        best_v, best_u = v, u
-    return best_v, best_u
-
 
 @pixel
 def self_smoothness_row(s_h, s_v, one_d, s_self):
@@ -66,12 +37,15 @@ def self_smoothness_row(s_h, s_v, one_d, s_self):
 
 @pixel
 def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, tol, fill, out_row):
-    """MNR at one pixel of row v, any neighbours missing (the rule of :func:`mnr_choice` on precomputed scores).
+    """MNR at one pixel of row v, any neighbours missing: the normal of the smoothest of left, right, up, down, self.
 
-    A candidate replaces the best so far only if smoother by more than
-    ``tol`` (0: strictly smoother; see :func:`mnr_row`). Every candidate is
-    read (at clamped columns) before the choice, which then only selects
-    among values (see :func:`surfnorm.gradients.clamp`).
+    Candidates are the 4-neighbours that have a normal, scored by their
+    precomputed smoothness (s_h for left/right, s_up/s_dn for up/down, s_self
+    for p); ties keep the first in that order, as in the authors' code. A
+    candidate replaces the best so far only if smoother by more than ``tol``
+    (0: strictly smoother; see :func:`mnr_row`). Every candidate is read (at
+    clamped columns) before the choice, which then only selects among values
+    (see :func:`surfnorm.gradients.clamp`).
     """
     W = out_row.shape[0]
     x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)

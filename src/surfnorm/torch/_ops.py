@@ -245,7 +245,7 @@ def cp2tv(g: Grid, cam, *, border: str, fill: float):
     return unit(n_x, n_y, n_z, g.valid & ok_u & ok_v, fill)
 
 
-# (dv, du, axis of the 1D DLF) of MNR's candidate neighbours, in tie-break order (mnr._NEIGHBOURS)
+# (dv, du, axis of the 1D DLF) of MNR's candidate neighbours, in tie-break order (as surfnorm.mnr.mnr_pixel)
 _MNR_NEIGHBOURS = ((0, -1, 0), (0, 1, 0), (-1, 0, 1), (1, 0, 1))
 
 

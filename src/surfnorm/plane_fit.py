@@ -106,20 +106,17 @@ def window_moments(P, valid, v, u, h):
     for q_v in range(v - h, v + h + 1):
         for q_u in range(u - h, u + h + 1):
             w = 1.0 if valid[q_v, q_u] else 0.0
-            r_x = (P[0, q_v, q_u] - p_x) * w
-            r_y = (P[1, q_v, q_u] - p_y) * w
-            r_z = (P[2, q_v, q_u] - p_z) * w
-            m += w
-            s_x += r_x
-            s_y += r_y
-            s_z += r_z
-            s_xx += r_x * r_x
-            s_xy += r_x * r_y
-            s_xz += r_x * r_z
-            s_yy += r_y * r_y
-            s_yz += r_y * r_z
-            s_zz += r_z * r_z
+            m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = add_offset(
+                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz,
+                (P[0, q_v, q_u] - p_x) * w, (P[1, q_v, q_u] - p_y) * w, (P[2, q_v, q_u] - p_z) * w, w)
     return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
+
+
+@pixel
+def add_offset(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, r_x, r_y, r_z, w):
+    """The moments with one more offset r (already weighted by w): count, sums, sums of products."""
+    return (m + w, s_x + r_x, s_y + r_y, s_z + r_z, s_xx + r_x * r_x, s_xy + r_x * r_y, s_xz + r_x * r_z,
+            s_yy + r_y * r_y, s_yz + r_y * r_z, s_zz + r_z * r_z)
 
 
 @pixel
@@ -371,19 +368,9 @@ def tile_moments(R, i):
         for d_u in range(3):
             q = 4 * r * _PITCH + i + d_u
             w = R[q + 3 * _PITCH]
-            r_x = (R[q] - p_x) * w
-            r_y = (R[q + _PITCH] - p_y) * w
-            r_z = (R[q + 2 * _PITCH] - p_z) * w
-            m += w
-            s_x += r_x
-            s_y += r_y
-            s_z += r_z
-            s_xx += r_x * r_x
-            s_xy += r_x * r_y
-            s_xz += r_x * r_z
-            s_yy += r_y * r_y
-            s_yz += r_y * r_z
-            s_zz += r_z * r_z
+            m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = add_offset(
+                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz,
+                (R[q] - p_x) * w, (R[q + _PITCH] - p_y) * w, (R[q + 2 * _PITCH] - p_z) * w, w)
     return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, R[c + 3 * _PITCH]
 
 

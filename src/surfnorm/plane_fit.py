@@ -249,8 +249,37 @@ def plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
     return lam
 
 
+_PLANE_PCA, _PLANE_SVD, _VECTOR_SVD = 0, 1, 2  # ``kind`` of the fit kernels
+
+
+@pixel
+def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
+    """The normal of one window from its moments: PlanePCA, VectorSVD or PlaneSVD (``kind``); returns (n, ok)."""
+    n_x = n_y = n_z = 0.0
+    ok = False
+    if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
+        sigma = smallest_eigenvalue(s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+        n_x, n_y, n_z, ok = null_vector(s_xx - sigma, s_xy, s_xz, s_yy - sigma, s_yz, s_zz - sigma)
+    else:
+        s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+        if kind == _PLANE_PCA:  # the covariance about the centroid
+            sigma = smallest_eigenvalue(s_00, s_01, s_02, s_11, s_12, s_22)
+            n_x, n_y, n_z, ok = null_vector(s_00 - sigma, s_01, s_02, s_11 - sigma, s_12, s_22 - sigma)
+        else:  # PlaneSVD: [Q+, 1] with the offset inside the normalisation
+            c_x = p_x + s_x / m  # centroid
+            c_y = p_y + s_y / m
+            c_z = p_z + s_z / m
+            lam = plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
+            mu = m * lam / (m - lam)
+            n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
+                                            s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
+                                            s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+    return n_x, n_y, n_z, ok
+
+
 @njit
-def _plane_pca_kernel(P, valid, h, fill, out):
+def _window_fit_kernel(P, valid, h, kind, fill, out):
+    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over any window, pixel by pixel (the 3x3 one has a tiled path)."""
     H, W = out.shape[:2]
     for o_v in range(H):
         for o_u in range(W):
@@ -259,49 +288,9 @@ def _plane_pca_kernel(P, valid, h, fill, out):
             n_x = n_y = n_z = 0.0
             if valid[v, u]:
                 m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
-                if m >= 3:
-                    s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
-                    sigma = smallest_eigenvalue(s_00, s_01, s_02, s_11, s_12, s_22)
-                    n_x, n_y, n_z, ok = null_vector(s_00 - sigma, s_01, s_02, s_11 - sigma, s_12, s_22 - sigma)
-            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
-
-
-@njit
-def _vector_svd_kernel(P, valid, h, fill, out):
-    H, W = out.shape[:2]
-    for o_v in range(H):
-        for o_u in range(W):
-            v, u = o_v + h, o_u + h  # p in the padded cloud
-            ok = False
-            n_x = n_y = n_z = 0.0
-            if valid[v, u]:
-                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
-                if m >= 3:  # p and at least two vectors q - p
-                    sigma = smallest_eigenvalue(s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
-                    n_x, n_y, n_z, ok = null_vector(s_xx - sigma, s_xy, s_xz, s_yy - sigma, s_yz, s_zz - sigma)
-            write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
-
-
-@njit
-def _plane_svd_kernel(P, valid, h, fill, out):
-    H, W = out.shape[:2]
-    for o_v in range(H):
-        for o_u in range(W):
-            v, u = o_v + h, o_u + h  # p in the padded cloud
-            ok = False
-            n_x = n_y = n_z = 0.0
-            if valid[v, u]:
-                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
-                if m >= 3:
-                    s_00, s_01, s_02, s_11, s_12, s_22 = scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
-                    c_x = P[0, v, u] + s_x / m  # centroid
-                    c_y = P[1, v, u] + s_y / m
-                    c_z = P[2, v, u] + s_z / m
-                    lam = plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
-                    mu = m * lam / (m - lam)
-                    n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
-                                                    s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
-                                                    s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+                if m >= 3:  # p and at least two other points
+                    n_x, n_y, n_z, ok = fit_normal(kind, P[0, v, u], P[1, v, u], P[2, v, u], m, s_x, s_y, s_z,
+                                                   s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
             write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
@@ -325,7 +314,6 @@ _PITCH = 136  # >= _TILE + 2, a multiple of 8
 _M, _SX, _SY, _SZ, _S00, _S01, _S02, _S11, _S12, _S22 = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 _T1, _T2, _T3, _G0, _G1, _G2, _LAM, _ACT = 10, 11, 12, 13, 14, 15, 16, 17
 _WORK_ROWS = 18
-_PLANE_PCA, _PLANE_SVD, _VECTOR_SVD = 0, 1, 2  # ``kind`` of the tiled kernel
 
 
 @njit
@@ -489,30 +477,26 @@ def tiled_cloud(z, valid, cam):
     return P_t
 
 
-def _run_fit(kernel, kind, z, valid, cam, out, window, fill):
+def _run_fit(kind, z, valid, cam, out, window, fill):
     if int(window) == 3 and out.flags.c_contiguous:
         _tiled_fit_kernel(tiled_cloud(z, valid, cam), kind, np.float32(fill), out)
         return out
-    return _run(kernel, z, valid, cam, out, window, fill)
-
-
-def _run(kernel, z, valid, cam, out, window, fill):
     h = int(window) // 2
     P, P_valid = point_cloud(z, valid, cam, pad=h)
-    kernel(P, P_valid, h, np.float32(fill), out)
+    _window_fit_kernel(P, P_valid, h, kind, np.float32(fill), out)
     return out
 
 
 def plane_svd(z, valid, cam, out, *, window=3, fill=0.0):
     """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch."""
-    return _run_fit(_plane_svd_kernel, _PLANE_SVD, z, valid, cam, out, window, fill)
+    return _run_fit(_PLANE_SVD, z, valid, cam, out, window, fill)
 
 
 def plane_pca(z, valid, cam, out, *, window=3, fill=0.0):
     """PlanePCA (Table I): smallest eigenvector of the covariance of Q^+ about its centroid."""
-    return _run_fit(_plane_pca_kernel, _PLANE_PCA, z, valid, cam, out, window, fill)
+    return _run_fit(_PLANE_PCA, z, valid, cam, out, window, fill)
 
 
 def vector_svd(z, valid, cam, out, *, window=3, fill=0.0):
     """VectorSVD (Table I): smallest right singular vector of the matrix of the vectors q - p."""
-    return _run_fit(_vector_svd_kernel, _VECTOR_SVD, z, valid, cam, out, window, fill)
+    return _run_fit(_VECTOR_SVD, z, valid, cam, out, window, fill)

@@ -40,6 +40,20 @@ def test_depth_and_mask_files(tmp_path):
     np.save(tmp_path / "m.npy", np.zeros((4, 4, 2), bool))
     with pytest.raises(DataFileError, match=r"m.npy: expected a 2-D mask, got an array of shape \(4, 4, 2\)"):
         read_mask(tmp_path / "m.npy")
+    np.savez(tmp_path / "two.npz", a=np.ones((2, 2)), b=np.ones((2, 2)))
+    with pytest.raises(DataFileError, match=r"two.npz: expected an array named 'mask' or a single array in the .npz "
+                                            r"archive, got 2 arrays \(a, b\)"):
+        read_mask(tmp_path / "two.npz")
+    (tmp_path / "cut.npy").write_bytes((tmp_path / "m.npy").read_bytes()[:60])
+    with pytest.raises(DataFileError, match=r"cut.npy: cannot read as NumPy .npy mask \(truncated or corrupt"):
+        read_mask(tmp_path / "cut.npy")
+    with pytest.raises(DataFileError, match=r"missing.npy: cannot read mask file"):
+        read_mask(tmp_path / "missing.npy")
+    (tmp_path / "bad.png").write_bytes(b"\x89PNG not an image")
+    with pytest.raises(DataFileError, match=r"bad.png: cannot decode as an image \(empty, truncated or corrupt\)"):
+        read_mask(tmp_path / "bad.png")
+    np.savez(tmp_path / "named.npz", other=np.zeros((2, 2)), mask=np.eye(2))
+    np.testing.assert_array_equal(read_mask(tmp_path / "named.npz"), np.eye(2, dtype=bool))
 
 
 def test_normal_files(tmp_path):

@@ -39,26 +39,27 @@ def depth_suffix(path) -> str:
     return ".bin.gz" if name.endswith(".bin.gz") else Path(name).suffix
 
 
-def _read_numpy(path: Path, suffix: str) -> np.ndarray:
+def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
+    """The array of a .npy file, or of a .npz archive (the array called ``name``, or its only array)."""
     try:
         with open(path, "rb") as fh:
             data = np.load(fh, allow_pickle=False)
             if suffix == ".npz":
                 with data:
                     keys = list(data.keys())
-                    if "depth" in keys:
-                        return np.asarray(data["depth"])
+                    if name in keys:
+                        return np.asarray(data[name])
                     if len(keys) != 1:
-                        raise DataFileError(f"{path}: expected an array named 'depth' or a single array in the .npz archive, "
+                        raise DataFileError(f"{path}: expected an array named {name!r} or a single array in the .npz archive, "
                                             f"got {len(keys)} arrays ({', '.join(keys) or 'none'})")
                     return np.asarray(data[keys[0]])
             return np.asarray(data)
     except DataFileError:
         raise
     except OSError as exc:
-        raise DataFileError(f"{path}: cannot read depth file ({exc.strerror or exc})") from exc
+        raise DataFileError(f"{path}: cannot read {name} file ({exc.strerror or exc})") from exc
     except (ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise DataFileError(f"{path}: cannot read as NumPy {suffix} depth (truncated or corrupt: {exc})") from exc
+        raise DataFileError(f"{path}: cannot read as NumPy {suffix} {name} (truncated or corrupt: {exc})") from exc
 
 
 def _read_image(path: Path) -> np.ndarray:
@@ -132,29 +133,16 @@ def read_mask(path) -> np.ndarray:
     path = Path(path)
     suffix = depth_suffix(path)
     if suffix in (".npy", ".npz"):
-        try:
-            with open(path, "rb") as fh:
-                data = np.load(fh, allow_pickle=False)
-                if suffix == ".npz":
-                    with data:
-                        keys = list(data.keys())
-                        key = "mask" if "mask" in keys else (keys[0] if len(keys) == 1 else None)
-                        if key is None:
-                            raise DataFileError(f"{path}: expected an array named 'mask' or a single array, got {', '.join(keys) or 'none'}")
-                        data = np.asarray(data[key])
-                arr = np.asarray(data)
-        except DataFileError:
-            raise
-        except OSError as exc:
-            raise DataFileError(f"{path}: cannot read mask file ({exc.strerror or exc})") from exc
-        except (ValueError, EOFError, zipfile.BadZipFile) as exc:
-            raise DataFileError(f"{path}: cannot read as a NumPy mask (truncated or corrupt: {exc})") from exc
+        arr = _read_numpy(path, suffix, "mask")
     else:
         try:
             raw = path.read_bytes()
         except OSError as exc:
             raise DataFileError(f"{path}: cannot read mask file ({exc.strerror or exc})") from exc
-        arr = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if raw else None
+        try:
+            arr = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if raw else None
+        except cv2.error:
+            arr = None
         if arr is None:
             raise DataFileError(f"{path}: cannot decode as an image (empty, truncated or corrupt)")
     if arr.ndim != 2 or arr.dtype == object:

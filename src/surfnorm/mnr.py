@@ -36,6 +36,28 @@ def self_smoothness_row(s_h, s_v, one_d, s_self):
 
 
 @pixel
+def challenge(k, s_q, ok, best_s, best, tol):
+    """Candidate k (smoothness s_q, ``ok`` if it has a normal) against the best so far: (best_s, best) after it.
+
+    It wins only if smoother by more than ``tol``, so ties (and near-ties, tol > 0) keep the earlier one.
+    Written with selects, so that a loop of it vectorises.
+    """
+    take = ok & (s_q < best_s - tol)
+    return (s_q if take else best_s), (k if take else best)
+
+
+@pixel
+def smoothest(s_l, s_r, s_a, s_b, s_c, ok_l, ok_r, ok_a, ok_b, tol):
+    """Index of MNR's choice among left, right, up, down (0-3, if ``ok``) and p itself (4), in that order."""
+    best_s, best = challenge(0, s_l, ok_l, np.float32(np.inf), 4, tol)
+    best_s, best = challenge(1, s_r, ok_r, best_s, best, tol)
+    best_s, best = challenge(2, s_a, ok_a, best_s, best, tol)
+    best_s, best = challenge(3, s_b, ok_b, best_s, best, tol)
+    _, best = challenge(4, s_c, True, best_s, best, tol)
+    return best
+
+
+@pixel
 def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, tol, fill, out_row):
     """MNR at one pixel of row v, any neighbours missing: the normal of the smoothest of left, right, up, down, self.
 
@@ -54,17 +76,7 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
     ok_a = (v >= 1) & has_up[x]
     ok_b = (v + 1 < H) & has_dn[x]
     s_l, s_r, s_a, s_b, s_c = s_h[x_l], s_h[x_r], s_up[x], s_dn[x], s_self[x]
-    best_s, k = np.float32(np.inf), 4
-    if ok_l & (s_l < best_s - tol):
-        best_s, k = s_l, 0
-    if ok_r & (s_r < best_s - tol):
-        best_s, k = s_r, 1
-    if ok_a & (s_a < best_s - tol):
-        best_s, k = s_a, 2
-    if ok_b & (s_b < best_s - tol):
-        best_s, k = s_b, 3
-    if s_c < best_s - tol:
-        k = 4
+    k = smoothest(s_l, s_r, s_a, s_b, s_c, ok_l, ok_r, ok_a, ok_b, tol)
     keep = has_mid[x]
     for c in range(3):
         n_l, n_r, n_a, n_b, n_c = n_mid[x_l, c], n_mid[x_r, c], n_up[x, c], n_dn[x, c], n_mid[x, c]
@@ -89,7 +101,6 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
     """
     W = out_row.shape[0]
     n_runs = box_row(has_up, has_mid, has_dn, v >= 1 and v < H - 1, col, runs)
-    inf = np.float32(np.inf)
     up_flat, mid_flat, dn_flat, out_flat = n_up.reshape(3 * W), n_mid.reshape(3 * W), n_dn.reshape(3 * W), out_row.reshape(3 * W)
     u = 0
     for k in range(n_runs + 1):
@@ -105,21 +116,7 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
             run_out = out_flat[3 * a:3 * b]
             run_choice = choice[3 * a:3 * b]
             for i in range(b - a):
-                tol = tie_tol * z_p[i]
-                best_s, best = inf, 4
-                s_q = s_l[i]
-                best = 0 if s_q < best_s - tol else best
-                best_s = s_q if s_q < best_s - tol else best_s
-                s_q = s_r[i]
-                best = 1 if s_q < best_s - tol else best
-                best_s = s_q if s_q < best_s - tol else best_s
-                s_q = s_a[i]
-                best = 2 if s_q < best_s - tol else best
-                best_s = s_q if s_q < best_s - tol else best_s
-                s_q = s_b[i]
-                best = 3 if s_q < best_s - tol else best
-                best_s = s_q if s_q < best_s - tol else best_s
-                best = 4 if s_c[i] < best_s - tol else best
+                best = smoothest(s_l[i], s_r[i], s_a[i], s_b[i], s_c[i], True, True, True, True, tie_tol * z_p[i])
                 run_choice[3 * i] = best
                 run_choice[3 * i + 1] = best
                 run_choice[3 * i + 2] = best

@@ -495,9 +495,19 @@ def row_is_dense(rows_valid, v):
     return ok
 
 
+@pixel
+def interior_run(median, z, v, a, b, f_x, f_y, c_x, c_y, rows, flat, fronto, out):
+    """Pixels [a, b) of row v, whose 3x3 neighbourhoods are all valid: the median or the mean path."""
+    if median:
+        median_run_split(z, v, a, b, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
+    else:
+        mean_run(z, v, a, b, f_x, f_y, c_x, c_y, rows)
+        store_run(out, v, a, b, rows)
+
+
 @njit
-def _tf2n_median_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """3F2N with the median filter: gradients of 1/Z -> eq. 10 per neighbour -> median -> unit, one pass.
+def _tf2n_kernel(z, valid, rows_valid, median, f_x, f_y, c_x, c_y, reflect, fill, out):
+    """3F2N: gradients of 1/Z -> eq. 10 per neighbour -> median (or mean) -> unit, one pass.
 
     ``rows_valid[v]``: row v holds only valid depth. Between such rows the interior of a row is one
     run, whose loop starts at the constant 1 (a run starting elsewhere is not vectorised by LLVM).
@@ -510,43 +520,18 @@ def _tf2n_median_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill,
     buf = np.empty(8)
     for v in range(H):
         if row_is_dense(rows_valid, v):
-            median_run_split(z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
-            generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
-            generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
+            interior_run(median, z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
+            generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out)
+            generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out)
             continue
         u = 0
         while u < W:
             if all_nine_valid(valid, v, u):
                 end = run_end(valid, v, u)
-                median_run_split(z, v, u, end, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
+                interior_run(median, z, v, u, end, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
                 u = end
             else:
-                generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, True, buf, out)
-                u += 1
-
-
-@njit
-def _tf2n_mean_kernel(z, valid, rows_valid, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """3F2N with the mean filter: gradients of 1/Z -> eq. 10 per neighbour -> mean -> unit, one pass."""
-    H, W = z.shape
-    rows = np.empty((3, W), dtype=np.float32)
-    buf = np.empty(8)
-    for v in range(H):
-        if row_is_dense(rows_valid, v):
-            mean_run(z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows)
-            store_run(out, v, 1, W - 1, rows)
-            generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, False, buf, out)
-            generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, False, buf, out)
-            continue
-        u = 0
-        while u < W:
-            if all_nine_valid(valid, v, u):
-                end = run_end(valid, v, u)
-                mean_run(z, v, u, end, f_x, f_y, c_x, c_y, rows)
-                store_run(out, v, u, end, rows)
-                u = end
-            else:
-                generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, False, buf, out)
+                generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out)
                 u += 1
 
 
@@ -556,8 +541,8 @@ def _camera(cam):
 
 def three_filters(z, valid, cam, out, *, third="median", border="one-sided", fill=0.0):
     """3F2N (Fan et al., RA-L 2021, eq. 7-11) with the ``third`` filter "mean" or "median", into ``out``."""
-    kernel = _tf2n_median_kernel if third == "median" else _tf2n_mean_kernel
-    kernel(z, valid, valid.all(axis=1), *_camera(cam), border == "reflect", np.float32(fill), out)
+    _tf2n_kernel(z, valid, valid.all(axis=1), third == "median", *_camera(cam), border == "reflect", np.float32(fill),
+                 out)
     return out
 
 

@@ -13,7 +13,7 @@ from surfnorm.errors import InputError
 from . import surfaces
 from .naive_averaging import averaging as naive_averaging
 from .naive_plane_fit import points
-from .test_plane_fit import H, K, W, angle, rough_depth, smooth_depth
+from .test_plane_fit import H, K, W, angle, errors_by_resolution, rough_depth, smooth_depth
 
 METHODS = {"area_weighted": "area", "angle_weighted": "angle"}
 
@@ -90,13 +90,7 @@ def test_exact_on_planes(method, normal):
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("surface", ["sphere", "cylinder"])
 def test_error_falls_with_resolution(method, surface):
-    errors = []
-    for scale in (1, 2, 4):
-        h, w = 24 * scale, 32 * scale
-        Ks = surfaces.camera(w, h)
-        depth, n_true, hit = getattr(surfaces, surface)(Ks, h, w, (0.1, -0.05, 3.0), 1.0)
-        out = surfnorm.estimate(depth, Ks, method=method)
-        errors.append(angle(out[hit], n_true[hit]).mean())
+    errors = errors_by_resolution(method, surface)
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < 0.5 * errors[0]
     assert errors[2] < 0.5

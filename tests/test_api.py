@@ -71,9 +71,43 @@ class TestEstimate:
         one_k = surfnorm.estimate(stack, K, method="d2nt_basic")
         np.testing.assert_array_equal(one_k[2], surfnorm.estimate(stack[2], K, method="d2nt_basic"))
 
+    @pytest.mark.parametrize("method", ["d2nt_v3", "cp2tv+mnr", "sda_sne"])
+    def test_out_is_written_and_returned(self, method):
+        rng = np.random.default_rng(1)
+        stack = (2 + rng.random((3, 20, 24))).astype(np.float32)
+        stack[1, 5:9, 6:10] = 0  # a hole
+        out = np.full(stack.shape + (3,), 7.0, np.float32)  # stale values that must all be overwritten
+        assert surfnorm.estimate(stack, K, method=method, threads=2, out=out) is out
+        np.testing.assert_array_equal(out, surfnorm.estimate(stack, K, method=method))
+        frame = np.full((20, 24, 3), 7.0, np.float32)
+        assert surfnorm.estimate(stack[1], K, method=method, out=frame, scale_invariant=True) is frame
+        np.testing.assert_array_equal(frame, surfnorm.estimate(stack[1], K, method=method, scale_invariant=True))
+
+    def test_out_reused_for_a_stream_of_batches(self):
+        rng = np.random.default_rng(2)
+        out = np.empty((4, 20, 24, 3), np.float32)
+        for _ in range(3):
+            stack = (1 + rng.random((4, 20, 24))).astype(np.float32)
+            surfnorm.estimate(stack, K, method="d2nt_v2", threads=2, out=out)
+            for i in range(4):
+                np.testing.assert_array_equal(out[i], surfnorm.estimate(stack[i], K, method="d2nt_v2"))
+
+    def test_batches_in_a_forked_child(self):
+        # The thread pool kept between batch calls must not be inherited by a forked child (its threads are not).
+        stack = np.stack([wall(), wall(d=3.0)])
+        surfnorm.estimate(stack, K, threads=2)
+        ctx = pytest.importorskip("multiprocessing").get_context("fork")
+        with ctx.Pool(1) as pool:
+            result = pool.apply_async(_batch_z_components, (stack,)).get(timeout=60)
+        np.testing.assert_allclose(result, -1.0, atol=1e-6)
+
     def test_intrinsics_object(self):
         cam = surfnorm.Intrinsics(100, 100, 15.5, 11.5)
         np.testing.assert_array_equal(surfnorm.estimate(wall(), cam), surfnorm.estimate(wall(), K))
+
+
+def _batch_z_components(stack):
+    return surfnorm.estimate(stack, K, method="d2nt_basic", threads=2)[:, 5:-5, 5:-5, 2]
 
 
 BAD_DEPTH = [
@@ -133,6 +167,26 @@ def test_bad_mask():
         surfnorm.estimate(wall(), K, mask=np.ones((24, 31), bool))
     with pytest.raises(InputError, match=r"mask: expected a boolean array \(True where depth is usable\), got an array of shape \(24, 32\) and dtype <U1"):
         surfnorm.estimate(wall(), K, mask=np.full((24, 32), "y"))
+
+
+def test_bad_out():
+    shape = (24, 32, 3)
+    read_only = np.empty(shape, np.float32)
+    read_only.flags.writeable = False
+    depth_and_room = np.ones((4, 24, 32), np.float32)  # depth in plane 0, and room that a wrong out= could reuse
+    cases = [
+        ([], r"out: expected a float32 NumPy array of shape \(24, 32, 3\) to write the normals into, got list"),
+        (np.empty(shape), r"out: expected a float32 array of shape \(24, 32, 3\), got an array of shape \(24, 32, 3\) and dtype float64"),
+        (np.empty((2,) + shape, np.float32), r"out: expected a float32 array of shape \(24, 32, 3\), got an array of shape \(2, 24, 32, 3\)"),
+        (np.empty((24, 32, 4), np.float32)[..., :3], r"out: expected a C-contiguous array \(written in place\), got a non-contiguous view"),
+        (read_only, r"out: expected a writeable array, got a read-only one"),
+        (depth_and_room.reshape(-1)[:24 * 32 * 3].reshape(shape), r"out: expected an array apart from depth, got one that shares memory with it"),
+    ]
+    for out, message in cases:
+        with pytest.raises(InputError, match=message):
+            surfnorm.estimate(depth_and_room[0], K, out=out)
+    with pytest.raises(InputError, match=r"out: expected a float32 array of shape \(2, 24, 32, 3\), got an array of shape \(24, 32, 3\)"):
+        surfnorm.estimate(np.stack([wall(), wall()]), K, out=np.empty(shape, np.float32))
 
 
 def test_unknown_method_and_options():

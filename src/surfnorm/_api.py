@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ._validate import as_depth, as_mask, as_normals, check_bool, check_choice, check_fill, valid_pixels
+from ._validate import as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, valid_pixels
 from .camera import Intrinsics
 from .errors import InputError
 from ._choices import DLF_NAMES
@@ -49,6 +50,36 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
     return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol)
 
 
+# Thread pools for stacks of frames, kept between calls: starting two threads and stopping them costs about
+# 0.5 ms (measured), 5 % of a batch of 16 d2nt_basic frames on 2 threads. Only pools of up to one thread per
+# core are kept. A forked child forgets them: its copies have no threads behind them.
+_pools: dict[int, ThreadPoolExecutor] = {}
+_pools_lock = threading.Lock()
+
+
+def _forget_pools() -> None:
+    global _pools_lock
+    _pools.clear()
+    _pools_lock = threading.Lock()  # another thread may have held it at the fork
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
+
+
+def _map(func, n: int, workers: int) -> None:
+    """``func(i)`` for i in range(n) on ``workers`` threads; the first exception is raised here."""
+    if workers > (os.cpu_count() or 1):
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            list(pool.map(func, range(n)))
+        return
+    with _pools_lock:
+        if workers not in _pools:
+            _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="surfnorm")
+        pool = _pools[workers]
+    list(pool.map(func, range(n)))
+
+
 def _valid(z, mask):
     # One Numba pass (compiled on first use; imported here so that ``import surfnorm`` compiles nothing).
     from .gradients import valid_map
@@ -57,7 +88,8 @@ def _valid(z, mask):
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None,
-             scale_invariant: bool = False, disparity: bool = False, **options) -> np.ndarray:
+             scale_invariant: bool = False, disparity: bool = False, out: np.ndarray | None = None,
+             **options) -> np.ndarray:
     """Estimate surface normals from a depth image (or a stack of them).
 
     Parameters
@@ -81,6 +113,12 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     disparity : bool
         ``depth`` holds disparity (or inverse depth up to scale); it is inverted
         and handled as in the scale-invariant mode. See :mod:`surfnorm.units`.
+    out : ndarray of float32, shape of the result, optional
+        Write the normals into this C-contiguous array (and return it) instead
+        of a new one, so that a stream of frames or batches reuses one buffer.
+        A new output is memory that the system hands over and zeroes when it
+        is first written: about 0.5 ms per 480x640 frame on our 2-core test
+        machine, and it does not get faster with more threads.
     **options
         The method's options (see ``surfnorm.methods()[name].options``), e.g.
         ``dlf``, ``tau``, ``truncate``, ``mnr_dlf``, ``fill``.
@@ -90,7 +128,8 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     ndarray of float32, shape (H, W, 3) or (N, H, W, 3)
         Unit normals in the camera frame (x right, y down, z forward), facing
         the camera (n_z < 0 on a fronto-parallel wall). Pixels without a valid
-        normal hold ``fill`` (default 0.0) in all three components.
+        normal hold ``fill`` (default 0.0) in all three components. The array
+        is ``out`` when one was given.
 
     Raises
     ------
@@ -108,6 +147,8 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     method_obj, refined, clean = resolve(method, options)
     z = as_depth(depth)
     user_mask = as_mask(mask, z.shape)
+    if out is not None:
+        out = as_output(out, z.shape + (3,), [("depth", z), ("mask", user_mask)])
     if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
         from .units import TIE_TOLERANCE, relative_depth
 
@@ -119,12 +160,13 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
         tie_tol = 0.0
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam, tie_tol=tie_tol)
+        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam, out, tie_tol=tie_tol)
     cams = _intrinsics_list(K, z.shape[0])
     workers = threads if threads is not None else (os.cpu_count() or 1)
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise InputError(f"threads: expected a positive integer, got {threads!r}")
-    out = np.empty(z.shape + (3,), dtype=np.float32)
+    if out is None:
+        out = np.empty(z.shape + (3,), dtype=np.float32)
 
     def one(i):
         # Everything per frame (validity, kernel) runs here, so frames proceed in parallel:
@@ -136,8 +178,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
         for i in range(z.shape[0]):
             one(i)
     else:
-        with ThreadPoolExecutor(max_workers=min(workers, z.shape[0])) as pool:
-            list(pool.map(one, range(z.shape[0])))
+        _map(one, z.shape[0], min(workers, z.shape[0]))
     return out
 
 

@@ -13,8 +13,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "check_choice", "check_positive", "check_bool",
-           "check_iterations", "check_window"]
+__all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "as_output", "check_choice", "check_positive",
+           "check_bool", "check_iterations", "check_window"]
 
 MIN_SIZE = 3
 
@@ -90,6 +90,29 @@ def as_normals(normals, shape: tuple, *, name: str = "normals") -> np.ndarray:
     if arr.shape != tuple(shape) + (3,):
         raise InputError(f"{name}: expected shape {tuple(shape) + (3,)} to match depth, got shape {arr.shape}")
     return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def as_output(out, shape: tuple, inputs=(), *, name: str = "out") -> np.ndarray:
+    """Check a caller's output array: float32, C-contiguous, writeable, of ``shape``, apart from ``inputs``.
+
+    It is written in place (not converted), so anything else is refused rather
+    than copied; and the kernels assume that what they write never overlaps
+    what they read.
+    """
+    if not isinstance(out, np.ndarray):
+        raise InputError(f"{name}: expected a float32 NumPy array of shape {tuple(shape)} to write the normals into, "
+                         f"got {type(out).__name__}")
+    if out.dtype != np.float32 or out.shape != tuple(shape):
+        raise InputError(f"{name}: expected a float32 array of shape {tuple(shape)}, got {_describe(out)}")
+    if not out.flags.c_contiguous:
+        raise InputError(f"{name}: expected a C-contiguous array (written in place), got a non-contiguous view; "
+                         f"pass np.empty({tuple(shape)}, np.float32) or an array like it")
+    if not out.flags.writeable:
+        raise InputError(f"{name}: expected a writeable array, got a read-only one")
+    for input_name, arr in inputs:
+        if arr is not None and np.may_share_memory(out, arr):
+            raise InputError(f"{name}: expected an array apart from {input_name}, got one that shares memory with it")
+    return out
 
 
 def check_choice(name: str, value, choices) -> str:

@@ -12,7 +12,8 @@ same machine load, and each figure is the median of ``--repeats`` runs.
 
 Also measured: every other registered estimator on the shipped frames (no peer; the targets of the
 issues), ``import surfnorm`` and the first estimate in a fresh process
-with a warm compile cache (subprocesses), the peak memory of one d2nt_v3 call
+with a warm compile cache (subprocesses; beside Numba's own floor: its import and
+the first call of a one-line cached function), the peak memory of one d2nt_v3 call
 (tracemalloc for NumPy arrays, and the growth of the process's peak RSS, which
 also sees Numba's own allocations), and the throughput of a stack of 16
 frames on 1 and 2 threads, into a new output and into a reused one (``out=``).
@@ -194,6 +195,38 @@ surfnorm.estimate(z, [[525.0, 0, 319.5], [0, 525.0, 239.5], [0, 0, 1]], method="
 t2 = time.perf_counter()
 print(t1 - t0, t2 - t1, t2 - t0)
 """
+# Numba's own start-up, the floor under a first estimate: import Numba, then the first call of a one-line
+# function loaded from its disk cache (Numba then sets up its typing and target registries, whatever the function).
+NUMBA_PROBE = """
+import numba
+
+
+@numba.njit(cache=True, nogil=True)
+def probe(x):
+    return x[0] + 1.0
+"""
+NUMBA_FLOOR_CODE = """
+import sys, time; sys.path.insert(0, {folder!r})
+import numpy as np
+t0 = time.perf_counter()
+import numba_floor_probe
+numba_floor_probe.probe(np.ones(3))
+print(time.perf_counter() - t0)
+"""
+
+
+def numba_floor_seconds(runs):
+    """Median seconds of Numba's import plus its first cached call, in fresh interpreters (cache warmed first)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        Path(folder, "numba_floor_probe.py").write_text(NUMBA_PROBE)
+        code = NUMBA_FLOOR_CODE.format(folder=folder)
+        subprocess_seconds(code, 1)  # compiles and writes the cache
+        (seconds,), _ = subprocess_seconds(code, runs)
+    return seconds
+
+
 MEMORY_CODE = """
 import tracemalloc, numpy as np, surfnorm
 from surfnorm.io.threef2n import read_frame, sample_root
@@ -328,6 +361,8 @@ def markdown(record):
               f"| `import surfnorm` (in-process, median of fresh interpreters) | {s['import_s']:.3f} s | 0.3 s |",
               f"| `python -c 'import surfnorm'` wall time, interpreter included | {s['import_process_s']:.3f} s | |",
               f"| first d2nt_v3 estimate, fresh process, warm cache (after the import) | {s['first_call_s']:.3f} s | 0.5 s |",
+              f"| the Numba floor under it: import Numba + first call of a one-line cached function | "
+              f"{s['numba_floor_s']:.3f} s | |",
               f"| import + first estimate | {s['import_and_first_s']:.3f} s | |"]
     m = record["memory"]
     out_mb = m["output_bytes"] / 2**20
@@ -365,7 +400,9 @@ def main():
     print("start-up (fresh interpreters):", flush=True)
     (imp,), imp_wall = subprocess_seconds(IMPORT_CODE, 3 if args.quick else 9)
     (t_imp, t_first, t_both), _ = subprocess_seconds(FIRST_CALL_CODE.format(method="d2nt_v3"), 3 if args.quick else 9)
-    print(f"  import {imp:.3f} s (process {imp_wall:.3f} s); first d2nt_v3 {t_first:.3f} s; both {t_both:.3f} s")
+    numba_floor = numba_floor_seconds(3 if args.quick else 9)
+    print(f"  import {imp:.3f} s (process {imp_wall:.3f} s); first d2nt_v3 {t_first:.3f} s; both {t_both:.3f} s; "
+          f"Numba floor {numba_floor:.3f} s")
     (peak, rss, nbytes), _ = subprocess_seconds(MEMORY_CODE.format(method="d2nt_v3"), 1)
     memory = {"tracemalloc_peak_bytes": peak, "rss_growth_bytes": rss, "output_bytes": nbytes}
     try:
@@ -382,7 +419,7 @@ def main():
               "machine": machine(), "repeats": repeats, "load_before": load_before,
               "load_after": [round(x, 2) for x in os.getloadavg()], "frames": frames, "floor": floor, "baselines": baselines,
               "startup": {"import_s": imp, "import_process_s": imp_wall, "first_call_s": t_first,
-                          "import_and_first_s": t_both},
+                          "import_and_first_s": t_both, "numba_floor_s": numba_floor},
               "memory": memory, "batch": batch}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

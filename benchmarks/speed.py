@@ -178,9 +178,15 @@ def time_baselines(repeats, quick):
 
 
 def subprocess_seconds(code, runs):
-    """Median of what ``code`` prints (seconds) over fresh interpreters, and the median wall time of each process."""
+    """Median of what ``code`` prints (seconds) over fresh interpreters, and the median wall time of each process.
+
+    One unmeasured run first, with Python's bytecode cache allowed (some machines set PYTHONDONTWRITEBYTECODE):
+    "warm cache" means Numba's compile cache and Python's, as for an installed package.
+    """
     inner, outer = [], []
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
     for _ in range(runs):
         t0 = time.perf_counter()
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
@@ -226,8 +232,7 @@ def numba_floor_seconds(runs):
     with tempfile.TemporaryDirectory() as folder:
         Path(folder, "numba_floor_probe.py").write_text(NUMBA_PROBE)
         code = NUMBA_FLOOR_CODE.format(folder=folder)
-        subprocess_seconds(code, 1)  # compiles and writes the cache
-        (seconds,), _ = subprocess_seconds(code, runs)
+        (seconds,), _ = subprocess_seconds(code, runs)  # its warm-up run compiles and writes the cache
     return seconds
 
 

@@ -68,7 +68,7 @@ import numpy as np
 
 from ._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from ._config import njit, pixel, select
-from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, median_nz, write_unit
+from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, third_nz, write_unit
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
 
@@ -453,7 +453,7 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect,
             if e_u[v + _P, u + _P] < _INF and e_v[v + _P, u + _P] < _INF:
                 gu = g_u[v + _P, u + _P]
                 gv = g_v[v + _P, u + _P]
-                n_z, count = median_nz(z, valid, v, u, gu, gv, c_x, c_y, reflect, buf)
+                n_z, count = third_nz(z, valid, v, u, gu, gv, c_x, c_y, reflect, True, buf)
                 n_x, n_y, n_z = fronto_parallel_fallback(f_x * gu, f_y * gv, n_z, count)
                 n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
                 ok = write_unit(out, v, u, n_x, n_y, n_z, fill)

@@ -143,10 +143,12 @@ def fronto_parallel_fallback(n_x, n_y, n_z, count):
 
 
 @pixel
-def median_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, buf):
-    """Median of the candidates n_z,q over the usable neighbours (eq. 11), and their count.
+def third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf):
+    """n_z of eq. 11 from the candidates n_z,q of the usable neighbours, and their count.
 
-    Candidates are kept sorted in ``buf`` (8 entries) by insertion as they come.
+    The median (``median``: NaN without candidates) or the mean (0 without).
+    Candidates are collected in ``buf`` (8 entries), kept sorted by insertion
+    as they come for the median; the mean adds them in neighbour order.
     """
     z_p = np.float64(z[v, u])
     zx_p = (u - c_x) * z_p
@@ -159,11 +161,16 @@ def median_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, buf):
             nz, ok = candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p)
             if ok:
                 j = count
-                while j > 0 and buf[j - 1] > nz:
+                while median and j > 0 and buf[j - 1] > nz:
                     buf[j] = buf[j - 1]
                     j -= 1
                 buf[j] = nz
                 count += 1
+    if not median:
+        total = 0.0
+        for i in range(count):
+            total += buf[i]
+        return total / max(count, 1), count
     half = count // 2
     med = np.nan
     if count > 0:
@@ -172,25 +179,6 @@ def median_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, buf):
         else:
             med = (buf[half - 1] + buf[half]) / 2.0
     return med, count
-
-
-@pixel
-def mean_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect):
-    """Mean of the candidates n_z,q over the usable neighbours (eq. 11), and their count."""
-    z_p = np.float64(z[v, u])
-    zx_p = (u - c_x) * z_p
-    zy_p = (v - c_y) * z_p
-    total = 0.0
-    count = 0
-    for k in range(8):
-        dv, du = _NEIGHBOURS[k]
-        q_v, q_u, ok = neighbour_pixel(valid, v, u, dv, du, reflect)
-        if ok:
-            nz, ok = candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p)
-            if ok:
-                total += nz
-                count += 1
-    return total / max(count, 1), count
 
 
 @pixel
@@ -474,10 +462,7 @@ def generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, median, buf
         g_u, ok_u = inverse_depth_gradient(z, valid, v, u, 0, 1, reflect)
         g_v, ok_v = inverse_depth_gradient(z, valid, v, u, 1, 0, reflect)
         if ok_u and ok_v:
-            if median:
-                n_z, count = median_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, buf)
-            else:
-                n_z, count = mean_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect)
+            n_z, count = third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf)
             n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
             n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
             ok = write_unit(out, v, u, n_x, n_y, n_z, fill)

@@ -23,6 +23,7 @@ import numpy as np
 
 from .._validate import check_positive
 from ..errors import DataFileError
+from ._files import decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
 
 __all__ = ["read_depth", "read_mask", "disparity_to_depth", "depth_suffix", "DEPTH_SUFFIXES"]
@@ -63,16 +64,7 @@ def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
 
 
 def _read_image(path: Path) -> np.ndarray:
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise DataFileError(f"{path}: cannot read depth file ({exc.strerror or exc})") from exc
-    try:
-        img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if raw else None
-    except cv2.error as exc:
-        raise DataFileError(f"{path}: cannot decode as an image (truncated or corrupt)") from exc
-    if img is None:
-        raise DataFileError(f"{path}: cannot decode as an image (empty, truncated or corrupt)")
+    img = decode_image(path, read_bytes(path, "depth"), cv2.IMREAD_UNCHANGED)
     if img.ndim != 2:
         raise DataFileError(f"{path}: expected a single-channel depth image, got {img.shape[2]} channels "
                             f"(shape {img.shape}); a colour picture is not depth")
@@ -135,16 +127,7 @@ def read_mask(path) -> np.ndarray:
     if suffix in (".npy", ".npz"):
         arr = _read_numpy(path, suffix, "mask")
     else:
-        try:
-            raw = path.read_bytes()
-        except OSError as exc:
-            raise DataFileError(f"{path}: cannot read mask file ({exc.strerror or exc})") from exc
-        try:
-            arr = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if raw else None
-        except cv2.error:
-            arr = None
-        if arr is None:
-            raise DataFileError(f"{path}: cannot decode as an image (empty, truncated or corrupt)")
+        arr = decode_image(path, read_bytes(path, "mask"), cv2.IMREAD_GRAYSCALE)
     if arr.ndim != 2 or arr.dtype == object:
         raise DataFileError(f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype}")
     return np.ascontiguousarray(arr != 0)

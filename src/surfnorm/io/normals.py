@@ -29,6 +29,7 @@ import numpy as np
 from .._validate import check_choice, check_fill
 from ..errors import DataFileError, InputError
 from ._atomic import atomic_write
+from ._files import decode_image, read_bytes
 from .pictures import COLOURINGS, normal_to_rgb8
 
 __all__ = ["NORMAL_FORMATS", "FORMAT_SUFFIX", "write_normals", "read_normals", "encode_png16", "decode_png"]
@@ -110,10 +111,7 @@ def read_normals(path, *, colouring: str = "3f2n", fill: float = 0.0) -> np.ndar
     path = Path(path)
     fill = check_fill(fill)
     suffix = path.suffix.lower()
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise DataFileError(f"{path}: cannot read normal file ({exc.strerror or exc})") from exc
+    raw = read_bytes(path, "normal")
     if suffix == ".npy":
         import io
 
@@ -126,12 +124,7 @@ def read_normals(path, *, colouring: str = "3f2n", fill: float = 0.0) -> np.ndar
         return np.ascontiguousarray(n, dtype=np.float32)
     if suffix != ".png":
         raise DataFileError(f"{path}: unknown normal file type {suffix!r}; expected .npy or .png")
-    try:
-        img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if raw else None
-    except cv2.error as exc:
-        raise DataFileError(f"{path}: cannot decode as PNG (truncated or corrupt)") from exc
-    if img is None:
-        raise DataFileError(f"{path}: cannot decode as PNG (empty, truncated or corrupt)")
+    img = decode_image(path, raw, cv2.IMREAD_UNCHANGED, "PNG")
     if img.ndim != 3 or img.shape[2] < 3 or img.dtype not in (np.uint8, np.uint16):
         raise DataFileError(f"{path}: expected an 8- or 16-bit RGB PNG normal map, got shape {img.shape} and dtype {img.dtype}")
     return decode_png(np.ascontiguousarray(img[:, :, 2::-1]), colouring=colouring, fill=fill)

@@ -6,6 +6,9 @@
 * :func:`mean_angular_error` - e_A (eq. 21), the mean over the evaluated pixels.
 * :func:`proportion_below` - e_p, the share of pixels whose error is below thresholds.
 * :func:`tradeoff` - pi = e_A * t (eq. 22): degrees x milliseconds, i.e. degrees/kHz.
+* :func:`plane_error` - the sensor benchmark's metric on real frames: mean folded
+  angle to reference planes over the planes' pixels that received a normal, and
+  the coverage of those pixels.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["angular_error", "mean_angular_error", "proportion_below", "tradeoff", "coverage"]
+__all__ = ["angular_error", "mean_angular_error", "proportion_below", "tradeoff", "coverage", "plane_error"]
 
 
 def _pair(normals, gt):
@@ -85,3 +88,44 @@ def proportion_below(normals, gt, mask=None, thresholds=(5.0, 10.0, 20.0, 30.0))
 def tradeoff(e_a: float, t_ms: float) -> float:
     """pi = e_A * t (eq. 22) in degrees/kHz, with e_A in degrees and t in milliseconds."""
     return float(e_a) * float(t_ms)
+
+
+def plane_error(normals, plane_normals, plane_masks) -> tuple[float, float]:
+    """Mean folded angle (degrees) to reference planes, and the coverage of their pixels.
+
+    The metric of real sensor frames, where no per-pixel ground truth exists:
+    each pixel of plane ``p`` (``plane_masks[p]``) is compared with that plane's
+    normal ``plane_normals[p]``; the mean runs over all plane pixels pooled
+    that received a normal (finite, non-zero), and the coverage is their share
+    of all plane pixels. Both are needed: a method that leaves hard pixels
+    empty must not look better.
+
+    Parameters
+    ----------
+    normals : ndarray of shape (H, W, 3)
+    plane_normals : array_like of shape (P, 3)
+    plane_masks : array_like of bool, shape (P, H, W)
+
+    Returns
+    -------
+    (mean_angle_deg, coverage) : tuple of float
+        NaN for the mean when no plane pixel received a normal.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    if n.ndim != 3 or n.shape[-1] != 3:
+        raise InputError(f"normals: expected shape (H, W, 3), got shape {n.shape}")
+    pn = np.asarray(plane_normals, dtype=np.float64)
+    pm = np.asarray(plane_masks, dtype=bool)
+    if pn.ndim != 2 or pn.shape[1] != 3:
+        raise InputError(f"plane_normals: expected shape (P, 3), got shape {pn.shape}")
+    if pm.shape != (pn.shape[0],) + n.shape[:2]:
+        raise InputError(f"plane_masks: expected shape {(pn.shape[0],) + n.shape[:2]}, got shape {pm.shape}")
+    errors, total = [], 0
+    for normal, mask in zip(pn, pm):
+        gt = np.broadcast_to(normal, n.shape)
+        err = angular_error(n, gt)[mask]
+        total += err.size
+        errors.append(err[np.isfinite(err)])
+    err = np.concatenate(errors) if errors else np.empty(0)
+    mean = float(err.mean()) if err.size else float("nan")
+    return mean, (err.size / total if total else float("nan"))

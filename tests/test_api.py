@@ -229,6 +229,6 @@ def test_methods_registry():
     info = surfnorm.methods()
     assert {"d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv"} <= set(info)
     for m in info.values():
-        assert m.category in ("energy minimisation", "averaging", "depth-to-normal")
+        assert m.category in ("energy minimisation", "averaging", "depth-to-normal", "automatic")
         assert m.reference and "fill" in m.options
     assert info["d2nt_v3"].options["dlf"] == "1d" and info["d2nt_v3"].options["mnr_dlf"] == "alpha"

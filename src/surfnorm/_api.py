@@ -12,7 +12,7 @@ from ._validate import as_depth, as_mask, as_normals, as_output, check_bool, che
 from .camera import Intrinsics
 from .errors import InputError
 from ._choices import DLF_NAMES
-from .methods import resolve
+from .methods import DEFAULT_METHOD, resolve
 
 __all__ = ["estimate", "refine"]
 
@@ -87,7 +87,7 @@ def _valid(z, mask):
     return valid_map(z, mask)
 
 
-def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None,
+def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int | None = None,
              scale_invariant: bool = False, disparity: bool = False, out: np.ndarray | None = None,
              **options) -> np.ndarray:
     """Estimate surface normals from a depth image (or a stack of them).
@@ -101,6 +101,9 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
         Intrinsic matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], 0-based pixel centres.
     method : str
         A name from :func:`surfnorm.methods`, optionally followed by ``+mnr``.
+        The default, ``"auto"``, runs ``d2nt_v3`` on clean depth (rendered) and
+        ``adaptive_fit`` on sensor depth (quantised, noisy, sparse), chosen
+        from the depth's own noise floor; see :mod:`surfnorm.auto`.
     mask : ndarray of bool, shape of ``depth``, optional
         False where depth must not be used (in addition to invalid values).
     threads : int, optional

@@ -14,6 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from .errors import SurfnormError
+from .methods import DEFAULT_METHOD
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Surface normals from depth images: D2NT (ICRA 2023) and the estimators it is compared with.")
@@ -60,7 +61,7 @@ def _check_format(fmt: str) -> str:
 def estimate(
     depth: Path = typer.Argument(..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png, float .tif)."),
     output: Path = typer.Argument(..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."),
-    method: str = typer.Option("d2nt_v3", "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
+    method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
     intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP),
     fx: Optional[float] = typer.Option(None, help="Focal length x, pixels."),
     fy: Optional[float] = typer.Option(None, help="Focal length y, pixels."),
@@ -144,7 +145,7 @@ def demo(
 def convert(
     inputs: str = typer.Argument(..., metavar="INPUT", help="A depth file, a folder (searched recursively) or a quoted glob pattern."),
     output_dir: Path = typer.Argument(..., help="Folder for the normal files (created if missing); sub-folders mirror INPUT."),
-    method: str = typer.Option("d2nt_v3", "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
+    method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
     depth_scale: Optional[float] = typer.Option(None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."),
     intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k",
                                               help=INTRINSICS_HELP + " Default: each 3F2N file's params.txt."),

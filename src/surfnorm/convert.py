@@ -32,6 +32,7 @@ import numpy as np
 
 from .camera import Intrinsics
 from .errors import InputError, SurfnormError
+from .methods import DEFAULT_METHOD
 
 __all__ = ["ConvertTask", "ConvertSettings", "FileResult", "ConvertSummary", "plan_tasks", "convert_file", "convert",
            "STATUSES"]
@@ -55,7 +56,7 @@ class ConvertSettings:
     object folder (``<object>/depth/<frame>.bin`` -> ``<object>/params.txt``).
     """
 
-    method: str = "d2nt_v3"
+    method: str = DEFAULT_METHOD
     options: dict = field(default_factory=dict)
     fmt: str = "npy"
     depth_scale: float | None = None
@@ -338,7 +339,7 @@ def _pool_context():
     return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
 
 
-def convert(inputs, output_dir, *, method: str = "d2nt_v3", fmt: str = "npy", depth_scale: float | None = None,
+def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy", depth_scale: float | None = None,
             intrinsics=None, jobs: int = 1, client=None, shard_size: int | None = None, overwrite: bool = False,
             progress: Callable[[FileResult], None] | None = None, scale_invariant: bool = False,
             **options) -> ConvertSummary:

@@ -131,3 +131,31 @@ register(Method("angle_weighted", "averaging",
                 "D2NT eq. 2 and Table I",
                 "mean of the 8 triangle normals around the pixel, weighted by their angle at the pixel",
                 angle_weighted))
+
+# --- Sensor depth (ours): adaptive_fit.py, auto.py -------------------------------------------------
+
+_adaptive_fit, _auto = _kernel("adaptive_fit", "adaptive_fit"), _kernel("auto", "auto")
+SURFNORM = "surfnorm (ours, not in the D2NT paper)"
+
+
+def _check_window_or_none(name, value):
+    return None if value is None else check_window(name, value)
+
+
+ADAPTIVE_OPTIONS = {
+    "window": Option(None, _check_window_or_none,
+                     "side of the fitted window (odd, >= 3); None: chosen per pixel from the frame's noise and "
+                     "the pixel's depth"),
+    "max_window": Option(31, check_window, "largest window side (odd, >= 3), also for sparse depth"),
+}
+
+register(Method("adaptive_fit", "energy minimisation",
+                SURFNORM + ": least-squares plane of inverse depth over a window sized from the frame's noise, "
+                "integral images, edge-aware quadrant windows",
+                "plane fit of inverse depth, support sized from the depth's own noise; for sensor depth",
+                _adaptive_fit, ADAPTIVE_OPTIONS))
+register(Method("auto", "automatic",
+                SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's "
+                "noise floor",
+                "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
+                _auto, ties=True))

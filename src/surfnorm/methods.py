@@ -15,10 +15,12 @@ from ._validate import check_bool, check_choice, check_fill, check_positive
 from .errors import InputError
 from ._choices import BORDERS, DLF_NAMES
 
-__all__ = ["Option", "Method", "MethodInfo", "register", "resolve", "methods", "CATEGORIES", "MNR_SUFFIX"]
+__all__ = ["Option", "Method", "MethodInfo", "register", "resolve", "methods", "CATEGORIES", "MNR_SUFFIX", "DEFAULT_METHOD"]
 
-CATEGORIES = ("energy minimisation", "averaging", "depth-to-normal")
+CATEGORIES = ("energy minimisation", "averaging", "depth-to-normal", "automatic")
 MNR_SUFFIX = "+mnr"
+#: The method of :func:`surfnorm.estimate`, the CLI and :func:`surfnorm.convert` when none is named.
+DEFAULT_METHOD = "auto"
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,557 @@
+"""Adaptive plane fit of inverse depth: the estimator for real sensor depth (ours, not in the paper).
+
+Why inverse depth. A plane n . P = d seen through a pinhole camera has an
+inverse depth w = 1/z that is exactly affine in the pixel (u, v)::
+
+    w(u, v) = (n_x (u - c_x) / f_x + n_y (v - c_y) / f_y + n_z) / d                  (1)
+
+so the slopes g_u = dw/du, g_v = dw/dv and the value w at a pixel give its
+normal without approximation (the relation 3F2N builds on)::
+
+    n = -(f_x g_u, f_y g_v, w - g_u (u - c_x) - g_v (v - c_y)) / norm                (2)
+
+The minus sign makes n face the camera for any fit: n . (x, y, 1) = -w / norm < 0.
+Fitting (1) by least squares to the valid pixels of a window therefore gives
+exact normals on planes at any orientation and distance, whatever the window
+size, with or without holes; and the residual is measured along the ray, as
+depth noise is (for stereo and structured light, whose noise is uniform in
+disparity ~ w, it is exactly the right norm).
+
+Constant cost per pixel. The ten moment sums of the fit (count, u, v, uu, uv,
+vv, w, uw, vw, ww over the window's valid pixels) come from integral images
+(as PCL's IntegralImageNormalEstimation does for the covariance), so a window
+of any size costs four look-ups per moment.
+
+Support chosen from the data. Sensor depth is quantised and noisy at a level
+that depends on the sensor and on the distance. The frame's own noise is
+measured first: the second differences of w along rows and columns vanish on
+planes (w is affine there), so their robust RMS (sigma-clipped at 5 sigma, which
+drops depth discontinuities) in bins of depth gives the noise sigma_z(z). In
+units of the distance between neighbouring pixels' points (z / f) this is
+rho(z) = sigma_z f / z. A window of radius r estimates a slope with standard
+deviation rho * sqrt(3) / ((2r + 1) sqrt(r (r + 1))) ~ rho / r^2 (radians), so
+the radius r = ceil(alpha sqrt(rho)) keeps the noise-induced error near a
+constant angle at every depth and for every sensor: clean depth gets 3x3
+windows, a Kinect frame at 4 m gets 15x15 or more. Where the window holds too
+few valid pixels (sparse LiDAR depth, holes) it grows (x1.5, up to
+``max_window``) until at least half of it is valid.
+
+Edge awareness. A window across a depth discontinuity or a crease fits badly:
+its residual per degree of freedom exceeds the noise level (kappa sigma_w)^2.
+Such a pixel is refitted on the eight windows of the same size shifted by r
+(corners and sides, each still containing the pixel), and keeps the fit with
+the smallest residual per degree of freedom (the Kuwahara principle): a pixel
+near an edge takes its normal from its own side. A window whose valid pixels
+lie on a line (they fix no plane), or with fewer than 4 of them, gives no fit;
+a pixel without any fit gets the fill value.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ._config import njit, pixel, select
+
+__all__ = ["adaptive_fit", "noise_profile", "NoiseProfile", "radius_table", "ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW"]
+
+#: Radius gain: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors (``surfnorm bench --simulate``).
+ALPHA = 5.0
+#: A fit is trusted when its residual per degree of freedom is below (KAPPA * sigma_w)^2.
+KAPPA = 3.0
+#: Lowest noise level (pixel spacings) assumed by the edge test, so clean depth still tolerates rounding.
+RHO_FLOOR = 0.25
+#: Largest window side (odd); the radius is at most (MAX_WINDOW - 1) / 2.
+MAX_WINDOW = 31
+#: The radii a window may take (about x1.3 apart): few distinct radii in a row keep the box sums cheap.
+RADII = (1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 26, 33, 43, 56, 73, 95, 124)
+#: Depth bins (log-spaced between the nearest and farthest valid depth) of the noise profile.
+N_BINS = 8
+#: Samples a depth bin needs to have its own noise level; bins with fewer take their neighbours'.
+MIN_SAMPLES = 64
+#: About how many pixels the noise profile samples (every step-th row and column).
+_NOISE_SAMPLES = 40_000
+_CLIP_SIGMAS = 5.0
+_CLIP_ROUNDS = 5
+_N_MOMENTS = 10
+
+
+# --- noise profile -------------------------------------------------------------------------------
+
+
+@njit
+def _depth_range(z, valid):
+    zmin = np.inf
+    zmax = 0.0
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            if valid[v, u]:
+                zmin = min(zmin, z[v, u])
+                zmax = max(zmax, z[v, u])
+    return zmin, zmax
+
+
+@njit
+def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
+    """Second differences of w = 1/z at strides 1 and 2 along rows and columns, in units of the
+    point spacing z/f.
+
+    For each run of five valid pixels centred on every ``step``-th row and column (both
+    directions), x_s = (w_{-s} - 2 w_0 + w_{+s}) z_0 f / sqrt(6) for s = 1, 2 go to
+    ``xs[0, k]`` and ``xs[1, k]``, and the centre's depth bin to ``bins[k]``. On a plane both
+    vanish (w is affine there); for white noise sigma_z in depth both have the RMS
+    rho = sigma_z f / z; on a smooth curved surface x_2 = 4 x_1. Returns how many.
+    """
+    H, W = z.shape
+    k = 0
+    scale = f / math.sqrt(6.0)
+    lo = math.log(zmin)
+    span = math.log(zmax) - lo
+    for v in range(0, H, step):
+        for u in range(0, W, step):
+            if not valid[v, u]:
+                continue
+            zb = z[v, u]
+            w0 = 2.0 / zb
+            b = 0
+            if span > 0.0:
+                b = min(nbins - 1, int((math.log(zb) - lo) / span * nbins))
+            if 1 < u < W - 2 and valid[v, u - 2] and valid[v, u - 1] and valid[v, u + 1] and valid[v, u + 2]:
+                xs[0, k] = (1.0 / z[v, u - 1] - w0 + 1.0 / z[v, u + 1]) * zb * scale
+                xs[1, k] = (1.0 / z[v, u - 2] - w0 + 1.0 / z[v, u + 2]) * zb * scale
+                bins[k] = b
+                k += 1
+            if 1 < v < H - 2 and valid[v - 2, u] and valid[v - 1, u] and valid[v + 1, u] and valid[v + 2, u]:
+                xs[0, k] = (1.0 / z[v - 1, u] - w0 + 1.0 / z[v + 1, u]) * zb * scale
+                xs[1, k] = (1.0 / z[v - 2, u] - w0 + 1.0 / z[v + 2, u]) * zb * scale
+                bins[k] = b
+                k += 1
+    return k
+
+
+@njit
+def _clipped_rms(xs, bins, n, nbins, rounds, sigmas, rms, counts):
+    """Per bin: RMS of xs[:n], then ``rounds`` times the RMS of those within ``sigmas`` times it."""
+    sums = np.zeros(nbins)
+    for b in range(nbins):
+        rms[b] = np.inf
+    for _ in range(rounds + 1):
+        sums[:] = 0.0
+        counts[:] = 0
+        for i in range(n):
+            b = bins[i]
+            x = xs[i]
+            if abs(x) <= sigmas * rms[b]:
+                sums[b] += x * x
+                counts[b] += 1
+        for b in range(nbins):
+            rms[b] = math.sqrt(sums[b] / counts[b]) if counts[b] > 0 else 0.0
+
+
+def _samples(z, valid, f):
+    zmin, zmax = _depth_range(z, valid)
+    if not zmax > 0.0:
+        return zmin, zmax, np.empty((2, 0)), np.empty(0, np.int64)
+    step = max(1, int(round(math.sqrt(z.size / _NOISE_SAMPLES))))
+    size = 2 * ((z.shape[0] + step - 1) // step) * ((z.shape[1] + step - 1) // step)
+    xs = np.empty((2, size))
+    bins = np.empty(size, np.int64)
+    n = _second_differences(z, valid, float(f), zmin, zmax, N_BINS, step, xs, bins)
+    return zmin, zmax, xs[:, :n], bins[:n]
+
+
+class NoiseProfile(NamedTuple):
+    """The frame's noise, measured by :func:`noise_profile`.
+
+    depths, rho : ndarray
+        rho (units of the point spacing z / f) at the centres of log-spaced depth bins.
+    floor : float
+        The median |second difference of inverse depth| at stride 1 in the same units, over
+        0.6745 (white Gaussian noise of rho gives rho). Depth rendered without noise has most
+        second differences at 0 (smooth surfaces between edges) however detailed the scene:
+        the 12 3F2N sample frames give 0.00-0.08. Sensor depth has a floor: 0.3-4 on the
+        PrimeSense, Kinect v1, RealSense D435 and LiDAR frames we measured. NaN when too
+        few pixels have valid neighbours.
+    """
+
+    depths: np.ndarray
+    rho: np.ndarray
+    floor: float
+
+
+def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
+    """The frame's noise against depth (see :class:`NoiseProfile`).
+
+    In each depth bin (log-spaced between the nearest and farthest valid depth),
+    the sigma-clipped mean squares v_1, v_2 of the second differences of inverse
+    depth at strides 1 and 2 (see :func:`_second_differences`) separate noise
+    from shape: noise adds rho^2 to both, smooth curvature adds c to v_1 and
+    16 c to v_2, so rho^2 = (16 v_1 - v_2) / 15 (the curvature of clean depth is
+    not taken for noise). Sampled on every step-th row and column (about
+    ``_NOISE_SAMPLES`` pixels). Bins with fewer than ``MIN_SAMPLES`` samples
+    take the value of the nearest bins that have enough; with none, rho is 0
+    (3x3 windows).
+    """
+    zmin, zmax, xs, bins = _samples(z, valid, f)
+    n = xs.shape[1]
+    if n < MIN_SAMPLES:
+        return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
+    floor = float(np.median(np.abs(xs[0]))) / 0.6745
+    rms1 = np.empty(N_BINS)
+    rms2 = np.empty(N_BINS)
+    counts = np.zeros(N_BINS, np.int64)
+    _clipped_rms(np.ascontiguousarray(xs[1]), bins, n, N_BINS, _CLIP_ROUNDS, _CLIP_SIGMAS, rms2, counts)
+    _clipped_rms(np.ascontiguousarray(xs[0]), bins, n, N_BINS, _CLIP_ROUNDS, _CLIP_SIGMAS, rms1, counts)
+    rho = np.sqrt(np.maximum(16.0 * rms1 ** 2 - rms2 ** 2, 0.0) / 15.0)
+    edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)
+    centres = np.sqrt(edges[:-1] * edges[1:])
+    ok = counts >= MIN_SAMPLES
+    if not ok.any():
+        return NoiseProfile(centres, np.zeros(N_BINS), floor)
+    return NoiseProfile(centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor)
+
+
+#: Entries of the depth -> (radius, rho) look-up table, linear in depth between the nearest and farthest.
+_TABLE = 512
+
+
+def radius_table(depths: np.ndarray, rho: np.ndarray, *, alpha: float = ALPHA, window=None,
+                 max_window: int = MAX_WINDOW) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """A look-up table from depth to the window radius and the noise rho.
+
+    Returns (z0, inv_step, radius, rho): entry int((z - z0) * inv_step), clipped,
+    holds the radius r = ceil(alpha sqrt(rho)) (or ``(window - 1) / 2``) and rho
+    interpolated in log depth.
+    """
+    z0, z1 = float(depths[0]), float(depths[-1])
+    zs = np.linspace(z0, z1, _TABLE) if z1 > z0 else np.full(_TABLE, z0)
+    rho_t = np.interp(np.log(zs), np.log(depths), rho) if z1 > z0 else np.full(_TABLE, rho[0])
+    r_max = (max_window - 1) // 2
+    if window is None:
+        wanted = np.clip(np.ceil(alpha * np.sqrt(rho_t)), 1, r_max)
+        r_t = np.array([allowed_radius(x, r_max) for x in wanted], np.int64)
+    else:
+        r_t = np.full(_TABLE, (window - 1) // 2, np.int64)
+    inv_step = (_TABLE - 1) / (z1 - z0) if z1 > z0 else 0.0
+    return z0, inv_step, r_t, rho_t.astype(np.float64)
+
+
+def allowed_radius(r: float, r_max: int) -> int:
+    """The smallest radius of ``RADII`` that is at least r, at most r_max."""
+    for x in RADII:
+        if x >= r:
+            return min(x, r_max)
+    return r_max
+
+
+def growth_table(r_max: int) -> np.ndarray:
+    """grow[r]: the radius a window of radius r grows to when too few of its pixels are valid (x1.5)."""
+    return np.array([allowed_radius(math.ceil(1.5 * r), r_max) if r else 1 for r in range(r_max + 1)], np.int64)
+
+
+# --- the fit ---------------------------------------------------------------------------------------
+#
+# Integral rows live in a ring of 4 r_max + 3 rows, channel-major: ring[slot[i], c, u] is moment c of
+# integral row i at column u. A row of the image needs integral rows v - 2 r .. v + 2 r + 1 (the centred
+# windows and the shifted ones), so the moments stay in cache instead of a full-size image.
+
+
+@njit(noalias=True, _nrt=False)
+def integral_row(z_row, valid_row, y, prev, row):
+    """Integral row i from row i - 1 (``prev``), adding image row i - 1 (``z_row``, ``valid_row``, at
+    centred ordinate ``y``).
+
+    Integral row i holds, per column u (0..W), the sums over the valid pixels of image rows < i
+    and columns < u of (1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww), with u' = u - W/2,
+    v' = v - H/2 (centred coordinates keep the sums small) and w = 1/z.
+    """
+    W = z_row.shape[0]
+    for c in range(_N_MOMENTS):
+        row[c, 0] = 0.0
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = 0.0
+    for u in range(W):
+        if valid_row[u]:
+            x = u - 0.5 * W
+            w = 1.0 / z_row[u]
+            s0 += 1.0
+            s1 += x
+            s2 += y
+            s3 += x * x
+            s4 += x * y
+            s5 += y * y
+            s6 += w
+            s7 += x * w
+            s8 += y * w
+            s9 += w * w
+        row[0, u + 1] = prev[0, u + 1] + s0
+        row[1, u + 1] = prev[1, u + 1] + s1
+        row[2, u + 1] = prev[2, u + 1] + s2
+        row[3, u + 1] = prev[3, u + 1] + s3
+        row[4, u + 1] = prev[4, u + 1] + s4
+        row[5, u + 1] = prev[5, u + 1] + s5
+        row[6, u + 1] = prev[6, u + 1] + s6
+        row[7, u + 1] = prev[7, u + 1] + s7
+        row[8, u + 1] = prev[8, u + 1] + s8
+        row[9, u + 1] = prev[9, u + 1] + s9
+
+
+@pixel
+def window_sums(ring, slot, H, W, v, u, r, m):
+    """Moment sums of the window rows v-r..v+r, columns u-r..u+r (clipped to the image) into m."""
+    v0 = slot[min(max(v - r, 0), H)]
+    v1 = slot[min(max(v + r + 1, 0), H)]
+    u0 = min(max(u - r, 0), W)
+    u1 = min(max(u + r + 1, 0), W)
+    for c in range(_N_MOMENTS):
+        m[c] = ring[v1, c, u1] - ring[v0, c, u1] - ring[v1, c, u0] + ring[v0, c, u0]
+
+
+@njit(noalias=True, _nrt=False)
+def box_row(top, bottom, r, pick, cols, m_row):
+    """Window sums at radius r for the pixels of a row where ``pick``: m_row[c, u] = sums of moment c
+    over columns u - r .. u + r (clipped) between integral rows ``top`` and ``bottom``.
+
+    ``cols`` is scratch of W + 1 (the column sums bottom - top). Loops run from 0 over views so that
+    they vectorise (a negative-looking index costs Numba a wrap-around test per read).
+    """
+    W = m_row.shape[1]
+    k = 2 * r + 1
+    for c in range(_N_MOMENTS):
+        t = top[c]
+        b = bottom[c]
+        for u in range(W + 1):
+            cols[u] = b[u] - t[u]
+        out = m_row[c]
+        for u in range(min(r, W)):  # left border: clipped windows
+            out[u] = select(pick[u], cols[min(u + r + 1, W)] - cols[0], out[u])
+        n = W - k
+        if n > 0:  # interior: u = r .. W - r - 2
+            hi = cols[k:]
+            o = out[r:]
+            p = pick[r:]
+            for i in range(n):
+                o[i] = select(p[i], hi[i] - cols[i], o[i])
+        for u in range(max(r, W - r - 1), W):  # right border
+            out[u] = select(pick[u], cols[W] - cols[max(u - r, 0)], out[u])
+
+
+@njit(noalias=True, _nrt=False)
+def fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof):
+    """Least-squares fits w = a + g_u (u' - x) + g_v (v' - y) of a row's pixels from their window
+    moments; branch-free so that it vectorises (the same arithmetic as :func:`affine_fit`).
+
+    A window that is the whole (2r+1)^2 square (every pixel valid, none clipped) has known
+    coordinate moments: mean (x, y), sum of squared offsets (2r+1)^2 r (r+1) / 3 per axis, no
+    cross term. dof = n - 3, or 0 where the fit is undetermined (fewer than 4 points, or
+    points on a line: 1 - corr(u, v)^2 below 1e-6).
+    """
+    W = m_row.shape[1]
+    for u in range(W):
+        n = m_row[0, u]
+        x = u - 0.5 * W
+        r = r_row[u]
+        k = 2 * r + 1
+        full = n == k * k
+        inv_n = 1.0 / max(n, 1.0)
+        mw = m_row[6, u] * inv_n
+        mu = select(full, x, m_row[1, u] * inv_n)
+        mv = select(full, y, m_row[2, u] * inv_n)
+        c_full = n * (r * (r + 1)) * (1.0 / 3.0)
+        cuu = select(full, c_full, m_row[3, u] - m_row[1, u] * mu)
+        cuv = select(full, 0.0, m_row[4, u] - m_row[1, u] * mv)
+        cvv = select(full, c_full, m_row[5, u] - m_row[2, u] * mv)
+        cuw = m_row[7, u] - n * mu * mw
+        cvw = m_row[8, u] - n * mv * mw
+        cww = m_row[9, u] - m_row[6, u] * mw
+        det = cuu * cvv - cuv * cuv
+        ok = (n >= 4.0) & (cuu > 0.0) & (cvv > 0.0) & (det > 1e-6 * cuu * cvv)
+        inv_det = 1.0 / select(ok, det, 1.0)
+        gu = (cvv * cuw - cuv * cvw) * inv_det
+        gv = (cuu * cvw - cuv * cuw) * inv_det
+        g_u[u] = gu
+        g_v[u] = gv
+        a[u] = mw + gu * (x - mu) + gv * (y - mv)
+        rss[u] = max(cww - gu * cuw - gv * cvw, 0.0)
+        dof[u] = select(ok, n - 3.0, 0.0)
+
+
+@pixel
+def affine_fit(m, r, x, y):
+    """One window's fit from its moment sums m (window centred on (x, y)): (ok, a, g_u, g_v, rss, dof).
+
+    The per-pixel form of :func:`fit_row`, used for the shifted windows.
+    """
+    n = m[0]
+    if n < 4.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 1.0
+    inv_n = 1.0 / n
+    mw = m[6] * inv_n
+    k = 2 * r + 1
+    if n == k * k:
+        mu = x
+        mv = y
+        cuu = n * (r * (r + 1)) * (1.0 / 3.0)
+        cvv = cuu
+        cuv = 0.0
+    else:
+        mu = m[1] * inv_n
+        mv = m[2] * inv_n
+        cuu = m[3] - m[1] * mu
+        cuv = m[4] - m[1] * mv
+        cvv = m[5] - m[2] * mv
+    cuw = m[7] - n * mu * mw
+    cvw = m[8] - n * mv * mw
+    cww = m[9] - m[6] * mw
+    det = cuu * cvv - cuv * cuv
+    if not (cuu > 0.0 and cvv > 0.0 and det > 1e-6 * cuu * cvv):
+        return False, 0.0, 0.0, 0.0, 0.0, 1.0
+    inv_det = 1.0 / det
+    g_u = (cvv * cuw - cuv * cvw) * inv_det
+    g_v = (cuu * cvw - cuv * cuw) * inv_det
+    a = mw + g_u * (x - mu) + g_v * (y - mv)
+    rss = max(cww - g_u * cuw - g_v * cvw, 0.0)
+    return True, a, g_u, g_v, rss, n - 3.0
+
+
+@njit(noalias=True, _nrt=False)
+def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_row):
+    """Eq. (2): the unit normal facing the camera from each pixel's fit; ``fill`` without one."""
+    W = z_row.shape[0]
+    for u in range(W):
+        ok = valid_row[u] & (dof[u] > 0.0)
+        au = a[u]
+        au = select(au > 0.0, au, 1.0 / z_row[u])  # a fit that passes behind the camera: the pixel's own w
+        nx = fx * g_u[u]
+        ny = fy * g_v[u]
+        nz = au - g_u[u] * (u - cx) - g_v[u] * (v - cy)
+        inv_norm = -1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+        out_row[3 * u] = select(ok, np.float32(nx * inv_norm), fill)
+        out_row[3 * u + 1] = select(ok, np.float32(ny * inv_norm), fill)
+        out_row[3 * u + 2] = select(ok, np.float32(nz * inv_norm), fill)
+
+
+#: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner.
+_SHIFTS = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], np.int64)
+
+
+@njit(noalias=True)
+def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, fx, fy, cx, cy, kappa, rho_floor,
+                         r_max, fill, ring, out):
+    H, W = z.shape
+    L = ring.shape[0]
+    slot = np.arange(H + 1) % L
+    m = np.empty(_N_MOMENTS)
+    m_row = np.zeros((_N_MOMENTS, W))
+    r_row = np.empty(W, np.int64)
+    t_row = np.empty(W, np.int64)
+    pick = np.empty(W, np.bool_)
+    cols = np.empty(W + 1)
+    g_u = np.empty(W)
+    g_v = np.empty(W)
+    a = np.empty(W)
+    rss = np.empty(W)
+    dof = np.empty(W)
+    present = np.zeros(r_max + 2, np.bool_)
+    f = math.sqrt(fx * fy)
+    n_table = r_table.shape[0]
+    out_flat = out.reshape(H, 3 * W)
+    ring[0, :, :] = 0.0
+    made = 0  # the last integral row made
+    for v in range(H):
+        while made < min(H, v + 2 * r_max + 1):
+            made += 1
+            integral_row(z[made - 1], valid[made - 1], made - 1 - 0.5 * H, ring[slot[made - 1]], ring[slot[made]])
+        y = v - 0.5 * H
+        valid_row = valid[v]
+        z_row = z[v]
+        # Each pixel's radius from its depth; then window sums radius by radius, growing the
+        # radius (x1.5) where fewer than half the window's pixels are valid (sparse depth).
+        present[:] = False
+        for u in range(W):
+            t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
+            t_row[u] = t
+            r_row[u] = r_table[t]
+            if valid_row[u]:
+                present[r_table[t]] = True
+        for r in range(1, r_max + 1):
+            if not present[r]:
+                continue
+            for u in range(W):
+                pick[u] = valid_row[u] & (r_row[u] == r)
+            box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, cols, m_row)
+            if r == r_max:
+                continue
+            for u in range(W):
+                if pick[u] and 2.0 * m_row[0, u] < (2 * r + 1) * (2 * r + 1):
+                    r_row[u] = grow[r]
+                    present[grow[r]] = True
+        fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof)
+        # The edge test; the noise of w at this depth is sigma_z / z^2 = rho / (z f). A pixel that
+        # fails it takes the best of the four quadrant windows (smallest residual per dof).
+        for u in range(W):
+            if not valid_row[u]:
+                continue
+            zp = z_row[u]
+            s_w = kappa * max(rho_table[t_row[u]], rho_floor)
+            ok = dof[u] > 0.0
+            if ok and rss[u] * (zp * f) * (zp * f) <= s_w * s_w * dof[u]:
+                continue
+            x = u - 0.5 * W
+            r = r_row[u]
+            best = rss[u] / dof[u] if ok else np.inf
+            n_min = max(6.0, 0.25 * m_row[0, u])
+            for k in range(_SHIFTS.shape[0]):
+                dv = _SHIFTS[k, 0] * r
+                du = _SHIFTS[k, 1] * r
+                window_sums(ring, slot, H, W, v + dv, u + du, r, m)
+                if m[0] < n_min:
+                    continue
+                ok_k, a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(m, r, x + du, y + dv)
+                if ok_k and rss_k < best * dof_k:
+                    best = rss_k / dof_k
+                    g_u[u] = gu_k
+                    g_v[u] = gv_k
+                    a[u] = a_k - gu_k * du - gv_k * dv
+                    dof[u] = dof_k
+        normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_flat[v])
+
+
+def adaptive_fit(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, window=None, max_window: int = MAX_WINDOW,
+                 alpha: float = ALPHA, kappa: float = KAPPA, fill: float = 0.0,
+                 profile: NoiseProfile | None = None) -> np.ndarray:
+    """Adaptive plane fit of inverse depth; fills ``out`` (H, W, 3) float32 and returns it.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth.
+    valid : ndarray of bool, shape (H, W)
+        True where the depth is usable.
+    cam : Intrinsics
+    out : ndarray of float32, shape (H, W, 3)
+    window : int or None
+        None (default): the window side follows from the frame's noise (see the
+        module docstring). An odd int: that fixed side everywhere (still grown
+        where too few pixels are valid).
+    max_window : int
+        Largest window side (odd).
+    alpha : float
+        Radius gain, r = ceil(alpha sqrt(rho)).
+    kappa : float
+        Edge test: a fit whose residual per degree of freedom exceeds
+        (kappa sigma_w)^2 is replaced by the best shifted window.
+    fill : float
+        Value of pixels without a normal.
+    profile : NoiseProfile, optional
+        The frame's :func:`noise_profile`, when the caller has it already.
+    """
+    f = math.sqrt(cam.fx * cam.fy)
+    depths, rho, _ = profile if profile is not None else noise_profile(z, valid, f)
+    z0, inv_step, r_table, rho_table = radius_table(depths, rho, alpha=alpha, window=window, max_window=max_window)
+    r_max = (max_window - 1) // 2
+    ring = np.empty((4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1))
+    _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, growth_table(r_max), float(cam.fx), float(cam.fy), float(cam.cx),
+                         float(cam.cy), float(kappa), RHO_FLOOR, r_max, np.float32(fill), ring, out)
+    return out

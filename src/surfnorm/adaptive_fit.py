@@ -34,7 +34,9 @@ the radius r = ceil(alpha sqrt(rho)) keeps the noise-induced error near a
 constant angle at every depth and for every sensor: clean depth gets 3x3
 windows, a Kinect frame at 4 m gets 15x15 or more. Where the window holds too
 few valid pixels (sparse LiDAR depth, holes) it grows (x1.5, up to
-``max_window``) until at least half of it is valid.
+``max_window``) until its n valid pixels pin the slope at least half as well
+as the full window would (2 n r (r + 1) at least (2 r_0 + 1)^2 r_0 (r_0 + 1)),
+and hold at least ``MIN_POINTS``.
 
 Edge awareness. A window across a depth discontinuity or a crease fits badly:
 its residual per degree of freedom exceeds the noise level (kappa sigma_w)^2.
@@ -58,7 +60,7 @@ from ._config import njit, pixel, select
 __all__ = ["adaptive_fit", "noise_profile", "NoiseProfile", "radius_table", "ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW"]
 
 #: Radius gain: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors (``surfnorm bench --simulate``).
-ALPHA = 5.0
+ALPHA = 1.0
 #: A fit is trusted when its residual per degree of freedom is below (KAPPA * sigma_w)^2.
 KAPPA = 3.0
 #: Lowest noise level (pixel spacings) assumed by the edge test, so clean depth still tolerates rounding.
@@ -67,12 +69,18 @@ RHO_FLOOR = 0.25
 MAX_WINDOW = 31
 #: The radii a window may take (about x1.3 apart): few distinct radii in a row keep the box sums cheap.
 RADII = (1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 26, 33, 43, 56, 73, 95, 124)
+#: Times a window that fits within the noise is tried twice as wide.
+N_WIDEN = 3
+#: Fewest valid pixels a window is grown to hold (sparse depth).
+MIN_POINTS = 12
 #: Depth bins (log-spaced between the nearest and farthest valid depth) of the noise profile.
 N_BINS = 8
 #: Samples a depth bin needs to have its own noise level; bins with fewer take their neighbours'.
 MIN_SAMPLES = 64
 #: About how many pixels the noise profile samples (every step-th row and column).
 _NOISE_SAMPLES = 40_000
+#: Widest gap (pixels) between the samples of a second difference, for sparse depth.
+_MAX_GAP = 4
 _CLIP_SIGMAS = 5.0
 _CLIP_ROUNDS = 5
 _N_MOMENTS = 10
@@ -95,14 +103,15 @@ def _depth_range(z, valid):
 
 @njit
 def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
-    """Second differences of w = 1/z at strides 1 and 2 along rows and columns, in units of the
-    point spacing z/f.
+    """Second differences of w = 1/z at strides a, 2a and 4a along rows and columns, in units of
+    the point spacing z/f.
 
-    For each run of five valid pixels centred on every ``step``-th row and column (both
-    directions), x_s = (w_{-s} - 2 w_0 + w_{+s}) z_0 f / sqrt(6) for s = 1, 2 go to
-    ``xs[0, k]`` and ``xs[1, k]``, and the centre's depth bin to ``bins[k]``. On a plane both
-    vanish (w is affine there); for white noise sigma_z in depth both have the RMS
-    rho = sigma_z f / z; on a smooth curved surface x_2 = 4 x_1. Returns how many.
+    For each pixel on every ``step``-th row and column and each direction, the smallest a in
+    1..``_MAX_GAP`` for which the pixels at +-a, +-2a, +-4a are valid (sparse depth has gaps)
+    gives x_s = (w_{-sa} - 2 w_0 + w_{+sa}) z_0 f / sqrt(6) in ``xs[0, k]``, ``xs[1, k]``,
+    ``xs[2, k]`` (s = 1, 2, 4), and the centre's depth bin in ``bins[k]``. On a plane they vanish
+    (w is affine there); white noise sigma_z in depth gives each the RMS rho = sigma_z f / z; a
+    smooth curved surface gives x_2 = 4 x_1 and x_4 = 4 x_2. Returns how many.
     """
     H, W = z.shape
     k = 0
@@ -118,16 +127,24 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
             b = 0
             if span > 0.0:
                 b = min(nbins - 1, int((math.log(zb) - lo) / span * nbins))
-            if 1 < u < W - 2 and valid[v, u - 2] and valid[v, u - 1] and valid[v, u + 1] and valid[v, u + 2]:
-                xs[0, k] = (1.0 / z[v, u - 1] - w0 + 1.0 / z[v, u + 1]) * zb * scale
-                xs[1, k] = (1.0 / z[v, u - 2] - w0 + 1.0 / z[v, u + 2]) * zb * scale
-                bins[k] = b
-                k += 1
-            if 1 < v < H - 2 and valid[v - 2, u] and valid[v - 1, u] and valid[v + 1, u] and valid[v + 2, u]:
-                xs[0, k] = (1.0 / z[v - 1, u] - w0 + 1.0 / z[v + 1, u]) * zb * scale
-                xs[1, k] = (1.0 / z[v - 2, u] - w0 + 1.0 / z[v + 2, u]) * zb * scale
-                bins[k] = b
-                k += 1
+            for a in range(1, _MAX_GAP + 1):
+                if (u - 4 * a >= 0 and u + 4 * a < W and valid[v, u - 4 * a] and valid[v, u - 2 * a]
+                        and valid[v, u - a] and valid[v, u + a] and valid[v, u + 2 * a] and valid[v, u + 4 * a]):
+                    xs[0, k] = (1.0 / z[v, u - a] - w0 + 1.0 / z[v, u + a]) * zb * scale
+                    xs[1, k] = (1.0 / z[v, u - 2 * a] - w0 + 1.0 / z[v, u + 2 * a]) * zb * scale
+                    xs[2, k] = (1.0 / z[v, u - 4 * a] - w0 + 1.0 / z[v, u + 4 * a]) * zb * scale
+                    bins[k] = b
+                    k += 1
+                    break
+            for a in range(1, _MAX_GAP + 1):
+                if (v - 4 * a >= 0 and v + 4 * a < H and valid[v - 4 * a, u] and valid[v - 2 * a, u]
+                        and valid[v - a, u] and valid[v + a, u] and valid[v + 2 * a, u] and valid[v + 4 * a, u]):
+                    xs[0, k] = (1.0 / z[v - a, u] - w0 + 1.0 / z[v + a, u]) * zb * scale
+                    xs[1, k] = (1.0 / z[v - 2 * a, u] - w0 + 1.0 / z[v + 2 * a, u]) * zb * scale
+                    xs[2, k] = (1.0 / z[v - 4 * a, u] - w0 + 1.0 / z[v + 4 * a, u]) * zb * scale
+                    bins[k] = b
+                    k += 1
+                    break
     return k
 
 
@@ -153,10 +170,10 @@ def _clipped_rms(xs, bins, n, nbins, rounds, sigmas, rms, counts):
 def _samples(z, valid, f):
     zmin, zmax = _depth_range(z, valid)
     if not zmax > 0.0:
-        return zmin, zmax, np.empty((2, 0)), np.empty(0, np.int64)
+        return zmin, zmax, np.empty((3, 0)), np.empty(0, np.int64)
     step = max(1, int(round(math.sqrt(z.size / _NOISE_SAMPLES))))
     size = 2 * ((z.shape[0] + step - 1) // step) * ((z.shape[1] + step - 1) // step)
-    xs = np.empty((2, size))
+    xs = np.empty((3, size))
     bins = np.empty(size, np.int64)
     n = _second_differences(z, valid, float(f), zmin, zmax, N_BINS, step, xs, bins)
     return zmin, zmax, xs[:, :n], bins[:n]
@@ -185,11 +202,14 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     """The frame's noise against depth (see :class:`NoiseProfile`).
 
     In each depth bin (log-spaced between the nearest and farthest valid depth),
-    the sigma-clipped mean squares v_1, v_2 of the second differences of inverse
-    depth at strides 1 and 2 (see :func:`_second_differences`) separate noise
-    from shape: noise adds rho^2 to both, smooth curvature adds c to v_1 and
-    16 c to v_2, so rho^2 = (16 v_1 - v_2) / 15 (the curvature of clean depth is
-    not taken for noise). Sampled on every step-th row and column (about
+    the sigma-clipped mean squares v_1, v_2, v_4 of the second differences of
+    inverse depth at strides 1, 2 and 4 (see :func:`_second_differences`)
+    separate noise from shape: white noise adds rho^2 to each, smooth curvature
+    adds c, 16 c and 256 c, so rho^2 = (16 v_1 - v_2) / 15 (the curvature of
+    clean depth is not taken for noise). Noise correlated between neighbours
+    (stereo matchers aggregate over windows) shows less at stride 1 than at
+    stride 2 while it still moves a fitted slope, so rho is the larger of the
+    stride-1 estimate and (16 v_2 - v_4) / 15. Sampled on every step-th row and column (about
     ``_NOISE_SAMPLES`` pixels). Bins with fewer than ``MIN_SAMPLES`` samples
     take the value of the nearest bins that have enough; with none, rho is 0
     (3x3 windows).
@@ -199,12 +219,12 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     if n < MIN_SAMPLES:
         return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
     floor = float(np.median(np.abs(xs[0]))) / 0.6745
-    rms1 = np.empty(N_BINS)
-    rms2 = np.empty(N_BINS)
+    ms = np.empty((3, N_BINS))
     counts = np.zeros(N_BINS, np.int64)
-    _clipped_rms(np.ascontiguousarray(xs[1]), bins, n, N_BINS, _CLIP_ROUNDS, _CLIP_SIGMAS, rms2, counts)
-    _clipped_rms(np.ascontiguousarray(xs[0]), bins, n, N_BINS, _CLIP_ROUNDS, _CLIP_SIGMAS, rms1, counts)
-    rho = np.sqrt(np.maximum(16.0 * rms1 ** 2 - rms2 ** 2, 0.0) / 15.0)
+    for i in range(3):
+        _clipped_rms(np.ascontiguousarray(xs[i]), bins, n, N_BINS, _CLIP_ROUNDS, _CLIP_SIGMAS, ms[i], counts)
+    ms **= 2
+    rho = np.sqrt(np.maximum(np.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
     edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)
     centres = np.sqrt(edges[:-1] * edges[1:])
     ok = counts >= MIN_SAMPLES
@@ -244,6 +264,11 @@ def allowed_radius(r: float, r_max: int) -> int:
         if x >= r:
             return min(x, r_max)
     return r_max
+
+
+def widen_table(r_max: int) -> np.ndarray:
+    """widen[r]: the radius a passing window of radius r is tried at next (x2)."""
+    return np.array([allowed_radius(2 * r, r_max) if r else 1 for r in range(r_max + 1)], np.int64)
 
 
 def growth_table(r_max: int) -> np.ndarray:
@@ -437,8 +462,8 @@ _SHIFTS = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], np.int64)
 
 
 @njit(noalias=True)
-def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, fx, fy, cx, cy, kappa, rho_floor,
-                         r_max, fill, ring, out):
+def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen, n_widen, fx, fy, cx, cy, kappa,
+                         rho_floor, r_max, fill, ring, out):
     H, W = z.shape
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
@@ -453,6 +478,15 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, fx, f
     a = np.empty(W)
     rss = np.empty(W)
     dof = np.empty(W)
+    limit = np.empty(W)
+    passed = np.empty(W, np.bool_)
+    r_try = np.empty(W, np.int64)
+    m_try = np.zeros((_N_MOMENTS, W))
+    g_u2 = np.empty(W)
+    g_v2 = np.empty(W)
+    a2 = np.empty(W)
+    rss2 = np.empty(W)
+    dof2 = np.empty(W)
     present = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)
     n_table = r_table.shape[0]
@@ -467,7 +501,7 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, fx, f
         valid_row = valid[v]
         z_row = z[v]
         # Each pixel's radius from its depth; then window sums radius by radius, growing the
-        # radius (x1.5) where fewer than half the window's pixels are valid (sparse depth).
+        # radius where too few of the window's pixels are valid (sparse depth).
         present[:] = False
         for u in range(W):
             t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
@@ -484,19 +518,59 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, fx, f
             if r == r_max:
                 continue
             for u in range(W):
-                if pick[u] and 2.0 * m_row[0, u] < (2 * r + 1) * (2 * r + 1):
+                # Sparse depth: grow (x1.5) until the window's valid pixels pin the slope at least
+                # half as well as the full window of the noise's radius r0 (sum of squared offsets
+                # ~ n r (r + 1) / 3), with at least MIN_POINTS of them.
+                r0 = r_table[t_row[u]]
+                if pick[u] and (m_row[0, u] < MIN_POINTS
+                                or 2.0 * m_row[0, u] * (r * (r + 1)) < (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))):
                     r_row[u] = grow[r]
                     present[grow[r]] = True
         fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof)
-        # The edge test; the noise of w at this depth is sigma_z / z^2 = rho / (z f). A pixel that
-        # fails it takes the best of the four quadrant windows (smallest residual per dof).
+        # The noise test: a fit is consistent with the noise when its residual per degree of
+        # freedom is at most (kappa sigma_w)^2, sigma_w = sigma_z / z^2 = rho / (z f) the noise of w.
+        for u in range(W):
+            zf = z_row[u] * f
+            s_w = kappa * max(rho_table[t_row[u]], rho_floor)
+            limit[u] = (s_w * s_w) / (zf * zf)
+            passed[u] = valid_row[u] & (dof[u] > 0.0) & (rss[u] <= limit[u] * dof[u])
+        # Wider where the data allow: a fit that passes is tried on a window twice as wide, kept
+        # while it still passes (planes get wide windows, curved surfaces and edges keep theirs).
+        for _ in range(n_widen):
+            present[:] = False
+            more = False
+            for u in range(W):
+                r_try[u] = widen[r_row[u]]
+                if passed[u] and r_try[u] > r_row[u]:
+                    present[r_try[u]] = True
+                    more = True
+                else:
+                    passed[u] = False
+            if not more:
+                break
+            for r in range(1, r_max + 1):
+                if present[r]:
+                    for u in range(W):
+                        pick[u] = passed[u] & (r_try[u] == r)
+                    box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, cols, m_try)
+            fit_row(m_try, r_try, y, g_u2, g_v2, a2, rss2, dof2)
+            for u in range(W):
+                if passed[u] and dof2[u] > 0.0 and rss2[u] <= limit[u] * dof2[u]:
+                    g_u[u] = g_u2[u]
+                    g_v[u] = g_v2[u]
+                    a[u] = a2[u]
+                    rss[u] = rss2[u]
+                    dof[u] = dof2[u]
+                    r_row[u] = r_try[u]
+                else:
+                    passed[u] = False
+        # The edge test: a pixel whose fit fails the noise test takes the best of the four
+        # quadrant windows (smallest residual per dof).
         for u in range(W):
             if not valid_row[u]:
                 continue
-            zp = z_row[u]
-            s_w = kappa * max(rho_table[t_row[u]], rho_floor)
             ok = dof[u] > 0.0
-            if ok and rss[u] * (zp * f) * (zp * f) <= s_w * s_w * dof[u]:
+            if ok and rss[u] <= limit[u] * dof[u]:
                 continue
             x = u - 0.5 * W
             r = r_row[u]
@@ -552,6 +626,7 @@ def adaptive_fit(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, wind
     z0, inv_step, r_table, rho_table = radius_table(depths, rho, alpha=alpha, window=window, max_window=max_window)
     r_max = (max_window - 1) // 2
     ring = np.empty((4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1))
-    _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, growth_table(r_max), float(cam.fx), float(cam.fy), float(cam.cx),
+    _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, growth_table(r_max),
+                         widen_table(r_max), N_WIDEN, float(cam.fx), float(cam.fy), float(cam.cx),
                          float(cam.cy), float(kappa), RHO_FLOOR, r_max, np.float32(fill), ring, out)
     return out

@@ -34,7 +34,8 @@ def choose(z: np.ndarray, valid: np.ndarray, cam) -> str:
 
 
 def _choice(profile) -> str:
-    return "adaptive_fit" if profile.floor >= CLEAN_FLOOR else "d2nt_v3"
+    # A NaN floor: too few pixels with valid neighbours to measure one (sparse depth, as from a LiDAR).
+    return "d2nt_v3" if profile.floor < CLEAN_FLOOR else "adaptive_fit"
 
 
 def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, fill: float = 0.0, tie_tol: float = 0.0) -> np.ndarray:

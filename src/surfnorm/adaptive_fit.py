@@ -67,8 +67,9 @@ KAPPA = 3.0
 RHO_FLOOR = 0.25
 #: Largest window side (odd); the radius is at most (MAX_WINDOW - 1) / 2.
 MAX_WINDOW = 31
-#: The radii a window may take (about x1.3 apart): few distinct radii in a row keep the box sums cheap.
-RADII = (1, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 26, 33, 43, 56, 73, 95, 124)
+#: The radii a window may take (x2 apart, and ``max_window``'s): few distinct radii in a row keep the box
+#: sums cheap, and a window widened x2 stays on the ladder.
+RADII = (1, 2, 4, 8, 16, 32, 64, 128)
 #: Times a window that fits within the noise is tried twice as wide.
 N_WIDEN = 3
 #: Fewest valid pixels a window is grown to hold (sparse depth).
@@ -78,7 +79,7 @@ N_BINS = 8
 #: Samples a depth bin needs to have its own noise level; bins with fewer take their neighbours'.
 MIN_SAMPLES = 64
 #: About how many pixels the noise profile samples (every step-th row and column).
-_NOISE_SAMPLES = 40_000
+_NOISE_SAMPLES = 12_000
 #: Widest gap (pixels) between the samples of a second difference, for sparse depth.
 _MAX_GAP = 4
 _CLIP_SIGMAS = 5.0
@@ -227,7 +228,7 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     rho = np.sqrt(np.maximum(np.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
     edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)
     centres = np.sqrt(edges[:-1] * edges[1:])
-    ok = counts >= MIN_SAMPLES
+    ok = np.bincount(bins, minlength=N_BINS) >= MIN_SAMPLES
     if not ok.any():
         return NoiseProfile(centres, np.zeros(N_BINS), floor)
     return NoiseProfile(centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor)

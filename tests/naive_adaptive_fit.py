@@ -1,0 +1,133 @@
+"""A slow, obvious adaptive_fit: Python loops, explicit windows, np.linalg.lstsq.
+
+Written from the module docstring of surfnorm.adaptive_fit, not from its kernels: the
+noise profile from the second differences of inverse depth at strides a, 2a, 4a, the
+radius ladder, the sparse growth, the noise test, the widening and the quadrant windows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+LADDER = (1, 2, 4, 8, 16, 32, 64, 128)
+
+
+def on_ladder(r, r_max):
+    return min(next((x for x in LADDER if x >= r), r_max), r_max)
+
+
+def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
+    H, W = z.shape
+    zmin, zmax = float(z[valid].min()), float(z[valid].max())
+    step = max(1, int(round(math.sqrt(z.size / samples))))
+    lo, span = math.log(zmin), math.log(zmax) - math.log(zmin)
+    xs, bins = [], []
+    for v in range(0, H, step):
+        for u in range(0, W, step):
+            if not valid[v, u]:
+                continue
+            b = min(n_bins - 1, int((math.log(z[v, u]) - lo) / span * n_bins)) if span > 0 else 0
+            for dv, du in ((0, 1), (1, 0)):
+                for a in range(1, max_gap + 1):
+                    offs = [s * a for s in (-4, -2, -1, 1, 2, 4)]
+                    pts = [(v + o * dv, u + o * du) for o in offs]
+                    if all(0 <= p < H and 0 <= q < W and valid[p, q] for p, q in pts):
+                        w = lambda o: 1.0 / z[v + o * dv, u + o * du]
+                        x = [(w(-s * a) - 2.0 / z[v, u] + w(s * a)) * z[v, u] * f / math.sqrt(6) for s in (1, 2, 4)]
+                        xs.append(x)
+                        bins.append(b)
+                        break
+    xs, bins = np.array(xs).reshape(-1, 3), np.array(bins, dtype=int)
+    floor = float(np.median(np.abs(xs[:, 0]))) / 0.6745 if len(xs) >= min_samples else float("nan")
+    ms = np.zeros((3, n_bins))
+    for i in range(3):
+        for b in range(n_bins):
+            x = xs[bins == b, i]
+            rms = np.inf
+            for _ in range(6):
+                kept = x[np.abs(x) <= 5.0 * rms]
+                rms = math.sqrt(np.mean(kept ** 2)) if kept.size else 0.0
+            ms[i, b] = rms ** 2
+    rho = np.sqrt(np.maximum(np.maximum(16 * ms[0] - ms[1], 16 * ms[1] - ms[2]), 0) / 15)
+    edges = np.geomspace(zmin, zmax, n_bins + 1)
+    centres = np.sqrt(edges[:-1] * edges[1:])
+    ok = np.bincount(bins, minlength=n_bins) >= min_samples
+    return centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor
+
+
+def _fit(z, valid, v, u, vc, uc, r):
+    """Plane of w over the valid pixels of the window centred (vc, uc), radius r, clipped.
+    Returns (n, ok, a at (v, u), g_u, g_v, rss)."""
+    H, W = z.shape
+    vs, us = np.mgrid[max(vc - r, 0):min(vc + r + 1, H), max(uc - r, 0):min(uc + r + 1, W)]
+    sel = valid[vs, us]
+    vs, us = vs[sel], us[sel]
+    n = len(vs)
+    if n < 4:
+        return n, False, 0.0, 0.0, 0.0, 0.0
+    du, dv = (us - u).astype(float), (vs - v).astype(float)
+    cuu, cvv = np.sum((du - du.mean()) ** 2), np.sum((dv - dv.mean()) ** 2)
+    cuv = np.sum((du - du.mean()) * (dv - dv.mean()))
+    if not (cuu > 0 and cvv > 0 and cuu * cvv - cuv ** 2 > 1e-6 * cuu * cvv):
+        return n, False, 0.0, 0.0, 0.0, 0.0
+    A = np.stack([np.ones(n), du, dv], axis=1)
+    w = 1.0 / z[vs, us]
+    coef = np.linalg.lstsq(A, w, rcond=None)[0]
+    rss = float(np.sum((A @ coef - w) ** 2))
+    return n, True, coef[0], coef[1], coef[2], rss
+
+
+def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_window=31, n_widen=3,
+                 min_points=12, table=512, fill=0.0):
+    z = np.asarray(z, dtype=np.float64)
+    valid = (np.isfinite(z) & (z > 0)) if valid is None else valid
+    H, W = z.shape
+    fx, fy, cx, cy = K[0][0], K[1][1], K[0][2], K[1][2]
+    f = math.sqrt(fx * fy)
+    z32 = z.astype(np.float32).astype(np.float64)
+    centres, rho_bins, _ = noise_profile(z32, valid, f)
+    r_max = (max_window - 1) // 2
+    zs = np.linspace(centres[0], centres[-1], table)
+    rho_t = np.interp(np.log(zs), np.log(centres), rho_bins)
+    inv_step = (table - 1) / (centres[-1] - centres[0])
+    out = np.full((H, W, 3), fill, dtype=np.float32)
+    for v in range(H):
+        for u in range(W):
+            if not valid[v, u]:
+                continue
+            zp = z32[v, u]
+            t = min(max(int((zp - centres[0]) * inv_step), 0), table - 1)
+            rho = rho_t[t]
+            r0 = on_ladder(min(max(math.ceil(alpha * math.sqrt(rho)), 1), r_max), r_max)
+            r = r0
+            n, ok, a, gu, gv, rss = _fit(z32, valid, v, u, v, u, r)
+            while (n < min_points or 2 * n * r * (r + 1) < (2 * r0 + 1) ** 2 * r0 * (r0 + 1)) and r < r_max:
+                r = on_ladder(math.ceil(1.5 * r), r_max)
+                n, ok, a, gu, gv, rss = _fit(z32, valid, v, u, v, u, r)
+            limit = (kappa * max(rho, rho_floor) / (zp * f)) ** 2
+            if ok and rss <= limit * (n - 3):
+                for _ in range(n_widen):
+                    r2 = on_ladder(2 * r, r_max)
+                    if r2 <= r:
+                        break
+                    n2, ok2, a2, gu2, gv2, rss2 = _fit(z32, valid, v, u, v, u, r2)
+                    if not (ok2 and rss2 <= limit * (n2 - 3)):
+                        break
+                    r, a, gu, gv = r2, a2, gu2, gv2
+            else:
+                best = rss / (n - 3) if ok else np.inf
+                for dv, du in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                    nk, okk, ak, guk, gvk, rssk = _fit(z32, valid, v, u, v + dv * r, u + du * r, r)
+                    if nk < max(6, 0.25 * n) or not okk:
+                        continue
+                    if rssk / (nk - 3) < best:
+                        best, ok, a, gu, gv = rssk / (nk - 3), True, ak, guk, gvk
+            if not ok:
+                continue
+            if not a > 0:
+                a = 1.0 / zp
+            nvec = np.array([fx * gu, fy * gv, a - gu * (u - cx) - gv * (v - cy)])
+            out[v, u] = -nvec / np.linalg.norm(nvec)
+    return out

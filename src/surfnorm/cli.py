@@ -113,7 +113,10 @@ def list_methods():
 def demo(
     out: Path = typer.Argument(Path("demo-output"), help="Folder for the normal and error maps (PNG)."),
 ):
-    """Run every method on the sample frames shipped with surfnorm; print e_A next to the authors' figures."""
+    """Run every method on the sample frames shipped with surfnorm; print e_A next to the authors' figures.
+
+    Then the default estimator on a real RealSense D435 frame, beside OpenCV's RgbdNormals when installed.
+    """
     from rich.progress import Progress
 
     from .demo import demo_methods, run_demo
@@ -142,6 +145,28 @@ def demo(
         table.add_row(name, *cells, f"{ms:.1f}")
     console.print(table)
     console.print(f"normal maps and error maps (PNG) written to {out}/")
+    _sensor_demo(out)
+
+
+def _sensor_demo(out: Path):
+    """The default's normals on the shipped RealSense frame beside OpenCV's, with the plane metric."""
+    from .demo import run_sensor_demo
+
+    try:
+        with err_console.status("estimating on the RealSense D435 frame"):
+            rows, skipped, picture = run_sensor_demo(out)
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    table = Table(title="Real sensor depth: RealSense D435 frame (ClearGrasp, Apache-2.0), angle to its reference planes",
+                  title_justify="left")
+    for name in ("estimator", "mean angle (deg)", "coverage", "ms"):
+        table.add_column(name, justify="left" if name == "estimator" else "right")
+    for r in rows:
+        table.add_row(r.estimator, f"{r.plane_error:.1f}", f"{r.coverage:.1%}", f"{r.ms:.1f}")
+    console.print(table)
+    if skipped:
+        console.print(f"OpenCV RgbdNormals skipped: {skipped}", highlight=False, soft_wrap=True)
+    console.print(f"normal maps side by side: {picture}", highlight=False)
 
 
 @app.command()

@@ -78,11 +78,11 @@ def test_sensor_demo_default_beside_opencv(tmp_path):
 
 
 def test_sensor_demo_without_opencv_contrib(tmp_path, monkeypatch):
-    """A fresh clone installs the core OpenCV build only: the peers are skipped with the reason, the rest runs."""
+    """An OpenCV without cv2.RgbdNormals (4.x): the peers are skipped with the reason, the rest runs."""
     monkeypatch.delattr(cv2, "RgbdNormals", raising=False)
     rows, skipped, picture = run_sensor_demo(tmp_path, repeats=1)
     assert [r.estimator for r in rows] == [default_label()]
-    assert "has no cv2.RgbdNormals" in skipped and "opencv-contrib-python-headless" in skipped
+    assert "has no cv2.RgbdNormals" in skipped and "opencv-python-headless>=5" in skipped
     assert cv2.imread(str(picture)).shape == (360 + 36, 640, 3)
 
 

@@ -115,7 +115,7 @@ def demo(
 ):
     """Run every method on the sample frames shipped with surfnorm; print e_A next to the authors' figures.
 
-    Then the default estimator on a real RealSense D435 frame, beside OpenCV's RgbdNormals when installed.
+    Then the default estimator on a real RealSense D435 frame, beside OpenCV's RgbdNormals where OpenCV has it.
     """
     from rich.progress import Progress
 

@@ -1,5 +1,5 @@
 """``surfnorm demo``: every registered method on the sample frames shipped inside surfnorm, and the
-default estimator on a real RealSense D435 frame beside OpenCV's RgbdNormals (when installed)."""
+default estimator on a real RealSense D435 frame beside OpenCV's RgbdNormals (when this OpenCV has it)."""
 
 from __future__ import annotations
 
@@ -137,12 +137,13 @@ def default_label() -> str:
 
 def opencv_rgbd_normals():
     """``(run, None)`` where ``run(depth, K, method, window) -> normals`` uses OpenCV's RgbdNormals, or
-    ``(None, why)`` when this OpenCV has none (it comes with OpenCV 5's contrib build)."""
+    ``(None, why)`` when this OpenCV has none (``cv2.RgbdNormals`` and ``cv2.depthTo3d`` come with OpenCV 5,
+    also in its core wheels; OpenCV 4 had them only in the contrib build, as ``cv2.rgbd``)."""
     import cv2
 
     if not hasattr(cv2, "RgbdNormals") or not hasattr(cv2, "depthTo3d"):
-        return None, (f"OpenCV {cv2.__version__} has no cv2.RgbdNormals; install OpenCV's contrib build "
-                      "(pip install 'opencv-contrib-python-headless>=5') to see it beside surfnorm")
+        return None, (f"OpenCV {cv2.__version__} has no cv2.RgbdNormals/cv2.depthTo3d; they come with OpenCV 5 "
+                      "(pip install 'opencv-python-headless>=5' or 'opencv-contrib-python-headless>=5')")
     cache = {}
 
     def run(depth: np.ndarray, K: Intrinsics, method: str, window: int) -> np.ndarray:

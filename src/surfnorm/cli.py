@@ -35,6 +35,8 @@ def method_names() -> list[str]:
 
 INTRINSICS_HELP = "Camera intrinsics file: JSON/YAML (fx, fy, cx, cy or K), ROS camera_info YAML, OpenCV YAML, 3F2N params.txt."
 FORMAT_HELP = "Output format: npy (float32), png16 (lossless, 3F2N encoding) or png8 (picture)."
+KINECT_HELP = "The file holds Kinect v1 raw 11-bit disparity (NYU Depth v2 raw frames): convert to metres, a / (b - d), NYU toolbox constants."
+BYTE_ORDER_HELP = "Byte order of 16-bit .pgm samples: big (netpbm, default) or little (libfreenect dumps, NYU Depth v2 raw d-*.pgm)."
 
 
 def _intrinsics(intrinsics: Optional[Path], fx, fy, cx, cy, depth_path: Optional[Path] = None):
@@ -59,7 +61,7 @@ def _check_format(fmt: str) -> str:
 
 @app.command()
 def estimate(
-    depth: Path = typer.Argument(..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png, float .tif)."),
+    depth: Path = typer.Argument(..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png or .pgm, float .tif or .exr)."),
     output: Path = typer.Argument(..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."),
     method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
     intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP),
@@ -72,6 +74,8 @@ def estimate(
     scale_invariant: bool = typer.Option(False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."),
     disparity: bool = typer.Option(False, "--disparity", help="The input holds disparity (inverse depth up to scale)."),
     fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
+    kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
+    byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
 ):
     """Estimate the normals of one depth image."""
     from . import estimate as estimate_
@@ -82,7 +86,7 @@ def estimate(
     try:
         formats = [_check_format(fmt)] if fmt is not None else ["npy", "png8"]
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
-        z = read_depth(depth, depth_scale=depth_scale)
+        z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
         normals = estimate_(z, cam, method=method, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity)
         if output.is_dir():
@@ -110,7 +114,10 @@ def list_methods():
 def demo(
     out: Path = typer.Argument(Path("demo-output"), help="Folder for the normal and error maps (PNG)."),
 ):
-    """Run every method on the sample frames shipped with surfnorm; print e_A next to the authors' figures."""
+    """Run every method on the sample frames shipped with surfnorm; print e_A next to the authors' figures.
+
+    Then the default estimator on a real RealSense D435 frame, beside OpenCV's RgbdNormals where OpenCV has it.
+    """
     from rich.progress import Progress
 
     from .demo import demo_methods, run_demo
@@ -139,6 +146,28 @@ def demo(
         table.add_row(name, *cells, f"{ms:.1f}")
     console.print(table)
     console.print(f"normal maps and error maps (PNG) written to {out}/")
+    _sensor_demo(out)
+
+
+def _sensor_demo(out: Path):
+    """The default's normals on the shipped RealSense frame beside OpenCV's, with the plane metric."""
+    from .demo import run_sensor_demo
+
+    try:
+        with err_console.status("estimating on the RealSense D435 frame"):
+            rows, skipped, picture = run_sensor_demo(out)
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    table = Table(title="Real sensor depth: RealSense D435 frame (ClearGrasp, Apache-2.0), angle to its reference planes",
+                  title_justify="left")
+    for name in ("estimator", "mean angle (deg)", "coverage", "ms"):
+        table.add_column(name, justify="left" if name == "estimator" else "right")
+    for r in rows:
+        table.add_row(r.estimator, f"{r.plane_error:.1f}", f"{r.coverage:.1%}", f"{r.ms:.1f}")
+    console.print(table)
+    if skipped:
+        console.print(f"OpenCV RgbdNormals skipped: {skipped}", highlight=False, soft_wrap=True)
+    console.print(f"normal maps side by side: {picture}", highlight=False)
 
 
 @app.command()
@@ -161,6 +190,8 @@ def convert(
                                           help="Run on the Dask scheduler at ADDRESS (tcp://host:8786); every worker must see INPUT and OUTPUT_DIR at the same paths."),
     local_cluster: Optional[int] = typer.Option(None, "--local-cluster", metavar="N", help="Run on a Dask LocalCluster of N worker processes."),
     shard_size: Optional[int] = typer.Option(None, "--shard-size", help="Files per Dask task (default: about 4 per worker thread, 8 to 64 files)."),
+    kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
+    byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
 ):
     """Convert many depth files to normal files, in parallel; a re-run skips finished outputs.
 
@@ -204,7 +235,8 @@ def convert(
             bar.update(task, total=len(plan_tasks(inputs, output_dir, fmt)))
             summary = convert_(inputs, output_dir, method=method, fmt=fmt, depth_scale=depth_scale, intrinsics=cam,
                                jobs=jobs, overwrite=overwrite, progress=advance, scale_invariant=scale_invariant,
-                               client=client, shard_size=shard_size)
+                               client=client, shard_size=shard_size, kinect_disparity=kinect_disparity,
+                               byte_order=byte_order)
     except KeyboardInterrupt:
         fail("interrupted: finished outputs are complete; run the same command again to do the rest", 130)
     except (SurfnormError, OSError) as exc:

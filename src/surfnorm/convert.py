@@ -63,6 +63,8 @@ class ConvertSettings:
     intrinsics: Intrinsics | None = None
     scale_invariant: bool = False
     overwrite: bool = False
+    kinect_disparity: bool = False
+    byte_order: str | None = None
 
 
 @dataclass(frozen=True)
@@ -229,7 +231,7 @@ def _threef2n_params(path: Path) -> Path:
 
 def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     from ._api import estimate
-    from .io.depth import read_depth
+    from .io.depth import depth_suffix, read_depth
     from .io.normals import write_normals
     from .io.threef2n import read_params
 
@@ -239,7 +241,9 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
         if not params.is_file():
             raise InputError(f"intrinsics: none given and no 3F2N params.txt at {params}")
         cam = read_params(params)
-    depth = read_depth(task.input, depth_scale=settings.depth_scale)
+    byte_order = settings.byte_order if depth_suffix(task.input) == ".pgm" else None  # other files in the folder
+    depth = read_depth(task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity,
+                       byte_order=byte_order)
     normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant, **settings.options)
     task.output.parent.mkdir(parents=True, exist_ok=True)
     write_normals(task.output, normals, fmt=settings.fmt)
@@ -306,8 +310,10 @@ def _check_output_dir(output_dir: Path):
         raise InputError(f"output_dir: cannot write into {output_dir} (Permission denied)")
 
 
-def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options) -> ConvertSettings:
+def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity=False,
+              byte_order=None) -> ConvertSettings:
     from ._validate import check_bool, check_choice, check_positive
+    from .io.depth import PGM_BYTE_ORDERS
     from .io.intrinsics import resolve_intrinsics
     from .io.normals import NORMAL_FORMATS
     from .methods import resolve
@@ -316,8 +322,14 @@ def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, 
     check_choice("fmt", fmt, NORMAL_FORMATS)
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
+    kinect_disparity = check_bool("kinect_disparity", kinect_disparity)
+    if byte_order is not None:
+        check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
+    if kinect_disparity and depth_scale is not None:
+        raise InputError(f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}")
     return ConvertSettings(method, dict(options), fmt, depth_scale, resolve_intrinsics(intrinsics),
-                           check_bool("scale_invariant", scale_invariant), check_bool("overwrite", overwrite))
+                           check_bool("scale_invariant", scale_invariant), check_bool("overwrite", overwrite),
+                           kinect_disparity, byte_order)
 
 
 def _worker_init():
@@ -342,7 +354,7 @@ def _pool_context():
 def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy", depth_scale: float | None = None,
             intrinsics=None, jobs: int = 1, client=None, shard_size: int | None = None, overwrite: bool = False,
             progress: Callable[[FileResult], None] | None = None, scale_invariant: bool = False,
-            **options) -> ConvertSummary:
+            kinect_disparity: bool = False, byte_order: str | None = None, **options) -> ConvertSummary:
     """Convert depth files to normal files; see :func:`plan_tasks` for ``inputs`` and the output names.
 
     Parameters
@@ -369,6 +381,10 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
         Replace outputs that exist instead of skipping them.
     progress : callable, optional
         Called with each :class:`FileResult` as its file finishes (in this process).
+    kinect_disparity, byte_order
+        How raw sensor files are stored, as in :func:`surfnorm.io.read_depth`
+        (Kinect v1 disparity; little-endian 16-bit PGM such as NYU Depth v2's raw
+        frames; ``byte_order`` applies to the ``.pgm`` files among the inputs).
 
     Returns
     -------
@@ -380,7 +396,8 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     InputError
         Bad arguments, no input files, an output folder that is a file or not writable.
     """
-    settings = _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options)
+    settings = _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity,
+                         byte_order)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise InputError(f"jobs: expected a positive integer, got {jobs!r}")
     output_dir = Path(output_dir)

@@ -1,4 +1,4 @@
-"""Depth files: 3F2N .bin, NumPy .npy/.npz, 16-bit PNG (with a depth scale) and float TIFF.
+"""Depth files: 3F2N .bin, NumPy .npy/.npz, 16-bit PNG (with a depth scale), float TIFF, OpenEXR, 16-bit PGM.
 
 Every reader returns float32 (H, W) and never judges the values: 0, negative,
 NaN and inf stay as they are and are masked as invalid by
@@ -11,24 +11,61 @@ Stereo cameras give disparity d = f_x B / z (pixels) instead of depth.
 :func:`disparity_to_depth` converts it when the baseline ``B`` is known;
 ``surfnorm.estimate(d, K, disparity=True)`` takes disparity (or any inverse
 depth known only up to scale) directly, see :mod:`surfnorm.units`.
+
+OpenEXR
+-------
+``.exr`` depth as RealSense recording tools, ClearGrasp and renderers such as
+Blender write it: float16 or float32, metres as stored. The depth channel is
+the only channel, or the one named like depth (``Z``, ``depth``, ``distance``,
+``D``, also as the last part of a layer name such as ``ViewLayer.Depth.Z``),
+else ``Y``, else ``R`` when every colour channel holds the same values (depth
+copied into R, G and B). NaN holes stay NaN, which :func:`surfnorm.estimate`
+treats as invalid. Needs the ``OpenEXR`` package (``pip install
+'surfnorm[exr]'``): the OpenCV wheels on PyPI are built without OpenEXR
+(``cv2.getBuildInformation()`` says ``OpenEXR: NO`` for OpenCV 5), so
+``OPENCV_IO_ENABLE_OPENEXR`` cannot help there.
+
+PGM and Kinect v1 disparity
+---------------------------
+``.pgm`` is read by OpenCV, whose decoder follows the netpbm specification:
+16-bit samples are big-endian (most significant byte first). NYU Depth v2's
+raw frames (``d-*.pgm``) are dumps of libfreenect's record tool, whose samples
+are little-endian despite the P5 header: the NYU toolbox, Open3D's
+``CreateFromNYUFormat`` and others swap the bytes after a spec-conforming
+read. Pass ``byte_order="little"`` for them. Their values are not depth but
+the Kinect v1's raw 11-bit disparity ``d``; ``kinect_disparity=True`` turns it
+into metres with :func:`kinect_disparity_to_depth`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
+import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from .._validate import check_positive
-from ..errors import DataFileError
+from .._validate import check_bool, check_choice, check_positive
+from ..errors import DataFileError, InputError, MissingDependencyError
 from ._files import decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
 
-__all__ = ["read_depth", "read_mask", "disparity_to_depth", "depth_suffix", "DEPTH_SUFFIXES"]
+__all__ = ["read_depth", "read_mask", "disparity_to_depth", "kinect_disparity_to_depth", "depth_suffix",
+           "DEPTH_SUFFIXES", "KINECT_V1_NYU"]
 
-DEPTH_SUFFIXES = (".bin", ".bin.gz", ".npy", ".npz", ".png", ".tif", ".tiff")
+DEPTH_SUFFIXES = (".bin", ".bin.gz", ".npy", ".npz", ".png", ".tif", ".tiff", ".exr", ".pgm")
+
+#: Kinect v1 raw disparity to metres, depth = a / (b - d), with the NYU Depth v2 toolbox's constants
+#: (camera_params.m: depthParam1 = 351.3, depthParam2 = 1092.5, maxDepth = 10; depth_rel2depth_abs.m).
+KINECT_V1_NYU = {"a": 351.3, "b": 1092.5, "max_depth": 10.0}
+
+#: Byte orders of 16-bit PGM samples: the netpbm specification's, and libfreenect's dumps (NYU's raw frames).
+PGM_BYTE_ORDERS = ("big", "little")
 
 #: Common depth scales of 16-bit PNG depth: raw units per metre.
 DEPTH_SCALES = {"mm": 1000.0, "tum": 5000.0}
@@ -74,7 +111,8 @@ def _read_image(path: Path) -> np.ndarray:
     return img
 
 
-def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH)) -> np.ndarray:
+def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH), kinect_disparity: bool = False,
+               byte_order: str | None = None) -> np.ndarray:
     """Read a depth image as float32 (H, W).
 
     Parameters
@@ -82,20 +120,33 @@ def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH))
     path : str or Path
         ``.png`` (16-bit, one channel), ``.tif``/``.tiff`` (float or 16-bit),
         ``.npy``, ``.npz`` (array ``depth`` or the only array), 3F2N ``.bin``
-        or ``.bin.gz`` (raw float32 of ``shape``).
+        or ``.bin.gz`` (raw float32 of ``shape``), ``.exr`` (float16 or
+        float32 channel, needs ``surfnorm[exr]``), ``.pgm`` (16-bit P5).
     depth_scale : float, optional
         Raw units per depth unit: the values are divided by it (1000 turns
         millimetres into metres, 5000 is TUM RGB-D's PNG scale). 0 stays 0,
         i.e. invalid. None keeps the values as stored.
     shape : (int, int)
         Rows and columns of a ``.bin`` file (3F2N: 480 x 640).
+    kinect_disparity : bool
+        The file holds a Kinect v1's raw 11-bit disparity (NYU Depth v2's raw
+        frames): convert it to metres with :func:`kinect_disparity_to_depth`
+        (NYU toolbox constants). Not with ``depth_scale``.
+    byte_order : {"big", "little"}, optional
+        Byte order of a 16-bit ``.pgm`` file's samples: None or "big" as the
+        netpbm specification says, "little" for libfreenect's dumps such as
+        NYU Depth v2's raw ``d-*.pgm`` frames.
 
     Raises
     ------
     DataFileError (a ValueError)
-        Missing, unreadable, truncated or corrupt file, or not one depth channel.
+        Missing, unreadable, truncated or corrupt file, or not one depth channel;
+        with ``kinect_disparity``, values outside 0 to 2047.
     InputError (a ValueError)
-        ``depth_scale`` not a positive finite number.
+        ``depth_scale`` not a positive finite number; ``byte_order`` for a file
+        that is not ``.pgm``; ``depth_scale`` with ``kinect_disparity``.
+    MissingDependencyError (an ImportError)
+        An ``.exr`` file without the OpenEXR package.
     """
     path = Path(path)
     if depth_scale is not None:
@@ -103,18 +154,23 @@ def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH))
     if path.is_dir():
         raise DataFileError(f"{path}: expected a depth file, got a directory")
     suffix = depth_suffix(path)
+    kinect_disparity = _check_raw_options(suffix, depth_scale, kinect_disparity, byte_order)
     if suffix in (".bin", ".bin.gz"):
         depth = read_depth_bin(path, shape)
     elif suffix in (".npy", ".npz"):
         depth = _read_numpy(path, suffix)
-    elif suffix in (".png", ".tif", ".tiff"):
+    elif suffix in (".png", ".tif", ".tiff", ".pgm"):
         depth = _read_image(path)
+    elif suffix == ".exr":
+        depth = _read_exr(path)
     else:
         raise DataFileError(f"{path}: unknown depth file type {suffix!r}; expected one of {', '.join(DEPTH_SUFFIXES)}")
     if depth.ndim != 2:
         raise DataFileError(f"{path}: expected a 2-D depth image, got an array of shape {depth.shape}")
     if depth.dtype == bool or not (np.issubdtype(depth.dtype, np.integer) or np.issubdtype(depth.dtype, np.floating)):
         raise DataFileError(f"{path}: expected real-valued depth (float or integer), got dtype {depth.dtype}")
+    if kinect_disparity or byte_order is not None:
+        depth = _raw_sensor_values(path, depth, suffix, kinect_disparity=kinect_disparity, byte_order=byte_order)
     if depth_scale is not None and depth_scale != 1:
         return (depth.astype(np.float64) / depth_scale).astype(np.float32)
     return np.ascontiguousarray(depth, dtype=np.float32)
@@ -148,4 +204,181 @@ def disparity_to_depth(disparity, baseline: float, fx: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         ok = np.isfinite(d) & (d > 0)
         z = np.where(ok, fx * baseline / np.where(ok, d, 1.0), 0.0)
+    return z.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------- OpenEXR
+
+#: EXR channel names (the last part of a layer name, any case) that hold depth.
+EXR_DEPTH_NAMES = ("z", "depth", "distance", "d")
+
+#: The first four bytes of every OpenEXR file.
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+@contextlib.contextmanager
+def _library_output(lines: list):
+    """Collect what a library prints (through Python's sys.stdout/sys.stderr or C's file descriptors 1 and 2)
+    into ``lines`` instead of the terminal.
+
+    The OpenEXR library reports a truncated file there, sometimes without
+    raising; surfnorm reports it once, in a DataFileError. (Other threads'
+    output during the call lands there too; the call lasts milliseconds.)
+    """
+    python_out = io.StringIO()
+    with tempfile.TemporaryFile() as tmp, contextlib.redirect_stdout(python_out), contextlib.redirect_stderr(python_out):
+        try:
+            sys.__stdout__.flush()
+            sys.__stderr__.flush()
+            saved = (os.dup(1), os.dup(2))
+        except (OSError, ValueError, AttributeError):  # no such descriptors (e.g. a daemon)
+            saved = None
+        try:
+            if saved is not None:
+                os.dup2(tmp.fileno(), 1)
+                os.dup2(tmp.fileno(), 2)
+            yield
+        finally:
+            if saved is not None:
+                os.dup2(saved[0], 1)
+                os.dup2(saved[1], 2)
+                os.close(saved[0])
+                os.close(saved[1])
+            tmp.seek(0)
+            text = python_out.getvalue() + tmp.read().decode("utf-8", "replace")
+            lines += [ln.strip() for ln in text.splitlines() if ln.strip()]
+
+
+def _exr_channels(path: Path) -> dict[str, object]:
+    """Every channel of every part of an EXR file: {name: OpenEXR.Channel}; part names prefix them in multi-part files."""
+    try:
+        import OpenEXR
+    except ImportError as exc:
+        raise MissingDependencyError(f"{path}: reading OpenEXR depth needs the OpenEXR package: "
+                                     "pip install 'surfnorm[exr]'") from exc
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(len(_EXR_MAGIC))
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read depth file ({exc.strerror or exc})") from exc
+    if magic != _EXR_MAGIC:
+        raise DataFileError(f"{path}: cannot read as OpenEXR depth (empty, or not an OpenEXR file)")
+    chatter: list[str] = []
+    channels: dict[str, object] = {}
+    failure = None
+    try:
+        with _library_output(chatter), OpenEXR.File(str(path), separate_channels=True) as exr:
+            count = len(exr.parts)
+            for i in range(count):
+                part_name = exr.header(i).get("name") if count > 1 else None
+                channels.update({(f"{part_name}.{name}" if part_name else name): ch for name, ch in exr.channels(i).items()})
+    except (RuntimeError, ValueError, TypeError, OSError) as exc:
+        failure = exc
+    if failure is not None or chatter or not channels:  # the library complains without raising on some truncations
+        reason = chatter[-1] if chatter else str(failure) if failure is not None else "no channels"
+        reason = reason.split(f"{path}: ", 1)[-1].removeprefix("Warning: ")
+        raise DataFileError(f"{path}: cannot read as OpenEXR depth (truncated or corrupt: {reason})") from failure
+    return channels
+
+
+def _exr_depth_channel(path: Path, channels: dict) -> str:
+    """The name of the channel that holds depth (see the module's docstring), or a DataFileError."""
+    names = list(channels)
+    listed = ", ".join(names) or "none"
+    if len(names) == 1:
+        return names[0]
+
+    def last(name):
+        return name.rsplit(".", 1)[-1].lower()
+
+    depth_like = [n for n in names if last(n) in EXR_DEPTH_NAMES]
+    if len(depth_like) > 1:
+        raise DataFileError(f"{path}: expected one depth channel, got {len(depth_like)} ({', '.join(depth_like)})")
+    if depth_like:
+        return depth_like[0]
+    luminance = [n for n in names if last(n) == "y"]
+    if len(luminance) == 1:
+        return luminance[0]
+    colour = [n for n in names if last(n) in ("r", "g", "b")]
+    if any(last(n) == "r" for n in colour):
+        first = np.asarray(channels[colour[0]].pixels)
+        if all(np.array_equal(first, np.asarray(channels[n].pixels), equal_nan=True) for n in colour[1:]):
+            return next(n for n in colour if last(n) == "r")
+        raise DataFileError(f"{path}: expected one depth channel, got the colour channels {', '.join(colour)} "
+                            "holding different values (a colour image is not depth)")
+    raise DataFileError(f"{path}: expected one depth channel (named Z, depth, distance, D, Y or R), got channels {listed}")
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    channels = _exr_channels(path)
+    name = _exr_depth_channel(path, channels)
+    ch = channels[name]
+    if (getattr(ch, "xSampling", 1), getattr(ch, "ySampling", 1)) != (1, 1):
+        raise DataFileError(f"{path}: expected a full-resolution depth channel, got channel {name!r} subsampled "
+                            f"{ch.xSampling}x{ch.ySampling}")
+    pixels = np.asarray(ch.pixels)
+    if pixels.dtype not in (np.float16, np.float32):
+        raise DataFileError(f"{path}: expected a float16 (HALF) or float32 (FLOAT) depth channel, "
+                            f"got channel {name!r} of dtype {pixels.dtype}")
+    return pixels.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------- PGM byte order, Kinect v1 disparity
+
+def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order):
+    """The options of :func:`read_depth` that say how raw sensor values are stored; InputError when they do not fit."""
+    kinect_disparity = check_bool("kinect_disparity", kinect_disparity)
+    if byte_order is not None:
+        check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
+        if suffix != ".pgm":
+            raise InputError(f"byte_order: applies to 16-bit .pgm files, got byte_order={byte_order!r} for a {suffix} file")
+    if kinect_disparity and depth_scale is not None:
+        raise InputError(f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}")
+    return kinect_disparity
+
+
+def _raw_sensor_values(path: Path, raw: np.ndarray, suffix: str, *, kinect_disparity: bool, byte_order) -> np.ndarray:
+    """Swap a little-endian PGM's bytes, and turn Kinect v1 disparity into metres (float32)."""
+    if byte_order == "little" and raw.dtype == np.uint16:
+        raw = raw.byteswap()
+    if not kinect_disparity:
+        return raw
+    with np.errstate(invalid="ignore"):
+        top = np.nanmax(np.where(np.isfinite(raw), raw, 0)) if raw.size else 0
+    if top > 2047:
+        hint = ""
+        if suffix == ".pgm" and byte_order != "little" and raw.dtype == np.uint16 and raw.byteswap().max() <= 2047:
+            hint = ("; with the bytes swapped they are: pass byte_order='little' (libfreenect's dumps, such as "
+                    "NYU Depth v2's raw d-*.pgm frames, store little-endian samples)")
+        raise DataFileError(f"{path}: expected Kinect v1 raw disparity (11 bits, 0 to 2047), got values up to {top}{hint}")
+    return kinect_disparity_to_depth(raw)
+
+
+def kinect_disparity_to_depth(disparity, *, a: float = KINECT_V1_NYU["a"], b: float = KINECT_V1_NYU["b"],
+                              max_depth: float | None = KINECT_V1_NYU["max_depth"]) -> np.ndarray:
+    """Depth in metres, ``a / (b - d)``, from a Kinect v1's raw 11-bit disparity ``d``; float32 (H, W).
+
+    The defaults are the NYU Depth v2 toolbox's (``camera_params.m``:
+    ``depthParam1 = 351.3``, ``depthParam2 = 1092.5``, ``maxDepth = 10``;
+    ``depth_rel2depth_abs.m``), fitted for the Kinect that recorded NYU Depth
+    v2. Other published fits of the same sensor (e.g. Burrus' ``1 / (3.3309495161
+    - 0.0030711016 d)``) differ by a few per cent; pass your own ``a`` and ``b``
+    when your camera was calibrated.
+
+    Pixels get depth 0 (invalid) where ``d`` is not finite or negative, where
+    ``d >= b`` (no finite positive depth; 2047 is the sensor's "no reading"),
+    and where the depth exceeds ``max_depth`` (None: no limit). The NYU toolbox
+    clamps such depth to ``maxDepth`` instead; a clamped value would be a false
+    surface, so here it is invalid.
+    """
+    a = check_positive("a", a)
+    b = check_positive("b", b)
+    if max_depth is not None:
+        max_depth = check_positive("max_depth", max_depth)
+    d = np.asarray(disparity, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ok = np.isfinite(d) & (d >= 0) & (d < b)
+        z = np.where(ok, a / np.where(ok, b - d, 1.0), 0.0)
+    if max_depth is not None:
+        z[z > max_depth] = 0.0
     return z.astype(np.float32)

@@ -34,6 +34,9 @@ def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_sampl
                     offs = [s * a for s in (-4, -2, -1, 1, 2, 4)]
                     pts = [(v + o * dv, u + o * du) for o in offs]
                     if all(0 <= p < H and 0 <= q < W and valid[p, q] for p, q in pts):
+                        depths = [z[p, q] for p, q in pts] + [z[v, u]]
+                        if max(depths) > 1.25 * min(depths):
+                            break  # a discontinuity, not noise
                         w = lambda o: 1.0 / z[v + o * dv, u + o * du]
                         x = [(w(-s * a) - 2.0 / z[v, u] + w(s * a)) * z[v, u] * f / math.sqrt(6) for s in (1, 2, 4)]
                         xs.append(x)
@@ -117,13 +120,18 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                         break
                     r, a, gu, gv = r2, a2, gu2, gv2
             else:
+                # quadrant windows; those whose plane passes through the pixel itself come first
+                wp = 1.0 / zp
                 best = rss / (n - 3) if ok else np.inf
+                best_in = ok and (a - wp) ** 2 <= kappa ** 2 * max(best, limit)
                 for dv, du in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
                     nk, okk, ak, guk, gvk, rssk = _fit(z32, valid, v, u, v + dv * r, u + du * r, r)
                     if nk < max(6, 0.25 * n) or not okk:
                         continue
-                    if rssk / (nk - 3) < best:
-                        best, ok, a, gu, gv = rssk / (nk - 3), True, ak, guk, gvk
+                    score = rssk / (nk - 3)
+                    inside = (ak - wp) ** 2 <= kappa ** 2 * max(score, limit)
+                    if (inside, -score) > (best_in, -best):
+                        best, best_in, ok, a, gu, gv = score, inside, True, ak, guk, gvk
             if not ok:
                 continue
             if not a > 0:

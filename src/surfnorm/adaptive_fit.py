@@ -40,10 +40,15 @@ and hold at least ``MIN_POINTS``.
 
 Edge awareness. A window across a depth discontinuity or a crease fits badly:
 its residual per degree of freedom exceeds the noise level (kappa sigma_w)^2.
-Such a pixel is refitted on the eight windows of the same size shifted by r
-(corners and sides, each still containing the pixel), and keeps the fit with
-the smallest residual per degree of freedom (the Kuwahara principle): a pixel
-near an edge takes its normal from its own side. A window whose valid pixels
+Such a pixel is refitted on the four quadrant windows of the same size (shifted
+by r diagonally, each with the pixel at a corner), and keeps the fit with the
+smallest residual per degree of freedom (the Kuwahara principle) among those
+whose plane passes through the pixel itself (within kappa times the fit's
+residual or the noise): a pixel near an edge takes its normal from its own
+side, and a thin part seen against a far background does not take the
+background's plane. A window that fits within the noise is tried twice as
+wide, up to ``N_WIDEN`` times, and kept while it still fits: planes get wide
+windows, curved surfaces and edges keep small ones. A window whose valid pixels
 lie on a line (they fix no plane), or with fewer than 4 of them, gives no fit;
 a pixel without any fit gets the fill value.
 """
@@ -82,6 +87,8 @@ MIN_SAMPLES = 64
 _NOISE_SAMPLES = 12_000
 #: Widest gap (pixels) between the samples of a second difference, for sparse depth.
 _MAX_GAP = 4
+#: Depth ratio within a second-difference stencil above which it counts as spanning a discontinuity.
+_MAX_SPREAD = 1.25
 _CLIP_SIGMAS = 5.0
 _CLIP_ROUNDS = 5
 _N_MOMENTS = 10
@@ -102,6 +109,14 @@ def _depth_range(z, valid):
     return zmin, zmax
 
 
+@pixel
+def _spread(z0, z1, z2, z3, z4, z5, z6):
+    """True when the depths of a stencil differ by more than ``_MAX_SPREAD`` (a discontinuity)."""
+    lo = min(z0, z1, z2, z3, z4, z5, z6)
+    hi = max(z0, z1, z2, z3, z4, z5, z6)
+    return hi > _MAX_SPREAD * lo
+
+
 @njit
 def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
     """Second differences of w = 1/z at strides a, 2a and 4a along rows and columns, in units of
@@ -112,7 +127,9 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
     gives x_s = (w_{-sa} - 2 w_0 + w_{+sa}) z_0 f / sqrt(6) in ``xs[0, k]``, ``xs[1, k]``,
     ``xs[2, k]`` (s = 1, 2, 4), and the centre's depth bin in ``bins[k]``. On a plane they vanish
     (w is affine there); white noise sigma_z in depth gives each the RMS rho = sigma_z f / z; a
-    smooth curved surface gives x_2 = 4 x_1 and x_4 = 4 x_2. Returns how many.
+    smooth curved surface gives x_2 = 4 x_1 and x_4 = 4 x_2. A stencil whose depths differ by more
+    than ``_MAX_SPREAD`` (x1.25) spans a discontinuity and is left out (only a surface seen at
+    over 80 degrees from its normal changes depth that fast). Returns how many.
     """
     H, W = z.shape
     k = 0
@@ -131,6 +148,9 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
             for a in range(1, _MAX_GAP + 1):
                 if (u - 4 * a >= 0 and u + 4 * a < W and valid[v, u - 4 * a] and valid[v, u - 2 * a]
                         and valid[v, u - a] and valid[v, u + a] and valid[v, u + 2 * a] and valid[v, u + 4 * a]):
+                    if _spread(z[v, u - 4 * a], z[v, u - 2 * a], z[v, u - a], zb, z[v, u + a], z[v, u + 2 * a],
+                               z[v, u + 4 * a]):
+                        break  # across a depth discontinuity: not noise
                     xs[0, k] = (1.0 / z[v, u - a] - w0 + 1.0 / z[v, u + a]) * zb * scale
                     xs[1, k] = (1.0 / z[v, u - 2 * a] - w0 + 1.0 / z[v, u + 2 * a]) * zb * scale
                     xs[2, k] = (1.0 / z[v, u - 4 * a] - w0 + 1.0 / z[v, u + 4 * a]) * zb * scale
@@ -140,6 +160,9 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
             for a in range(1, _MAX_GAP + 1):
                 if (v - 4 * a >= 0 and v + 4 * a < H and valid[v - 4 * a, u] and valid[v - 2 * a, u]
                         and valid[v - a, u] and valid[v + a, u] and valid[v + 2 * a, u] and valid[v + 4 * a, u]):
+                    if _spread(z[v - 4 * a, u], z[v - 2 * a, u], z[v - a, u], zb, z[v + a, u], z[v + 2 * a, u],
+                               z[v + 4 * a, u]):
+                        break
                     xs[0, k] = (1.0 / z[v - a, u] - w0 + 1.0 / z[v + a, u]) * zb * scale
                     xs[1, k] = (1.0 / z[v - 2 * a, u] - w0 + 1.0 / z[v + 2 * a, u]) * zb * scale
                     xs[2, k] = (1.0 / z[v - 4 * a, u] - w0 + 1.0 / z[v + 4 * a, u]) * zb * scale
@@ -575,7 +598,12 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 continue
             x = u - 0.5 * W
             r = r_row[u]
+            # A candidate is consistent when its plane passes through the pixel itself (within kappa
+            # times its residual or the noise): a thin part seen against a far background must not
+            # take the background's plane because that one fits its own points better.
+            w_p = 1.0 / z_row[u]
             best = rss[u] / dof[u] if ok else np.inf
+            best_in = ok and (a[u] - w_p) ** 2 <= kappa * kappa * max(best, limit[u])
             n_min = max(6.0, 0.25 * m_row[0, u])
             for k in range(_SHIFTS.shape[0]):
                 dv = _SHIFTS[k, 0] * r
@@ -584,11 +612,17 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 if m[0] < n_min:
                     continue
                 ok_k, a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(m, r, x + du, y + dv)
-                if ok_k and rss_k < best * dof_k:
-                    best = rss_k / dof_k
+                if not ok_k:
+                    continue
+                score = rss_k / dof_k
+                a_p = a_k - gu_k * du - gv_k * dv
+                inside = (a_p - w_p) ** 2 <= kappa * kappa * max(score, limit[u])
+                if (inside and not best_in) or (inside == best_in and score < best):
+                    best = score
+                    best_in = inside
                     g_u[u] = gu_k
                     g_v[u] = gv_k
-                    a[u] = a_k - gu_k * du - gv_k * dv
+                    a[u] = a_p
                     dof[u] = dof_k
         normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_flat[v])
 

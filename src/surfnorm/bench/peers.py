@@ -19,7 +19,7 @@ import numpy as np
 
 from ..camera import Intrinsics
 
-__all__ = ["Peer", "PEERS", "load_peers", "peer_versions", "single_thread"]
+__all__ = ["Peer", "PEERS", "SENSOR_PEERS", "load_peers", "peer_versions", "single_thread", "clean"]
 
 
 @dataclass(frozen=True)
@@ -121,7 +121,7 @@ def _make_open3d_tensor():
 
 # --- OpenCV RgbdNormals ---------------------------------------------------------------
 
-def _make_opencv(method_name: str):
+def _make_opencv(method_name: str, window: int = 5):
     def make():
         import cv2
 
@@ -136,7 +136,7 @@ def _make_opencv(method_name: str):
             key = (H, W, K.tobytes())
             if key not in cache:  # building the estimator is setup, as a user would keep it
                 cache.clear()
-                cache[key] = cv2.RgbdNormals.create(H, W, cv2.CV_32F, K, window_size=5, diff_threshold=50, method=method)
+                cache[key] = cv2.RgbdNormals.create(H, W, cv2.CV_32F, K, window_size=window, diff_threshold=50, method=method)
             pts = cv2.depthTo3d(np.ascontiguousarray(depth, dtype=np.float32), K)
             n = cache[key].apply(pts)
             return _clean(np.asarray(n)[..., :3]) if clean else np.asarray(n)[..., :3]
@@ -160,9 +160,28 @@ PEERS: tuple[Peer, ...] = (
 )
 
 
-def load_peers(names=None) -> tuple[dict[str, Callable], dict[str, str]]:
-    """Import the peers. Returns ({name: run}, {name: why skipped}) for ``names`` (default: all)."""
-    wanted = [p for p in PEERS if names is None or p.name in names]
+#: The peers of the sensor benchmark (``surfnorm bench --sensor``, benchmarks/sensor_sim.py), by short key:
+#: what a user of real depth would pick instead of surfnorm (OpenCV's RgbdNormals at windows 5 and 7
+#: with its default threshold, Open3D's two estimators, kornia).
+SENSOR_PEERS: tuple[Peer, ...] = tuple(
+    Peer(f"opencv_{m.lower()}_w{w}", "opencv", f"cv2.RgbdNormals {m}, window {w}, on cv2.depthTo3d points",
+         _make_opencv(m, w))
+    for m in ("FALS", "LINEMOD", "SRI") for w in (5, 7)
+) + (
+    Peer("open3d_knn30", "open3d", "Open3D PointCloud.estimate_normals, KNN 30, oriented towards the camera", _make_open3d_pcd),
+    Peer("open3d_normal_map", "open3d", "Open3D t.geometry.Image vertex map -> create_normal_map", _make_open3d_tensor),
+    Peer("kornia", "kornia", "kornia.geometry.depth.depth_to_normals", _make_kornia),
+)
+
+
+def clean(n) -> np.ndarray:
+    """A peer's raw output (``clean=False``) as surfnorm's convention: unit, camera-facing, zeros where none."""
+    return _clean(n)
+
+
+def load_peers(names=None, *, table=PEERS) -> tuple[dict[str, Callable], dict[str, str]]:
+    """Import the peers. Returns ({name: run}, {name: why skipped}) for ``names`` (default: all of ``table``)."""
+    wanted = [p for p in table if names is None or p.name in names]
     runs, skipped = {}, {}
     for peer in wanted:
         try:

@@ -261,10 +261,17 @@ def bench(
     seed: int = typer.Option(0, "--seed", help="Seed of the noise study's Gaussian noise."),
     tables: Optional[list[str]] = typer.Option(None, "--tables", help="Experiments to run: table2, table3, table4, noise, fig4 (repeatable or comma-separated). Default: all."),
     repeats: int = typer.Option(7, "--repeats", help="Timed calls per method and frame after the warm-up (3 for methods over 200 ms)."),
+    sensor: Optional[Path] = typer.Option(None, "--sensor", help="Instead: the sensor benchmark on a folder of real frames (<frame>/depth.npy in metres, K.json, planes.npz or gt.npy); --methods then also takes peer names and name:option=value."),
 ):
-    """Regenerate the paper's Tables II-IV and Figs. 1, 3, 4 (with today's peers) on data in the 3F2N layout."""
+    """Regenerate the paper's Tables II-IV and Figs. 1, 3, 4 (with today's peers) on data in the 3F2N layout.
+
+    With --sensor DIR: the plane metric (or e_A against gt.npy) and time of every method and peer on real sensor frames.
+    """
     import os
     import time
+
+    if sensor is not None:
+        return _bench_sensor(sensor, dataset, out, methods_, peers, repeats)
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -304,6 +311,38 @@ def bench(
         err_console.print(f"[yellow]skipped:[/] {name}: {why}", highlight=False, soft_wrap=True)
     console.print(_table3_text(paths["report"]), highlight=False, soft_wrap=True)
     console.print(f"wrote {paths['report']}, {paths['results']} and figures in {out}/ in {time.perf_counter() - t0:.0f} s")
+
+
+def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: int):
+    """``surfnorm bench --sensor DIR``: see :func:`surfnorm.bench.sensor.sensor_bench`."""
+    import time
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .bench.sensor import sensor_bench
+
+    if dataset is not None:
+        fail(f"dataset: --sensor DIR takes the place of a 3F2N dataset, got both {dataset} and --sensor {folder}")
+    names = None if methods_ is None else [v.strip() for x in methods_ for v in x.split(",") if v.strip()]
+    libs = None if peers is None else [v.strip() for x in peers for v in x.split(",") if v.strip()]
+    if libs is not None and "none" in libs:
+        libs = []
+    t0 = time.perf_counter()
+    try:
+        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=err_console, transient=True) as progress:
+            task = progress.add_task("sensor frames", total=None)
+            result, paths = sensor_bench(folder, out, names=names, peer_libraries=libs, repeats=repeats,
+                                         progress=lambda stage, done, total: progress.update(task, completed=done, total=total))
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    for name, why in result["absent"].items():
+        err_console.print(f"[yellow]absent:[/] {name}: {why}", highlight=False, soft_wrap=True)
+    for e in result["errors"]:
+        err_console.print(f"[yellow]failed:[/] {e['entry']} on {e['frame']}: {e['error']}", highlight=False, soft_wrap=True)
+    text = paths["report"].read_text()
+    console.print(text[text.index("## Angle"):text.index("## Coverage")].strip(), highlight=False, soft_wrap=True)
+    console.print(f"wrote {paths['report']}, {paths['results']} and {paths['figure']} in {time.perf_counter() - t0:.0f} s")
 
 
 def _table3_text(report_path: Path) -> str:

@@ -179,9 +179,10 @@ def clean(n) -> np.ndarray:
     return _clean(n)
 
 
-def load_peers(names=None, *, table=PEERS) -> tuple[dict[str, Callable], dict[str, str]]:
-    """Import the peers. Returns ({name: run}, {name: why skipped}) for ``names`` (default: all of ``table``)."""
-    wanted = [p for p in table if names is None or p.name in names]
+def load_peers(names=None, *, table=None) -> tuple[dict[str, Callable], dict[str, str]]:
+    """Import the peers. Returns ({name: run}, {name: why skipped}) for ``names`` (default: all of ``table``,
+    default :data:`PEERS`)."""
+    wanted = [p for p in (PEERS if table is None else table) if names is None or p.name in names]
     runs, skipped = {}, {}
     for peer in wanted:
         try:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -33,7 +34,8 @@ from .. import metrics
 from ..camera import Intrinsics
 from ..errors import InputError
 
-__all__ = ["Entry", "VARIANTS", "make_entries", "parse_name", "run_simulated", "sim_tables"]
+__all__ = ["Entry", "VARIANTS", "make_entries", "parse_name", "run_simulated", "sim_tables", "SensorFrame",
+           "find_sensor_frames", "read_sensor_frame", "score_frame", "run_folder", "write_folder_report", "sensor_bench"]
 
 #: Variants run beside the registered methods' defaults: (method, options).
 VARIANTS = (("plane_pca", {"window": 11}),)
@@ -103,9 +105,11 @@ def _peer_entry(peer, run) -> Entry:
     return Entry(peer.name, "peer", peer.summary, call, clean)
 
 
-def make_entries(names: list[str] | None = None) -> tuple[list[Entry], dict[str, str]]:
+def make_entries(names: list[str] | None = None, *, peer_libraries: list[str] | None = None
+                 ) -> tuple[list[Entry], dict[str, str]]:
     """The entries for ``names`` (registered methods, ``name:opt=value`` variants, peer keys), default all.
 
+    ``peer_libraries`` (opencv, open3d, kornia; default all) limits the default peers.
     Returns (entries, {name: why absent}) - a peer whose library does not import is absent.
     Unknown names are an InputError.
     """
@@ -116,7 +120,11 @@ def make_entries(names: list[str] | None = None) -> tuple[list[Entry], dict[str,
     peer_keys = [p.name for p in SENSOR_PEERS]
     if names is None:
         wanted = [(m, {}) for m in registered] + [(m, o) for m, o in VARIANTS if m in registered]
-        wanted_peers = peer_keys
+        libs = {p.library for p in SENSOR_PEERS}
+        for lib in peer_libraries or []:
+            if lib not in libs:
+                raise InputError(f"peers: expected some of {', '.join(sorted(libs))}, got {lib!r}")
+        wanted_peers = [p.name for p in SENSOR_PEERS if peer_libraries is None or p.library in peer_libraries]
     else:
         wanted, wanted_peers = [], []
         for name in names:
@@ -240,3 +248,271 @@ def sim_tables(result: dict) -> str:
         out.append("\n### failures\n")
         out += [f"- {e['entry']} on {e['frame']} ({e['sensor']}): {e['error']}" for e in result["errors"]]
     return "\n".join(out) + "\n"
+
+
+# ---------------------------------------------------------------------------- real frames (a folder)
+
+#: A method whose warm call takes longer than this (ms) is timed with SLOW_REPEATS calls only.
+SLOW_MS, SLOW_REPEATS = 200.0, 3
+
+
+@dataclass
+class SensorFrame:
+    """One frame of a sensor folder: depth (metres, 0 = none), intrinsics, and its reference.
+
+    ``planes``: (normals (P, 3), masks (P, H, W)) for real frames; ``gt``: normals (H, W, 3) for rendered ones.
+    """
+
+    name: str
+    depth: np.ndarray
+    K: Intrinsics
+    planes: tuple[np.ndarray, np.ndarray] | None = None
+    gt: np.ndarray | None = None
+
+
+def find_sensor_frames(root) -> list[Path]:
+    """The frame folders under ``root`` (sub-folders holding ``depth.npy``; ``root`` itself if it holds one).
+
+    Raises InputError when ``root`` is not a folder or holds no frame.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"sensor dataset: expected a folder of frame folders (depth.npy, K.json, planes.npz or gt.npy), got {root}")
+    if (root / "depth.npy").is_file():
+        return [root]
+    found = sorted(p for p in root.iterdir() if p.is_dir() and (p / "depth.npy").is_file())
+    if not found:
+        raise InputError(f"sensor dataset: expected frame folders holding depth.npy, K.json and planes.npz or gt.npy, "
+                         f"found none in {root}")
+    return found
+
+
+def _load_npy(path: Path, what: str) -> np.ndarray:
+    from ..errors import DataFileError
+
+    try:
+        return np.load(path, allow_pickle=False)
+    except FileNotFoundError as exc:
+        raise DataFileError(f"{path}: missing ({what})") from exc
+    except (OSError, ValueError, EOFError) as exc:
+        raise DataFileError(f"{path}: cannot read as a NumPy .npy file ({what}): {exc}") from exc
+
+
+def read_sensor_frame(folder) -> SensorFrame:
+    """Read one frame folder of the sensor-sample layout; a bad file is a DataFileError naming it."""
+    import zipfile
+
+    from ..errors import DataFileError
+    from ..io.intrinsics import read_intrinsics
+
+    folder = Path(folder)
+    depth = _load_npy(folder / "depth.npy", "depth in metres, (H, W) float")
+    if depth.ndim != 2 or not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
+        raise DataFileError(f"{folder / 'depth.npy'}: expected (H, W) float depth in metres, got shape {depth.shape} dtype {depth.dtype}")
+    depth = np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    if not np.any(depth > 0):
+        raise DataFileError(f"{folder / 'depth.npy'}: expected some valid (positive) depth, got none")
+    K = read_intrinsics(folder / "K.json")
+    H, W = depth.shape
+    planes = gt = None
+    if (folder / "planes.npz").is_file():
+        path = folder / "planes.npz"
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                normals, masks = np.asarray(z["normals"], np.float64), np.asarray(z["masks"]).astype(bool)
+        except KeyError as exc:
+            raise DataFileError(f"{path}: expected arrays 'normals' (P, 3) and 'masks' (P, H, W), missing {exc}") from exc
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise DataFileError(f"{path}: cannot read as a NumPy .npz file: {exc}") from exc
+        if normals.ndim != 2 or normals.shape[1] != 3 or masks.shape != (normals.shape[0], H, W):
+            raise DataFileError(f"{path}: expected normals (P, 3) and masks (P, {H}, {W}) to match depth.npy, "
+                                f"got {normals.shape} and {masks.shape}")
+        planes = (normals, masks)
+    elif (folder / "gt.npy").is_file():
+        gt = _load_npy(folder / "gt.npy", "ground-truth normals (H, W, 3)")
+        if gt.shape != (H, W, 3):
+            raise DataFileError(f"{folder / 'gt.npy'}: expected normals of shape {(H, W, 3)} to match depth.npy, got {gt.shape}")
+        gt = gt.astype(np.float32)
+    else:
+        raise DataFileError(f"{folder}: expected a reference, planes.npz (real frames) or gt.npy (rendered), found neither")
+    return SensorFrame(folder.name, depth, K, planes, gt)
+
+
+def score_frame(n: np.ndarray, frame: SensorFrame) -> tuple[str, float, float]:
+    """(metric, mean angle in degrees, coverage): the plane metric, or e_A against gt.npy over valid depth."""
+    if frame.planes is not None:
+        mean, cov = metrics.plane_error(n, *frame.planes)
+        return "planes", mean, cov
+    sq = np.einsum("hwc,hwc->hw", frame.gt.astype(np.float64), frame.gt.astype(np.float64))
+    where = (frame.depth > 0) & np.isfinite(sq) & (sq > 0)
+    return "gt", metrics.mean_angular_error(n, frame.gt, where), metrics.coverage(n, where)
+
+
+def run_folder(root, entries: list[Entry], *, repeats: int = 5,
+               progress: Callable[[str, int, int], None] | None = None) -> dict:
+    """The sensor benchmark on every frame folder under ``root``.
+
+    Per frame and entry: the metric of its normals (from the warm-up call), then ``repeats`` timed
+    calls (``SLOW_REPEATS`` for entries slower than ``SLOW_MS``), the entries' order rotating from
+    round to round; the median is kept. A frame that cannot be read is a DataFileError (the whole
+    run stops: a benchmark over a partial folder would be misread); an entry that raises is recorded.
+    """
+    if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
+        raise InputError(f"repeats: expected a positive integer, got {repeats!r}")
+    folders = find_sensor_frames(root)
+    frames = [read_sensor_frame(f) for f in folders]  # all read first: a bad file fails before hours of work
+    progress = progress or (lambda stage, done, total: None)
+    records, errors = [], []
+    for i, frame in enumerate(frames):
+        valid = frame.depth > 0
+        times, scores = {}, {}
+        for e in entries:
+            try:
+                e.call(frame.depth, frame.K, valid)  # warm-up (compiling, caches)
+                n, ms = _timed(e, frame.depth, frame.K, valid)
+            except Exception as exc:  # noqa: BLE001 - reported, never fatal
+                errors.append({"frame": frame.name, "entry": e.label, "error": f"{type(exc).__name__}: {exc}"})
+                continue
+            scores[e.label] = score_frame(n, frame)
+            times[e.label] = [ms]
+        live = [e for e in entries if e.label in times]
+        want = {e.label: SLOW_REPEATS if times[e.label][0] > SLOW_MS else repeats for e in live}
+        for r in range(max(want.values(), default=0) - 1):
+            k = r % max(len(live), 1)
+            for e in live[k:] + live[:k]:
+                if len(times[e.label]) < want[e.label]:
+                    t0 = time.perf_counter()
+                    e.call(frame.depth, frame.K, valid)
+                    times[e.label].append((time.perf_counter() - t0) * 1e3)
+        for e in live:
+            metric, angle, cov = scores[e.label]
+            records.append({"frame": frame.name, "entry": e.label, "kind": e.kind, "metric": metric, "angle": angle,
+                            "coverage": cov, "ms": float(np.median(times[e.label])), "calls": len(times[e.label]),
+                            "size": list(frame.depth.shape)})
+        progress("frames", i + 1, len(frames))
+    return {"root": str(root), "frames": [f.name for f in frames], "entries": [e.label for e in entries],
+            "summaries": {e.label: e.summary for e in entries}, "records": records, "errors": errors,
+            "repeats": repeats}
+
+
+def _fmt(v, d=1) -> str:
+    return "-" if v is None or not np.isfinite(v) else f"{v:.{d}f}"
+
+
+def folder_markdown(result: dict) -> str:
+    """The report: angle (ms) per frame and entry, the medians over frames, coverage, what was absent or failed."""
+    frames, entries, recs = result["frames"], result["entries"], result["records"]
+    get = {(r["frame"], r["entry"]): r for r in recs}
+    best = {}
+    for f in frames:
+        vals = [(get[(f, e)]["angle"], e) for e in entries if (f, e) in get and np.isfinite(get[(f, e)]["angle"])]
+        best[f] = min(vals)[1] if vals else None
+    metric = {f: next((get[(f, e)]["metric"] for e in entries if (f, e) in get), "") for f in frames}
+    out = ["# Sensor benchmark", "",
+           f"Frames: {len(frames)} in {result['root']}. Cells: mean folded angle in degrees to the reference planes "
+           "(plane metric) or to the ground truth (e_A, frames marked *), and in brackets the median time of a warm "
+           f"call in ms at one thread ({result['repeats']} calls, {SLOW_REPEATS} for calls over {SLOW_MS:g} ms). "
+           "Best angle per frame in bold. Medians over frames in the last columns.", "",
+           "## Angle (ms)", ""]
+    head = [f + ("*" if metric[f] == "gt" else "") for f in frames]
+    out.append("| method | " + " | ".join(head) + " | median angle | median ms |")
+    out.append("|---|" + "---|" * (len(frames) + 2))
+    for e in entries:
+        cells, angles, times = [], [], []
+        for f in frames:
+            r = get.get((f, e))
+            if r is None:
+                cells.append("failed")
+                continue
+            a = _fmt(r["angle"])
+            cells.append((f"**{a}**" if best[f] == e else a) + f" ({_fmt(r['ms'], 0 if r['ms'] >= 10 else 1)})")
+            angles.append(r["angle"])
+            times.append(r["ms"])
+        out.append(f"| {e} | " + " | ".join(cells) + f" | {_fmt(float(np.median(angles)) if angles else None)} | "
+                   f"{_fmt(float(np.median(times)) if times else None)} |")
+    out += ["", "## Coverage (share of the reference pixels that received a normal)", ""]
+    out.append("| method | " + " | ".join(head) + " | min |")
+    out.append("|---|" + "---|" * (len(frames) + 1))
+    for e in entries:
+        covs = [get[(f, e)]["coverage"] if (f, e) in get else None for f in frames]
+        ok = [c for c in covs if c is not None and np.isfinite(c)]
+        out.append(f"| {e} | " + " | ".join(_fmt(c, 3) for c in covs) + f" | {_fmt(min(ok) if ok else None, 3)} |")
+    out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
+    if result.get("absent"):
+        out += ["", "## Absent peers (library not installed)", ""]
+        out += [f"- {k}: {v}" for k, v in result["absent"].items()]
+    if result["errors"]:
+        out += ["", "## Failures", ""] + [f"- {x['entry']} on {x['frame']}: {x['error']}" for x in result["errors"]]
+    if result.get("meta"):
+        out += ["", "## Run", ""] + [f"- {k}: {v}" for k, v in result["meta"].items()]
+    return "\n".join(out) + "\n"
+
+
+def folder_figure(path, result: dict) -> Path:
+    """Per frame, angle against time (log scale) of every entry: surfnorm's methods and the peers in two colours."""
+    from .figures import _plt, _save
+
+    plt = _plt()
+    frames = result["frames"]
+    cols = min(4, len(frames))
+    rows = -(-len(frames) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.6 * rows), squeeze=False)
+    for ax, f in zip(axes.flat, frames):
+        for r in (r for r in result["records"] if r["frame"] == f and np.isfinite(r["angle"]) and r["ms"] > 0):
+            color = "tab:blue" if r["kind"] == "surfnorm" else "tab:orange"
+            ax.scatter(r["ms"], r["angle"], s=14, color=color)
+            ax.annotate(r["entry"], (r["ms"], r["angle"]), fontsize=5, xytext=(2, 2), textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_title(f, fontsize=9)
+        ax.set_xlabel("ms (one thread)", fontsize=8)
+        ax.set_ylabel("angle (deg)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(frames):]:
+        ax.axis("off")
+    fig.suptitle("Sensor benchmark: angle vs time per frame (blue: surfnorm, orange: peers)", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, Path(path))
+
+
+def write_folder_report(result: dict, out_dir) -> dict[str, Path]:
+    """report.md, results.json and sensor.png in ``out_dir``, each written atomically."""
+    import json
+
+    from ..io._atomic import atomic_write
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    text = folder_markdown(result)
+
+    def finite(obj):
+        if isinstance(obj, float):
+            return obj if np.isfinite(obj) else None
+        if isinstance(obj, dict):
+            return {k: finite(v) for k, v in obj.items()}
+        if isinstance(obj, list):
+            return [finite(v) for v in obj]
+        return obj
+
+    return {
+        "report": atomic_write(out_dir / "report.md", lambda tmp: tmp.write_text(text)),
+        "results": atomic_write(out_dir / "results.json", lambda tmp: tmp.write_text(json.dumps(finite(result), indent=1))),
+        "figure": folder_figure(out_dir / "sensor.png", result),
+    }
+
+
+def sensor_bench(root, out, *, names: list[str] | None = None, peer_libraries: list[str] | None = None,
+                 repeats: int = 5, progress=None) -> tuple[dict, dict[str, Path]]:
+    """``surfnorm bench --sensor ROOT --out OUT``: one thread everywhere, every entry, the report. Returns (result, paths)."""
+    import platform
+
+    from .peers import peer_versions, single_thread
+
+    find_sensor_frames(root)  # a bad folder fails before any library is imported
+    threads = single_thread()
+    entries, absent = make_entries(names, peer_libraries=peer_libraries)
+    result = run_folder(root, entries, repeats=repeats, progress=progress)
+    result["absent"] = absent
+    result["meta"] = {"threads": threads, "versions": peer_versions(), "python": platform.python_version(),
+                      "machine": platform.machine(), "cpus": __import__("os").cpu_count()}
+    return result, write_folder_report(result, out)

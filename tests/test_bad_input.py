@@ -293,3 +293,116 @@ def test_cli_typer_usage_errors_exit_2(files):
     assert result.exit_code == 2
     assert run_cli("convert").exit_code == 2
     assert run_cli("estimate", files / "good.png").exit_code == 2
+
+
+# ---------------------------------------------------------------------------- issue 14: readers' arguments and files
+
+from pathlib import Path  # noqa: E402
+
+from surfnorm.io.depth import read_mask  # noqa: E402
+
+# (reader, positional argument, keyword arguments, message). 13 cases.
+READER_ARGUMENTS = [
+    (read_depth, None, {}, r"path: expected a file path \(str or os.PathLike\), got NoneType None"),
+    (read_depth, 3, {}, r"path: expected a file path \(str or os.PathLike\), got int 3"),
+    (read_depth, 2.5, {}, r"path: expected a file path .*got float 2.5"),
+    (read_depth, ["a.png"], {}, r"path: expected a file path .*got list"),
+    (read_depth, "", {}, r"path: expected a file path, got an empty one"),
+    (read_mask, None, {}, r"path: expected a file path \(str or os.PathLike\), got NoneType None"),
+    (read_mask, 7, {}, r"path: expected a file path .*got int 7"),
+    (read_depth, "x.bin", {"shape": (-480, -640)}, r"shape: expected \(rows, cols\), two positive integers, got \(-480, -640\)"),
+    (read_depth, "x.bin", {"shape": (0, 640)}, r"shape: expected \(rows, cols\), two positive integers, got \(0, 640\)"),
+    (read_depth, "x.bin", {"shape": (480,)}, r"shape: expected \(rows, cols\), two positive integers, got \(480,\)"),
+    (read_depth, "x.bin", {"shape": (480.5, 640)}, r"shape: expected \(rows, cols\).*got \(480.5, 640\)"),
+    (read_depth, "x.bin", {"shape": (True, 640)}, r"shape: expected \(rows, cols\).*got \(True, 640\)"),
+    (read_depth, "x.bin", {"shape": "ab"}, r"shape: expected \(rows, cols\).*got 'ab'"),
+]
+
+
+@pytest.mark.parametrize("reader, arg, kwargs, pattern", READER_ARGUMENTS)
+def test_reader_arguments_are_input_errors_naming_them(reader, arg, kwargs, pattern):
+    with pytest.raises(InputError, match=pattern):
+        reader(arg, **kwargs)
+
+
+def test_a_bytes_path_reads_like_a_str_path(files):
+    np.testing.assert_array_equal(read_depth(os.fsencode(files / "good.png")), read_depth(files / "good.png"))
+    np.testing.assert_array_equal(read_mask(os.fsencode(files / "good.png")), read_mask(files / "good.png"))
+
+
+# (array saved as mask.npy, words of the message). 6 cases.
+BAD_MASKS = [
+    (np.zeros((4, 4), dtype=[("a", "<i4"), ("b", "<f4")]), r"dtype \[\('a', '<i4'\), \('b', '<f4'\)\]"),
+    (np.full((4, 4), "yes"), r"dtype <U3"),
+    (np.full((4, 4), b"1"), r"dtype \|S1"),
+    (np.ones((4, 4), np.complex64), r"dtype complex64"),
+    (np.ones((4, 4), "M8[s]"), r"dtype datetime64\[s\]"),
+    (np.ones((4, 4, 2), bool), r"shape \(4, 4, 2\)"),
+]
+
+
+@pytest.mark.parametrize("arr, pattern", BAD_MASKS, ids=["record", "str", "bytes", "complex", "datetime", "3-D"])
+def test_bad_mask_files_are_named(tmp_path, arr, pattern):
+    np.save(tmp_path / "mask.npy", arr)
+    with pytest.raises(DataFileError, match=r"mask.npy: expected a 2-D mask, got an array of " + ".*" + pattern):
+        read_mask(tmp_path / "mask.npy")
+
+
+def test_gzip_bomb_is_refused_while_decompressing(tmp_path):
+    import tracemalloc
+
+    bomb = tmp_path / "bomb.bin.gz"
+    with gzip.open(bomb, "wb", compresslevel=9) as fh:  # 256 MiB of zeros in about 255 KB
+        block = bytes(1 << 20)
+        for _ in range(256):
+            fh.write(block)
+    assert bomb.stat().st_size < 300_000
+    tracemalloc.start()
+    try:
+        with pytest.raises(DataFileError, match=r"bomb.bin.gz: expected 1228800 bytes of float32 depth \(480x640\) once decompressed, got more"):
+            read_depth(bomb)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 * 2**20, f"peak {peak / 2**20:.0f} MiB while refusing the file"  # one frame is 1.2 MiB
+
+
+def test_a_gzip_frame_of_the_right_size_still_reads(tmp_path):
+    z = np.arange(12, dtype="<f4").reshape(3, 4)
+    (tmp_path / "z.bin.gz").write_bytes(gzip.compress(z.tobytes()))
+    np.testing.assert_array_equal(read_depth(tmp_path / "z.bin.gz", shape=(3, 4)), z)
+    with pytest.raises(DataFileError, match=r"z.bin.gz: expected 1228800 bytes of float32 depth \(480x640\), got 48"):
+        read_depth(tmp_path / "z.bin.gz")
+    (tmp_path / "z.bin").write_bytes(z.tobytes() + b"1234")
+    with pytest.raises(DataFileError, match=r"z.bin: expected 48 bytes of float32 depth \(3x4\), got 52"):
+        read_depth(tmp_path / "z.bin", shape=(3, 4))
+
+
+@pytest.mark.parametrize("client", ["x", 3, object()])
+def test_convert_client_must_be_a_dask_client(files, client):
+    with pytest.raises(InputError, match=r"client: expected a dask.distributed.Client, got "):
+        surfnorm.convert(files / "good.png", files / "out", intrinsics=K, client=client)
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027, 0o002, 0o077])
+def test_outputs_get_the_mode_of_an_ordinary_write(tmp_path, umask):
+    from surfnorm.io.normals import write_normals
+    from surfnorm.io.pictures import write_rgb8
+
+    n = np.zeros((4, 4, 3), np.float32)
+    n[..., 2] = -1
+    old = os.umask(umask)
+    try:
+        (tmp_path / "plain").write_bytes(b"x")  # what open(..., "w") gives
+        written = [write_normals(tmp_path / "n.npy", n), write_normals(tmp_path / "n.png", n, fmt="png16"),
+                   write_rgb8(tmp_path / "p.png", np.zeros((4, 4, 3), np.uint8))]
+    finally:
+        os.umask(old)
+    plain = (tmp_path / "plain").stat().st_mode & 0o777
+    assert plain == 0o666 & ~umask
+    for p in written:
+        assert Path(p).stat().st_mode & 0o777 == plain, p
+    # replacing a file keeps its mode, as writing into it would
+    (tmp_path / "n.npy").chmod(0o640)
+    write_normals(tmp_path / "n.npy", n)
+    assert (tmp_path / "n.npy").stat().st_mode & 0o777 == 0o640

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from surfnorm.cli import app
@@ -50,3 +51,108 @@ def test_demo_table_and_pictures(tmp_path):
     pngs = sorted(p.name for p in (tmp_path / "demo").iterdir())
     assert "Easy_android_000001_d2nt_v3_normals.png" in pngs and "Easy_android_000001_d2nt_v3_error.png" in pngs
     assert "Hard_batman_000001_cp2tv_plus_mnr_error.png" in pngs
+
+
+# ---------------------------------------------------------------------------- issue 14: the one-line promise
+
+def _one_line_exit_2(args, needle):
+    result = runner.invoke(app, [str(a) for a in args])
+    assert result.exit_code == 2, (args, result.output)
+    assert "Traceback" not in result.output and "╭" not in result.output, result.output  # no traceback, no box
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), (args, result.stderr)
+    assert needle in lines[0], (args, lines[0])
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    return lines[0]
+
+
+@pytest.fixture
+def workdir(tmp_path, monkeypatch):
+    depth = tmp_path / "d.bin.gz"
+    depth.write_bytes((FRAME / "depth" / "000001.bin.gz").read_bytes())
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    (tmp_path / "bad.yaml").write_text("%YAML:1.0\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n"
+                                       "  data: [1, 0, 1, 0, 1, 1, 0, 0]\n")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+CAMERA = ["--fx", 500, "--fy", 500, "--cx", 319.5, "--cy", 239.5]
+# Every command with each class of usage error: (arguments, words of the one line). 34 cases.
+USAGE_ERRORS = [
+    # unknown command or option at the top
+    (["nope"], "No such command 'nope'"),
+    (["--bogus"], "No such option: --bogus"),
+    # estimate
+    (["estimate", "d.bin.gz", "o", "--bogus"], "No such option: --bogus"),
+    (["estimate", "d.bin.gz", "o", "--fx", "abc", "--fy", 1, "--cx", 1, "--cy", 1], "Invalid value for '--fx'"),
+    (["estimate", "d.bin.gz", "o", "--depth-scale", "x"], "Invalid value for '--depth-scale'"),
+    (["estimate", "d.bin.gz"], "Missing argument"),
+    (["estimate"], "Missing argument"),
+    (["estimate", "d.bin.gz", "o", "extra"], "unexpected extra argument"),
+    (["estimate", "d.bin.gz", "o", "--method"], "Option '--method' requires an argument"),
+    (["estimate", "missing.bin", "o", *CAMERA], "missing.bin: cannot read depth file"),
+    (["estimate", "d.bin.gz", "o", "-k", "bad.yaml"], "bad.yaml: expected 9 numbers (a 3x3 matrix) in camera_matrix.data, got 8"),
+    (["estimate", "d.bin.gz", "o", "-k", "deep.json"], "deep.json: expected lists and mappings at most 16 deep"),
+    (["estimate", "d.bin.gz", "o", "--method", "nope", *CAMERA], "method: expected one of"),
+    # convert
+    (["convert", "d.bin.gz", "out", "--jobs", "abc"], "Invalid value for '--jobs'"),
+    (["convert", "d.bin.gz", "out", "--bogus"], "No such option: --bogus"),
+    (["convert", "d.bin.gz"], "Missing argument"),
+    (["convert"], "Missing argument"),
+    (["convert", "d.bin.gz", "out", "extra"], "unexpected extra argument"),
+    (["convert", "nothing", "out", *CAMERA], "inputs: expected a depth file, a folder or a glob pattern"),
+    (["convert", "d.bin.gz", "out", "-k", "bad.yaml"], "bad.yaml: expected 9 numbers"),
+    (["convert", "d.bin.gz", "out", "-k", "deep.json"], "deep.json: expected lists and mappings at most 16 deep"),
+    (["convert", "d.bin.gz", "out", *CAMERA, "--cluster", "not a url"], "cluster address: expected a Dask scheduler address"),
+    (["convert", "d.bin.gz", "afile", *CAMERA], "output_dir: expected a folder, got the file"),
+    # bench
+    (["bench", "--out", "rep", "--repeats", "x"], "Invalid value for '--repeats'"),
+    (["bench", "--out", "rep", "--bogus"], "No such option: --bogus"),
+    (["bench"], "Missing option '--out'"),
+    (["bench", "empty", "--out", "rep", "extra"], "unexpected extra argument"),
+    (["bench", "empty", "--out", "rep"], "dataset: expected frames in the 3F2N layout"),
+    (["bench", "--out", "rep", "--levels", "Trivial"], "levels: expected some of Easy, Medium, Hard"),
+    # demo
+    (["demo", "--bogus"], "No such option: --bogus"),
+    (["demo", "a", "b"], "unexpected extra argument"),
+    (["demo", "afile"], "afile"),
+    # methods
+    (["methods", "extra"], "unexpected extra argument"),
+    (["methods", "--bogus"], "No such option: --bogus"),
+]
+
+
+@pytest.mark.parametrize("args, needle", USAGE_ERRORS, ids=[" ".join(map(str, a))[:60] for a, _ in USAGE_ERRORS])
+def test_every_command_usage_error_is_one_line_exit_2(workdir, args, needle):
+    _one_line_exit_2(args, needle)
+
+
+def test_a_bug_is_one_line_too(workdir, monkeypatch):
+    import surfnorm.io.depth
+
+    def broken(*a, **k):
+        raise TypeError("a bug")
+
+    monkeypatch.setattr(surfnorm.io.depth, "read_depth", broken)
+    result = runner.invoke(app, ["estimate", "d.bin.gz", "o", *map(str, CAMERA)])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "unexpected TypeError: a bug" in lines[0] and "SURFNORM_TRACEBACK=1" in lines[0]
+
+
+def test_params_txt_is_found_the_same_from_a_relative_and_an_absolute_path(tmp_path, monkeypatch):
+    (tmp_path / "ok.bin.gz").write_bytes((FRAME / "depth" / "000001.bin.gz").read_bytes())
+    (tmp_path / "params.txt").write_text((FRAME / "params.txt").read_text())
+    monkeypatch.chdir(tmp_path)
+    relative = runner.invoke(app, ["estimate", "ok.bin.gz", "rel", "-f", "npy"])
+    absolute = runner.invoke(app, ["estimate", str(tmp_path / "ok.bin.gz"), "abs", "-f", "npy"])
+    assert relative.exit_code == 0 and absolute.exit_code == 0, relative.output + absolute.output
+    assert (tmp_path / "rel.npy").read_bytes() == (tmp_path / "abs.npy").read_bytes()
+    # the 3F2N layout <object>/depth/<frame>: params.txt in the folder above, from inside depth/ too
+    monkeypatch.chdir(FRAME / "depth")
+    inside = runner.invoke(app, ["estimate", "000001.bin.gz", str(tmp_path / "in"), "-f", "npy"])
+    assert inside.exit_code == 0, inside.output
+    assert (tmp_path / "in.npy").read_bytes() == (tmp_path / "abs.npy").read_bytes()

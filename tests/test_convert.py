@@ -173,7 +173,7 @@ def test_convert_file_other_errors_are_named(tmp_path):
     r = convert_file(ConvertTask(tmp_path / "gone.png", tmp_path / "o.npy"), ConvertSettings(intrinsics=CAM))
     assert r.status == "error" and "gone.png: cannot read depth file (No such file or directory)" in r.message
     r = convert_file(ConvertTask(src, tmp_path / "o.npy"), ConvertSettings(intrinsics=None))
-    assert r.status == "error" and "intrinsics: none given and no 3F2N params.txt at" in r.message
+    assert r.status == "error" and "intrinsics: none given and no 3F2N params.txt beside" in r.message
     (tmp_path / "afile").write_text("x")
     r = convert_file(ConvertTask(src, tmp_path / "afile" / "o.npy"), ConvertSettings(intrinsics=CAM))
     assert r.status == "error" and r.message.startswith(f"{src}: cannot write")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import cv2
 import numpy as np
@@ -118,3 +119,82 @@ def test_resolve_intrinsics_sources(tmp_path):
         resolve_intrinsics(fx=1, cy=2)
     with pytest.raises(InputError, match=r"intrinsics: expected a file/matrix or --fx --fy --cx --cy, not both \(got fx too\)"):
         resolve_intrinsics(CAM, fx=1)
+
+
+# ---------------------------------------------------------------------------- issue 14: hostile files
+
+OPENCV = "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: {dt}\n   data: [ {data} ]\n"
+NINE = "525., 0., 319.5, 0., 520.5, 239.25, 0., 0., 1."
+
+
+def _alias_bomb(levels=10):
+    lines = ['a0: &a0 ["x", "x", "x", "x", "x", "x", "x", "x", "x"]']
+    for i in range(1, levels):
+        lines.append(f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]")
+    return "\n".join(lines) + f"\nK: *a{levels - 1}\n"
+
+
+# (file name, content, words of the message after the file name). 24 cases.
+HOSTILE = [
+    ("ocv_8.yaml", OPENCV.format(rows=3, cols=3, dt="d", data=NINE.rsplit(",", 1)[0]),
+     r"expected 9 numbers \(a 3x3 matrix\) in camera_matrix.data, got 8 values"),
+    ("ocv_10.yaml", OPENCV.format(rows=3, cols=3, dt="d", data=NINE + ", 1."), r"in camera_matrix.data, got 10 values"),
+    ("ocv_rows.yaml", OPENCV.format(rows=-3, cols=3, dt="d", data=NINE), r"expected rows: 3 and cols: 3 for 'camera_matrix', got rows: -3"),
+    ("ocv_rows_huge.yaml", OPENCV.format(rows=100000, cols=100000, dt="d", data=NINE), r"got rows: 100000, cols: 100000"),
+    ("ocv_rows_text.yaml", OPENCV.format(rows="three", cols=3, dt="d", data=NINE), r"got rows: not an integer"),
+    ("ocv_dt.yaml", OPENCV.format(rows=3, cols=3, dt="q", data=NINE), r"expected camera_matrix.dt to be one of u, c, w, s, i, f, d, h, got 'q'"),
+    ("ocv_dt_none.yaml", OPENCV.format(rows=3, cols=3, dt=7, data=NINE), r"expected camera_matrix.dt to be one of"),
+    ("ocv_text.yaml", OPENCV.format(rows=3, cols=3, dt="d", data=NINE.replace("525.", "abc")), r"expected numbers in camera_matrix.data"),
+    ("ocv_scalar.yaml", "%YAML:1.0\ncamera_matrix: 5\n", r"expected 'camera_matrix' to be an opencv-matrix"),
+    ("ocv_unterminated.yaml", "%YAML:1.0\ncamera_matrix: [[[\n", r"cannot parse as OpenCV YAML \(line 2"),
+    ("ocv_deep.yaml", "%YAML:1.0\ncamera_matrix: " + "[" * 100_000 + "]" * 100_000 + "\n", r"expected lists and mappings at most 16 deep"),
+    ("unterminated.yaml", "K: [[[\n", r"cannot parse as YAML"),
+    ("deep.json", "[" * 100_000 + "]" * 100_000, r"expected lists and mappings at most 16 deep"),
+    ("deep_k.json", '{"K": ' + "[" * 100_000 + "]" * 100_000 + "}", r"expected lists and mappings at most 16 deep"),
+    ("deep17.json", '{"K": ' + "[" * 17 + "]" * 17 + "}", r"expected lists and mappings at most 16 deep"),
+    ("deep.yaml", "K: " + "[" * 5000 + "]" * 5000 + "\n", r"line 1: expected lists and mappings at most 16 deep"),
+    ("deep_block.yaml", "".join(" " * i + f"k{i}:\n" for i in range(40)) + " " * 40 + "x: 1\n", r"at most 16 deep"),
+    ("bomb.yaml", _alias_bomb(), r"line 2: expected plain values, got the YAML alias \*a0"),
+    ("true.json", '{"fx": true, "fy": 500, "cx": 1, "cy": 1}', r"expected numbers for fx, fy, cx, cy, got fx: true \(a boolean\)"),
+    ("string.json", '{"fx": 500, "fy": "500", "cx": 1, "cy": 1}', r"got fy: '500' \(a string\)"),
+    ("k_bool.json", '{"K": [[true, 0, 1], [0, 1, 1], [0, 0, 1]]}', r"expected numbers for 'K', got true \(a boolean\) at K\[0\]\[0\]"),
+    ("k_str.yaml", 'K: ["525", 0, 1, 0, 5, 1, 0, 0, 1]\n', r"expected numbers for 'K', got '525' \(a string\) at K\[0\]"),
+    ("k_map.yaml", "K: {a: 1}\n", r"expected numbers for 'K', got a mapping of 1"),
+    ("ros_rows.yaml", "camera_matrix: {rows: 30, cols: 3, data: [1, 0, 1, 0, 1, 1, 0, 0, 1]}\n",
+     r"expected rows: 3 and cols: 3 for 'camera_matrix', got rows: 30"),
+]
+
+
+@pytest.mark.parametrize("name, text, pattern", HOSTILE, ids=[h[0] for h in HOSTILE])
+def test_hostile_intrinsics_files_are_named_with_bounded_memory(tmp_path, name, text, pattern):
+    import tracemalloc
+
+    path = write(tmp_path, name, text)
+    tracemalloc.start()
+    try:
+        with pytest.raises(DataFileError, match=re.escape(str(path)) + ": .*" + pattern):
+            read_intrinsics(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20 + 4 * len(text), f"{peak / 2**20:.0f} MiB to refuse a {len(text)} byte file"
+
+
+def test_an_oversized_file_is_not_read(tmp_path):
+    path = tmp_path / "huge.json"
+    path.write_text('{"fx": 1, "pad": "' + "x" * (1 << 20) + '"}')
+    with pytest.raises(DataFileError, match=r"huge.json: expected an intrinsics file of at most 1048576 bytes"):
+        read_intrinsics(path)
+
+
+def test_the_cli_says_the_same_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from surfnorm.cli import app
+
+    depth = sample_root() / "Easy" / "android" / "depth" / "000001.bin.gz"
+    for name, text, pattern in HOSTILE[::4]:
+        path = write(tmp_path, name, text)
+        result = CliRunner().invoke(app, ["estimate", str(depth), str(tmp_path / "o"), "-k", str(path)])
+        lines = result.stderr.strip().splitlines()
+        assert result.exit_code == 2 and len(lines) == 1 and re.search(pattern, lines[0]), result.output

@@ -1,10 +1,18 @@
 """The ``surfnorm`` command line: each command maps options to one library call.
 
-Usage errors (bad arguments, unreadable input) print one line and exit 2.
+Every error a user can cause prints ONE line on stderr and exits with status 2:
+Click's own usage errors (a bad option value, an unknown command or option, a
+missing argument) as well as the library's errors (:mod:`surfnorm.errors`,
+ValueError, OSError). :class:`OneLineGroup` does this for every command, so a
+command only has to call the library. An unexpected exception (a bug) is one
+line too, with exit status 1; ``SURFNORM_TRACEBACK=1`` shows its traceback.
 """
 
 from __future__ import annotations
 
+import os
+import re
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
 
@@ -12,19 +20,89 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
+from typer.core import TyperGroup
 
 from .errors import SurfnormError
 from .methods import DEFAULT_METHOD
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
-                  help="Surface normals from depth images: D2NT (ICRA 2023) and the estimators it is compared with.")
 console = Console()
 err_console = Console(stderr=True)
 
+#: Exit status of a usage error (Click's, and every error that bad input causes).
+USAGE = 2
 
-def fail(message: str, code: int = 2):
-    err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
+
+def one_line(message: str) -> str:
+    """``message`` on one line: line breaks (and the spaces around them) become one space."""
+    return re.sub(r"\s*[\r\n]+\s*", " ", str(message)).strip()
+
+
+def say_error(message: str):
+    """Print ``error: message`` as one line on stderr (never wrapped, markup escaped)."""
+    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+
+
+def fail(message: str, code: int = USAGE):
+    say_error(message)
     raise typer.Exit(code)
+
+
+def _click_exceptions():
+    """(errors, passed through): Click's exception classes, from the Click that Typer uses (recent Typer
+    versions carry their own copy as ``typer._click``) and from Click itself where it is installed."""
+    import importlib
+
+    modules = []
+    for name in ("typer._click.exceptions", "click.exceptions"):
+        try:
+            modules.append(importlib.import_module(name))
+        except ImportError:
+            pass
+    errors = tuple(m.ClickException for m in modules)
+    passed = tuple(getattr(m, n) for m in modules for n in ("Exit", "Abort", "NoArgsIsHelpError") if hasattr(m, n))
+    return errors, passed + (typer.Exit, typer.Abort)
+
+
+_CLICK_ERRORS, _PASSED = _click_exceptions()
+
+
+@contextmanager
+def _one_line_errors():
+    """Turn every error raised inside into one line on stderr and ``typer.Exit`` (2, or 1 for a bug)."""
+    try:
+        yield
+    except (KeyboardInterrupt,) + _PASSED:
+        raise  # exit codes, Ctrl-C (exit 130) and the help of a bare `surfnorm` stay Click's
+    except _CLICK_ERRORS as exc:  # a bad option value, an unknown command or option, a missing argument
+        where = exc.ctx.command_path if getattr(exc, "ctx", None) is not None else "surfnorm"
+        fail(f"{where}: {exc.format_message()} (see '{where} --help')")
+    except (SurfnormError, ValueError, OSError) as exc:  # InputError, DataFileError, ConnectionError, ...
+        fail(str(exc) or type(exc).__name__)
+    except Exception as exc:  # noqa: BLE001 - a bug: still one line, but not a usage error
+        if os.environ.get("SURFNORM_TRACEBACK"):
+            raise
+        fail(f"unexpected {type(exc).__name__}: {exc} (a bug in surfnorm; SURFNORM_TRACEBACK=1 shows the traceback)", 1)
+
+
+class OneLineGroup(TyperGroup):
+    """The command group: usage and library errors of every command become one line on stderr, exit 2.
+
+    Parsing (a bad value, a missing argument, an unknown option or command) happens in
+    ``make_context`` of the group and, for the command, inside the group's ``invoke``, as
+    does the command itself; both are wrapped, so no error reaches Typer's boxes or tracebacks.
+    """
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        with _one_line_errors():
+            return super().make_context(info_name, args, parent=parent, **extra)
+
+    def invoke(self, ctx):
+        with _one_line_errors():
+            return super().invoke(ctx)
+
+
+app = typer.Typer(cls=OneLineGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Surface normals from depth images: D2NT (ICRA 2023) and the estimators it is compared with.")
 
 
 def method_names() -> list[str]:
@@ -40,12 +118,14 @@ BYTE_ORDER_HELP = "Byte order of 16-bit .pgm samples: big (netpbm, default) or l
 
 
 def _intrinsics(intrinsics: Optional[Path], fx, fy, cx, cy, depth_path: Optional[Path] = None):
-    """The camera from --intrinsics or --fx --fy --cx --cy; a 3F2N file falls back to its params.txt."""
+    """The camera from --intrinsics or --fx --fy --cx --cy; a depth file falls back to its 3F2N params.txt
+    (beside it or in the folder above, whether its path is relative or absolute)."""
     from .io.intrinsics import resolve_intrinsics
+    from .io.threef2n import params_for
 
     cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
-    if cam is None and depth_path is not None and (depth_path.parent.parent / "params.txt").is_file():
-        cam = resolve_intrinsics(depth_path.parent.parent / "params.txt")
+    if cam is None and depth_path is not None and params_for(depth_path) is not None:
+        cam = resolve_intrinsics(params_for(depth_path))
     if cam is None:
         fail("intrinsics: expected --intrinsics FILE or all of --fx --fy --cx --cy")
     return cam

@@ -52,8 +52,9 @@ class ConvertTask:
 class ConvertSettings:
     """Everything :func:`convert_file` needs besides the task; picklable (plain values only).
 
-    ``intrinsics`` None means: read the 3F2N ``params.txt`` of each file's
-    object folder (``<object>/depth/<frame>.bin`` -> ``<object>/params.txt``).
+    ``intrinsics`` None means: read the 3F2N ``params.txt`` of each file (beside it,
+    or in its object folder: ``<object>/depth/<frame>.bin`` -> ``<object>/params.txt``;
+    see :func:`surfnorm.io.threef2n.params_for`).
     """
 
     method: str = DEFAULT_METHOD
@@ -225,21 +226,17 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
 
 # ---------------------------------------------------------------------------- one file
 
-def _threef2n_params(path: Path) -> Path:
-    return path.parent.parent / "params.txt"
-
-
 def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     from ._api import estimate
     from .io.depth import depth_suffix, read_depth
     from .io.normals import write_normals
-    from .io.threef2n import read_params
+    from .io.threef2n import params_for, read_params
 
     cam = settings.intrinsics
     if cam is None:
-        params = _threef2n_params(task.input)
-        if not params.is_file():
-            raise InputError(f"intrinsics: none given and no 3F2N params.txt at {params}")
+        params = params_for(task.input)
+        if params is None:
+            raise InputError(f"intrinsics: none given and no 3F2N params.txt beside {task.input} or in the folder above it")
         cam = read_params(params)
     byte_order = settings.byte_order if depth_suffix(task.input) == ".pgm" else None  # other files in the folder
     depth = read_depth(task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity,
@@ -332,11 +329,59 @@ def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, 
                            kinect_disparity, byte_order)
 
 
-def _worker_init():
-    """Workers ignore Ctrl-C: the parent handles it for the whole pool (see :func:`convert`)."""
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` is running (a zombie, dead but not yet reaped, counts as dead)."""
+    try:
+        os.kill(pid, 0)
+    except OSError:  # gone, or (PermissionError) the number now belongs to another user's process
+        return False
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True
+
+
+def _die_with(main_pid: int, poll_s: float = 0.5):
+    """End this worker process when ``main_pid`` (the process running :func:`convert`) dies, even by SIGKILL.
+
+    Linux: the kernel sends SIGKILL when the worker's parent dies (``prctl(PR_SET_PDEATHSIG)``); the
+    parent is ``main_pid`` itself, or the forkserver, which lives as long as the workers do (each
+    holds a copy of its lifeline), so on every system a daemon thread also checks twice a second
+    that ``main_pid`` is alive. A worker that outlived the run would hold memory and a CPU (and keep
+    multiprocessing's resource tracker and forkserver alive) for nothing.
+    """
+    import signal
+    import sys
+    import threading
+    import time
+
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            PR_SET_PDEATHSIG = 1
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no prctl: the watchdog remains
+            pass
+    if not _alive(main_pid):  # it died before prctl took effect
+        os._exit(1)
+
+    def watch():
+        while _alive(main_pid):
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="surfnorm-main-watchdog", daemon=True).start()
+
+
+def _worker_init(main_pid: int | None = None):
+    """Workers ignore Ctrl-C (the parent handles it for the whole pool, see :func:`convert`) and die with ``main_pid``."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if main_pid is not None:
+        _die_with(main_pid)
 
 
 def _pool_context():
@@ -398,13 +443,17 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     """
     settings = _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity,
                          byte_order)
+    if client is not None and not (callable(getattr(client, "submit", None)) and callable(getattr(client, "nthreads", None))):
+        raise InputError(f"client: expected a dask.distributed.Client, got {type(client).__name__} {client!r:.60}")
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise InputError(f"jobs: expected a positive integer, got {jobs!r}")
     output_dir = Path(output_dir)
     _check_output_dir(output_dir)
     tasks = plan_tasks(inputs, output_dir, fmt)
     if settings.intrinsics is None:
-        missing = [t.input for t in tasks if not _threef2n_params(t.input).is_file()]
+        from .io.threef2n import params_for
+
+        missing = [t.input for t in tasks if params_for(t.input) is None]
         if missing:
             raise InputError(f"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy "
                              f"(no 3F2N params.txt beside {missing[0]}{' and %d more' % (len(missing) - 1) if len(missing) > 1 else ''})")
@@ -435,7 +484,8 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     else:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=_pool_context(), initializer=_worker_init)
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=_pool_context(), initializer=_worker_init,
+                                   initargs=(os.getpid(),))
         try:
             futures = {pool.submit(convert_file, t, settings): i for i, t in enumerate(tasks)}
             for fut in as_completed(futures):

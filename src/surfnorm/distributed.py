@@ -229,6 +229,9 @@ def cluster_client(address: str | None = None, *, local_workers: int | None = No
             client = distributed.Client(address, **kwargs)
         except (OSError, TimeoutError) as exc:
             raise ConnectionError(f"cluster address {address!r}: no Dask scheduler answered there ({exc})") from exc
+        except (ValueError, TypeError) as exc:  # distributed's own words for a malformed address
+            raise InputError(f"cluster address: expected a Dask scheduler address such as tcp://host:8786, "
+                             f"got {address!r} ({exc})") from exc
     else:
         n = check_positive_int("local_workers", local_workers)
         # ":0": any free port for the scheduler's HTTP server (8787 may be another cluster's)

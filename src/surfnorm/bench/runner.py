@@ -382,6 +382,10 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
                 skipped.setdefault(name, f"not registered in surfnorm.methods() (needed by {table})")
 
     frames, unreadable = discover(cfg)
+    if not frames:
+        found = f"; only frames without depth: {', '.join(list(unreadable)[:3])}" if unreadable else ""
+        raise InputError(f"dataset: expected frames in the 3F2N layout ({'|'.join(cfg.levels)}/<object>/depth/<frame>.bin), "
+                         f"found none in {cfg.root}{found}")
     cache = Cache(Path(cfg.out) / "cache", code_version(), cfg.root)
 
     # accuracy: what is not cached yet, one task per frame

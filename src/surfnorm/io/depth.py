@@ -52,7 +52,7 @@ import numpy as np
 
 from .._validate import check_bool, check_choice, check_positive
 from ..errors import DataFileError, InputError, MissingDependencyError
-from ._files import decode_image, read_bytes
+from ._files import as_path, check_shape, decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
 
 __all__ = ["read_depth", "read_mask", "disparity_to_depth", "kinect_disparity_to_depth", "depth_suffix",
@@ -143,12 +143,14 @@ def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH),
         Missing, unreadable, truncated or corrupt file, or not one depth channel;
         with ``kinect_disparity``, values outside 0 to 2047.
     InputError (a ValueError)
-        ``depth_scale`` not a positive finite number; ``byte_order`` for a file
-        that is not ``.pgm``; ``depth_scale`` with ``kinect_disparity``.
+        ``path`` not a path, ``shape`` not two positive integers, ``depth_scale``
+        not a positive finite number; ``byte_order`` for a file that is not
+        ``.pgm``; ``depth_scale`` with ``kinect_disparity``.
     MissingDependencyError (an ImportError)
         An ``.exr`` file without the OpenEXR package.
     """
-    path = Path(path)
+    path = as_path(path)
+    shape = check_shape(shape)
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
     if path.is_dir():
@@ -178,14 +180,16 @@ def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH),
 
 def read_mask(path) -> np.ndarray:
     """A mask file as bool (H, W): any image, ``.npy`` or ``.npz`` (array ``mask`` or the only one); non-zero = usable."""
-    path = Path(path)
+    path = as_path(path)
     suffix = depth_suffix(path)
     if suffix in (".npy", ".npz"):
         arr = _read_numpy(path, suffix, "mask")
     else:
         arr = decode_image(path, read_bytes(path, "mask"), cv2.IMREAD_GRAYSCALE)
-    if arr.ndim != 2 or arr.dtype == object:
-        raise DataFileError(f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype}")
+    real = arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)
+    if arr.ndim != 2 or not real:  # not strings, complex numbers, objects or records
+        raise DataFileError(f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype} "
+                            "(a mask holds booleans or real numbers)")
     return np.ascontiguousarray(arr != 0)
 
 

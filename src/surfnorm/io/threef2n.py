@@ -13,6 +13,7 @@ Levels are Easy, Medium and Hard. Depth files may also be gzip-compressed
 from __future__ import annotations
 
 import gzip
+import os
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,7 @@ import numpy as np
 from ..camera import Intrinsics
 from ..errors import DataFileError
 
-__all__ = ["Frame", "read_params", "read_frame", "find_frames", "sample_root", "LEVELS", "HEIGHT", "WIDTH"]
+__all__ = ["Frame", "read_params", "params_for", "read_frame", "find_frames", "sample_root", "LEVELS", "HEIGHT", "WIDTH"]
 
 LEVELS = ("Easy", "Medium", "Hard")
 HEIGHT, WIDTH = 480, 640
@@ -61,18 +62,44 @@ def read_params(path) -> Intrinsics:
     return Intrinsics(fx, fy, u0 - 1.0, v0 - 1.0)
 
 
+def params_for(depth_path) -> Path | None:
+    """The ``params.txt`` that holds the camera of a depth file, or None.
+
+    Looked for beside the file, then in the folder above it (the 3F2N layout
+    ``<object>/depth/<frame>.bin`` -> ``<object>/params.txt``), from the file's
+    absolute path: ``f.bin`` and ``$PWD/f.bin`` find the same file.
+    """
+    path = Path(depth_path).absolute()
+    for folder in (path.parent, path.parent.parent):
+        if (folder / "params.txt").is_file():
+            return folder / "params.txt"
+    return None
+
+
 def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
     """A 3F2N ``.bin`` (or ``.bin.gz``) depth file: raw float32, row-major."""
     path = Path(path)
+    expected = shape[0] * shape[1] * 4
     try:
-        raw = gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_bytes()
+        if path.suffix == ".gz":
+            # decompress at most one byte more than a frame holds: a small file that unpacks to
+            # gigabytes ("gzip bomb") is refused once it passes the frame size, never held whole
+            with gzip.open(path, "rb") as fh:
+                raw = fh.read(expected + 1)
+            if len(raw) > expected:
+                raise DataFileError(f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}) "
+                                    f"once decompressed, got more")
+        else:
+            with open(path, "rb") as fh:
+                raw = fh.read(expected + 1)
+                size = os.fstat(fh.fileno()).st_size
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:  # BadGzipFile is an OSError: test it first
         raise DataFileError(f"{path}: truncated or corrupt gzip stream ({exc})") from exc
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read depth file ({exc.strerror or exc})") from exc
-    expected = shape[0] * shape[1] * 4
     if len(raw) != expected:
-        raise DataFileError(f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}), got {len(raw)}")
+        got = len(raw) if path.suffix == ".gz" else size
+        raise DataFileError(f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}), got {got}")
     return np.frombuffer(raw, dtype="<f4").reshape(shape).copy()
 
 

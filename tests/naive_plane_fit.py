@@ -32,7 +32,8 @@ def _face_camera(n, p):
 def plane_fit(depth, K, method, window=3, mask=None, fill=0.0):
     """Normals (H, W, 3) float64 of ``method`` in {"plane_svd", "plane_pca", "vector_svd"}.
 
-    Also returns the relative eigen-gap (H, W): (lambda_2 - lambda_1) / lambda_max of the matrix whose
+    A window whose valid pixels lie on one image line gets ``fill`` (their points lie in a plane through
+    the camera centre, which every fit would return, seen edge-on). Also returns the relative eigen-gap (H, W): (lambda_2 - lambda_1) / lambda_max of the matrix whose
     smallest eigenvector is the normal (0 where there is none). Where it is tiny the normal is
     ill-determined and any two correct solvers may disagree.
     """
@@ -52,6 +53,10 @@ def plane_fit(depth, K, method, window=3, mask=None, fill=0.0):
                       if 0 <= a < H and 0 <= b < W and valid[a, b]]  # includes p itself
             if len(Q_plus) < 3:
                 continue
+            pixels = np.array([(a, b) for a in range(v - h, v + h + 1) for b in range(u - h, u + h + 1)
+                               if 0 <= a < H and 0 <= b < W and valid[a, b]], dtype=np.float64)
+            if np.linalg.matrix_rank(pixels - pixels.mean(axis=0)) < 2:
+                continue  # the pixels lie on one image line: their points lie in a plane through the camera
             Q_plus = np.array(Q_plus)
             if method == "plane_svd":
                 # min || [Q+, 1] b ||, ||b|| = 1: last right singular vector; n = b[:3]

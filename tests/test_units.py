@@ -50,38 +50,65 @@ def test_the_paper_faithful_default_depends_on_the_unit():
     assert differ.mean() > 0.05  # the absolute DAG threshold: what the scale-invariant mode removes
 
 
-def test_the_two_modes_agree_at_the_reference_depth(monkeypatch):
+def test_the_two_modes_agree_but_for_relative_thresholds(monkeypatch):
     z = sensor_millimetres().astype(np.float64)
     valid = z > 0
-    z = (z * (REFERENCE_DEPTH / np.median(z[valid]))).astype(np.float32)
-    assert np.median(z[valid]) == np.float32(REFERENCE_DEPTH)
+    z = (z * (REFERENCE_DEPTH / np.median(z[valid]))).astype(np.float32)  # median 100: no power of two applies
     ties = [m for m in METHODS if resolve(m, {})[0].ties]
-    assert ties == ["d2nt_v3", "sda_sne"]
+    relative = [m for m in METHODS if resolve(m, {})[0].relative]
+    assert ties == ["d2nt_v3", "sda_sne"] and relative == ["d2nt_v2", "d2nt_v3", "plane_svd"]
     for method in METHODS + ["cp2tv+mnr"]:
-        if method not in ties and not method.endswith("+mnr"):
+        if method not in ties + relative and not method.endswith("+mnr"):
             np.testing.assert_array_equal(surfnorm.estimate(z, K, method=method, scale_invariant=True),
                                           surfnorm.estimate(z, K, method=method), err_msg=method)
     # MNR and SDA-SNE differ only by the near-tie tolerance of the scale-invariant mode
-    for method in ties + ["cp2tv+mnr"]:
+    for method in ["sda_sne", "cp2tv+mnr"]:
         differs = surfnorm.estimate(z, K, method=method, scale_invariant=True) != surfnorm.estimate(z, K, method=method)
         assert differs.any(), method
     monkeypatch.setattr(surfnorm.units, "TIE_TOLERANCE", 0.0)
-    for method in ties + ["cp2tv+mnr"]:
+    for method in ["sda_sne", "cp2tv+mnr"]:
         np.testing.assert_array_equal(surfnorm.estimate(z, K, method=method, scale_invariant=True),
                                       surfnorm.estimate(z, K, method=method), err_msg=method)
 
 
-def test_the_reference_is_per_frame_and_after_the_mask():
+@pytest.mark.parametrize("dlf", ["1d", "beta"])
+@pytest.mark.parametrize("tau", [1.0, 0.3])
+def test_scale_invariant_dag_measures_smoothness_relative_to_each_pixels_depth(monkeypatch, dlf, tau):
+    """The naive DAG with s_q replaced by s_q REFERENCE_DEPTH / z_q: tau relative to each pixel's own depth."""
+    from tests import naive_d2nt
+
+    z = sensor_millimetres().astype(np.float32)
+    valid = z > 0
+    absolute = naive_d2nt.laplacian_abs
+
+    def relative(zz, vv, dlf, axis=0):
+        with np.errstate(all="ignore"):
+            return np.where(vv, absolute(zz, vv, dlf, axis) / np.where(vv, zz, 1) * np.float32(REFERENCE_DEPTH), 0)
+
+    monkeypatch.setattr(naive_d2nt, "laplacian_abs", relative)
+    cam = surfnorm.camera.Intrinsics.from_matrix(K)
+    expected = naive_d2nt.d2nt_dag(z, valid, cam, dlf=dlf, tau=tau, fill=np.nan)
+    got = surfnorm.estimate(z, K, method="d2nt_v2", dlf=dlf, tau=tau, scale_invariant=True, fill=np.nan)
+    # a weight's last bits differ (the kernel divides in float64); where that crosses the truncation the
+    # gradient takes the other side: at most a few pixels
+    close = np.isclose(got, expected, atol=1e-5, equal_nan=True).all(-1)
+    assert close.mean() > 0.995, close.mean()
+    paper = surfnorm.estimate(z, K, method="d2nt_v2", dlf=dlf, tau=tau, fill=np.nan)
+    assert not np.allclose(got, paper, atol=1e-3, equal_nan=True)  # the relative tau is what the mode uses
+
+
+def test_per_frame_and_local():
     mm = sensor_millimetres().astype(np.float32)
     stack = np.stack([mm, mm / 1000])
     n = surfnorm.estimate(stack, K, method="d2nt_v2", scale_invariant=True)
     np.testing.assert_allclose(n[1], n[0], atol=1e-4)
     np.testing.assert_array_equal(n[0], surfnorm.estimate(mm, K, method="d2nt_v2", scale_invariant=True))
-    # a far background changes the median, and so the result, unless it is masked out
+    # a far background moves the median, which no longer changes anything: the decisions are local
     mask = mm < 2000
     far = np.where(mask, mm, 9000).astype(np.float32)
-    masked = surfnorm.estimate(far, K, method="d2nt_v2", scale_invariant=True, mask=mask)
-    np.testing.assert_array_equal(masked, surfnorm.estimate(mm, K, method="d2nt_v2", scale_invariant=True, mask=mask))
+    for method in ("d2nt_v2", "d2nt_v3", "3f2n_median"):
+        masked = surfnorm.estimate(far, K, method=method, scale_invariant=True, mask=mask)
+        np.testing.assert_array_equal(masked, surfnorm.estimate(mm, K, method=method, scale_invariant=True, mask=mask))
 
 
 @pytest.mark.parametrize("method", METHODS)

@@ -78,8 +78,12 @@ def raw_normals(method, z, mask, cam, scale_invariant=False):
     zz = as_depth(z, batch=False)
     valid = valid_pixels(zz, mask)
     if scale_invariant:
+        from surfnorm.units import REFERENCE_DEPTH
+
         zz = relative_depth(zz, valid)
         valid = valid_pixels(zz, valid)
+        if base.relative:  # tau relative to each pixel's depth, as the mode passes it
+            options["relative"] = REFERENCE_DEPTH
     return base.run(zz, valid, Intrinsics.from_matrix(cam), np.empty(zz.shape + (3,), np.float32), **options)
 
 

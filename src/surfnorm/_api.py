@@ -8,7 +8,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ._validate import as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, valid_pixels
+from ._validate import (as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, split_masked,
+                        valid_pixels)
 from .camera import Intrinsics
 from .errors import InputError
 from ._choices import DLF_NAMES
@@ -34,11 +35,13 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
     return [Intrinsics.from_matrix(arr)] * n
 
 
-def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
+def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relative=0.0):
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
     if tie_tol and method.ties:
         options = dict(options, tie_tol=tie_tol)
+    if relative and method.relative:
+        options = dict(options, relative=relative)
     if not refined:
         # A recipe ending with MNR (d2nt_v3) refines inside its own run, fused: no full-size temporary.
         return method.run(z, valid, cam, out, **options)
@@ -48,6 +51,21 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
     run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
     raw = method.run(z, valid, cam, np.empty(out.shape, np.float32), **run_options)
     return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol)
+
+
+def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The paper-faithful mode's range rescale of one frame (surfnorm.units, "Range"): depth and tau multiplied
+    by a power of two where the frame's depth would leave float32's range in the kernels; else unchanged."""
+    if not method.equivariant:
+        return z, options
+    from .units import range_exponent, scaled_frame
+
+    k = range_exponent(z)
+    if k == 0:
+        return z, options
+    if "tau" in options:
+        options = dict(options, tau=options["tau"] * 2.0 ** k)
+    return scaled_frame(src, k), options
 
 
 # Thread pools for stacks of frames, kept between calls: starting two threads and stopping them costs about
@@ -106,13 +124,16 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
         from the depth's own noise floor; see :mod:`surfnorm.auto`.
     mask : ndarray of bool, shape of ``depth``, optional
         False where depth must not be used (in addition to invalid values).
+        A NumPy masked array's masked pixels (in ``depth`` or in ``mask``)
+        are not used either, whatever values lie under the mask.
     threads : int, optional
         Threads for a stack of frames (default: all cores). Ignored for one frame.
     scale_invariant : bool
         False (default, paper-faithful): the DAG softmin threshold ``tau`` is in
-        depth units. True: each frame is rescaled to a median valid depth of
-        ``surfnorm.units.REFERENCE_DEPTH`` (100) first, so normals do not depend
-        on the unit of depth; see :mod:`surfnorm.units`.
+        depth units. True: ``tau`` is relative to each pixel's own depth
+        (tau z / ``surfnorm.units.REFERENCE_DEPTH``, 100) and near-ties are
+        judged relative to depth, so normals do not depend on the unit of
+        depth, and every decision is local; see :mod:`surfnorm.units`.
     disparity : bool
         ``depth`` holds disparity (or inverse depth up to scale); it is inverted
         and handled as in the scale-invariant mode. See :mod:`surfnorm.units`.
@@ -148,22 +169,35 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
     ((48, 64, 3), [0.0, 0.0, -1.0])
     """
     method_obj, refined, clean = resolve(method, options)
+    depth, unmasked = split_masked(depth)
     z = as_depth(depth)
     user_mask = as_mask(mask, z.shape)
+    if unmasked is not None:  # np.ma: masked pixels are invalid
+        user_mask = unmasked if user_mask is None else user_mask & unmasked
     if out is not None:
         out = as_output(out, z.shape + (3,), [("depth", z), ("mask", user_mask)])
+    src = np.asarray(depth)  # the caller's values before float32 (float64 keeps its digits when rescaled)
+    tie_tol = relative = 0.0
     if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
-        from .units import TIE_TOLERANCE, relative_depth
+        from .units import REFERENCE_DEPTH, TIE_TOLERANCE, relative_depth
 
         # Invalid pixels become 0 in the rescaled depth, and a value that over/underflows float32 when
         # rescaled is not finite and positive, so the validity computed below from z covers both.
-        z = relative_depth(z, valid_pixels(z, user_mask), disparity=disparity)
-        tie_tol = TIE_TOLERANCE
-    else:
-        tie_tol = 0.0
+        z = relative_depth(src, valid_pixels(z, user_mask), disparity=disparity)
+        tie_tol, relative = TIE_TOLERANCE, REFERENCE_DEPTH
+
+    def frame(i):
+        """Depth, validity and options of frame i (None: the only frame), rescaled into range if needed."""
+        z_i, src_i, options = (z, src, clean) if i is None else (z[i], src[i], clean)
+        m_i = user_mask if i is None or user_mask is None else user_mask[i]
+        if not relative:
+            z_i, options = _in_range(method_obj, options, src_i, z_i)
+        return z_i, _valid(z_i, m_i), dict(options)
+
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam, out, tie_tol=tie_tol)
+        z_0, valid_0, options_0 = frame(None)
+        return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative)
     cams = _intrinsics_list(K, z.shape[0])
     workers = threads if threads is not None else (os.cpu_count() or 1)
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
@@ -174,8 +208,8 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
     def one(i):
         # Everything per frame (validity, kernel) runs here, so frames proceed in parallel:
         # the kernels release the GIL (nogil=True).
-        frame_mask = None if user_mask is None else user_mask[i]
-        _run(method_obj, refined, dict(clean), z[i], _valid(z[i], frame_mask), cams[i], out[i], tie_tol)
+        z_i, valid_i, options_i = frame(i)
+        _run(method_obj, refined, options_i, z_i, valid_i, cams[i], out[i], tie_tol, relative)
 
     if workers == 1 or z.shape[0] == 1:
         for i in range(z.shape[0]):
@@ -199,7 +233,8 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     depth : ndarray of shape (H, W)
         The depth they were estimated from.
     mask : ndarray of bool, optional
-        False where depth must not be used.
+        False where depth must not be used. Masked entries of NumPy masked
+        arrays (``depth``, ``normals`` or ``mask``) count as unusable too.
     dlf : {"1d", "alpha", "beta", "gamma"}
         Discrete Laplace filter for the smoothness (default alpha, as the authors' code).
     fill : float
@@ -207,9 +242,15 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     """
     from .mnr import mnr
 
+    depth, unmasked = split_masked(depth)
     z = as_depth(depth, batch=False)
+    if isinstance(normals, np.ma.MaskedArray):  # a masked component: the pixel has no normal
+        normals = np.ma.filled(np.ma.asarray(normals, dtype=np.float32), np.nan)
     n = as_normals(normals, z.shape)
     check_choice("dlf", dlf, DLF_NAMES)
     fill = check_fill(fill)
-    valid = _valid(z, as_mask(mask, z.shape))
+    user_mask = as_mask(mask, z.shape)
+    if unmasked is not None:
+        user_mask = unmasked if user_mask is None else user_mask & unmasked
+    valid = _valid(z, user_mask)
     return mnr(z, valid, n, np.empty_like(n), dlf=dlf, fill=fill)

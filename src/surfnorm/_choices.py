@@ -15,3 +15,9 @@ SDA_BASES = ("cp2tv", "3f2n")
 #: 3F2N sample the authors' stop test fires after 6 to 228 passes (planar
 #: scenes take longest, because extending a run wins ties against keeping).
 SDA_MAX_ITERATIONS = 1000
+
+#: Orientation of a normal (see :mod:`surfnorm.orientation`): a normal within this relative margin of being
+#: perpendicular to the viewing ray (|n . P| <= ORIENTATION_TIE |n| |P|) is edge-on, and its sign is decided by
+#: a fixed rule instead of by rounding. (The kernels that use it are compiled with its value and cached: after
+#: changing it, delete the Numba cache files in src/surfnorm/__pycache__.)
+ORIENTATION_TIE = 1e-3

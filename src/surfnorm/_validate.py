@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["as_depth", "as_mask", "valid_pixels", "as_normals", "as_output", "check_choice", "check_positive",
+__all__ = ["as_depth", "as_mask", "split_masked", "valid_pixels", "as_normals", "as_output", "check_choice", "check_positive",
            "check_bool", "check_iterations", "check_window"]
 
 MIN_SIZE = 3
@@ -54,10 +54,25 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
+def split_masked(value):
+    """(data, usable): a NumPy masked array's data and ``~mask`` (True where not masked); (value, None) otherwise.
+
+    surfnorm honours ``np.ma`` masks: a masked depth pixel is invalid, whatever value lies under the mask.
+    """
+    if isinstance(value, np.ma.MaskedArray):
+        return np.ma.getdata(value), ~np.ma.getmaskarray(value)
+    return value, None
+
+
 def as_mask(mask, shape: tuple, *, name: str = "mask") -> np.ndarray | None:
-    """Return the user mask (True = use this pixel) as C-contiguous bool of ``shape``, or None."""
+    """Return the user mask (True = use this pixel) as C-contiguous bool of ``shape``, or None.
+
+    A masked entry of an ``np.ma`` mask counts as False (do not use the pixel).
+    """
     if mask is None:
         return None
+    if isinstance(mask, np.ma.MaskedArray):
+        mask = np.ma.filled(mask, 0)
     arr = np.asarray(mask)
     if not (arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
         raise InputError(f"{name}: expected a boolean array (True where depth is usable), got {_describe(arr)}")
@@ -145,7 +160,13 @@ def check_iterations(name: str, value) -> int | None:
 def check_fill(value) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InputError(f"fill: expected a number (0.0 or nan) written into every component of a pixel without a valid normal, got {value!r}")
-    return float(value)
+    value = float(value)
+    with np.errstate(over="ignore", under="ignore"):
+        stored = np.float32(value)
+    if (np.isinf(stored) and np.isfinite(value)) or (stored == 0 and value != 0):
+        raise InputError(f"fill: expected a value that the float32 output can hold (0, nan, +-inf, or a magnitude "
+                         f"between 1.4e-45 and 3.4e38), got {value!r}, which float32 stores as {float(stored)!r}")
+    return value
 
 
 def check_window(name: str, value) -> int:

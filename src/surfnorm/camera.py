@@ -14,7 +14,15 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["Intrinsics"]
+__all__ = ["Intrinsics", "FOCAL_RANGE", "PRINCIPAL_POINT_LIMIT"]
+
+#: Focal lengths (pixels) the kernels handle. Real cameras have 10^2 to 10^5; at 1e8 one pixel subtends
+#: 1e-8 rad, and beyond that (fx = 1e300 was accepted) the float32 kernels gave no normal at all.
+FOCAL_RANGE = (1e-3, 1e8)
+
+#: |cx|, |cy| at most this (pixels): beyond it float32 cannot tell u - c_x of neighbouring pixels apart
+#: to within a small fraction of a pixel (its spacing at 1e6 is 0.06).
+PRINCIPAL_POINT_LIMIT = 1e6
 
 
 @dataclass(frozen=True)
@@ -37,6 +45,13 @@ class Intrinsics:
         for name in ("fx", "fy"):
             if getattr(self, name) <= 0:
                 raise InputError(f"intrinsics.{name}: expected a positive focal length in pixels, got {getattr(self, name)!r}")
+            if not FOCAL_RANGE[0] <= getattr(self, name) <= FOCAL_RANGE[1]:
+                raise InputError(f"intrinsics.{name}: expected a focal length between {FOCAL_RANGE[0]:g} and "
+                                 f"{FOCAL_RANGE[1]:g} pixels, got {getattr(self, name)!r}")
+        for name in ("cx", "cy"):
+            if abs(getattr(self, name)) > PRINCIPAL_POINT_LIMIT:
+                raise InputError(f"intrinsics.{name}: expected a principal point within {PRINCIPAL_POINT_LIMIT:g} "
+                                 f"pixels of the image origin, got {getattr(self, name)!r}")
 
     @classmethod
     def from_matrix(cls, K, *, name: str = "K") -> "Intrinsics":
@@ -57,6 +72,12 @@ class Intrinsics:
         fx, fy, cx, cy = arr[0, 0], arr[1, 1], arr[0, 2], arr[1, 2]
         if fx <= 0 or fy <= 0:
             raise InputError(f"{name}: expected positive focal lengths K[0,0] and K[1,1], got fx={fx:g}, fy={fy:g}")
+        if not (FOCAL_RANGE[0] <= fx <= FOCAL_RANGE[1] and FOCAL_RANGE[0] <= fy <= FOCAL_RANGE[1]):
+            raise InputError(f"{name}: expected focal lengths K[0,0] and K[1,1] between {FOCAL_RANGE[0]:g} and "
+                             f"{FOCAL_RANGE[1]:g} pixels, got fx={fx:g}, fy={fy:g}")
+        if abs(cx) > PRINCIPAL_POINT_LIMIT or abs(cy) > PRINCIPAL_POINT_LIMIT:
+            raise InputError(f"{name}: expected a principal point K[0,2], K[1,2] within {PRINCIPAL_POINT_LIMIT:g} "
+                             f"pixels of the image origin, got cx={cx:g}, cy={cy:g}")
         if arr[0, 1] != 0 or arr[1, 0] != 0 or arr[2, 0] != 0 or arr[2, 1] != 0 or arr[2, 2] != 1:
             raise InputError(f"{name}: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew), got {arr.tolist()}")
         return cls(fx, fy, cx, cy)

@@ -37,21 +37,22 @@ def _d2nt_basic(z, valid, cam, out, *, border, fill):
     return d2nt(z, valid, cam, out, gradient="fd", border=border, fill=fill)
 
 
-def _d2nt_dag(z, valid, cam, out, *, dlf, tau, truncate, fill):
-    return d2nt(z, valid, cam, out, gradient="dag", dlf=dlf, tau=tau, truncate=truncate, fill=fill)
+def _d2nt_dag(z, valid, cam, out, *, dlf, tau, truncate, fill, relative=0.0):
+    return d2nt(z, valid, cam, out, gradient="dag", dlf=dlf, tau=tau, truncate=truncate, fill=fill, relative=relative)
 
 
-def _d2nt_v3(z, valid, cam, out, *, dlf, tau, truncate, mnr_dlf, fill, tie_tol=0.0):
-    return d2nt_v3(z, valid, cam, out, dlf=dlf, tau=tau, truncate=truncate, mnr_dlf=mnr_dlf, fill=fill, tie_tol=tie_tol)
+def _d2nt_v3(z, valid, cam, out, *, dlf, tau, truncate, mnr_dlf, fill, tie_tol=0.0, relative=0.0):
+    return d2nt_v3(z, valid, cam, out, dlf=dlf, tau=tau, truncate=truncate, mnr_dlf=mnr_dlf, fill=fill, tie_tol=tie_tol,
+                   relative=relative)
 
 
 register(Method("d2nt_basic", "depth-to-normal", D2NT_PAPER + ", eq. 9",
                 "D2NT translation with finite-difference gradients", _d2nt_basic, BORDER_OPTIONS))
 register(Method("d2nt_v2", "depth-to-normal", D2NT_PAPER + ", eq. 9-14",
-                "D2NT with discontinuity-aware gradient (DAG) filter", _d2nt_dag, DAG_OPTIONS))
+                "D2NT with discontinuity-aware gradient (DAG) filter", _d2nt_dag, DAG_OPTIONS, relative=True))
 register(Method("d2nt_v3", "depth-to-normal", D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
                 "D2NT with DAG filter and MRF-based normal refinement (MNR)", _d2nt_v3, DAG_OPTIONS, mnr=True,
-                ties=True))
+                ties=True, relative=True))
 register(Method("cp2tv", "depth-to-normal",
                 "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
                 "cross product of two finite-difference tangent vectors",
@@ -98,7 +99,7 @@ register(Method("sda_sne", "energy minimisation",
                 lambda z, valid, cam, out, *, iterations, base, border, fill, tie_tol=0.0:
                     _sda_sne(z, valid, cam, out, iterations=iterations, base=base, border=border, fill=fill,
                              tie_tol=tie_tol),
-                SDA_OPTIONS, ties=True))
+                SDA_OPTIONS, ties=True, equivariant=False))
 
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
 
@@ -110,7 +111,7 @@ register(Method("plane_svd", "energy minimisation",
                 "Wang et al., Comparison of local plane fitting methods for range data, CVPR 2001 "
                 "(as formulated by Klasing et al., ICRA 2009); D2NT Table I",
                 "least-squares plane with offset: smallest right singular vector of [Q+, 1]",
-                plane_svd, WINDOW_OPTIONS))
+                plane_svd, WINDOW_OPTIONS, relative=True, equivariant=False))
 register(Method("plane_pca", "energy minimisation",
                 "Klasing et al., Realtime segmentation of range data using continuous nearest neighbors, ICRA 2009; "
                 "D2NT Table I",

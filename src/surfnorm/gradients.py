@@ -39,7 +39,8 @@ import numpy as np
 from ._choices import BORDERS, DLF_NAMES
 from ._config import as_float64, njit, pixel, row
 
-__all__ = ["DLF_NAMES", "BORDERS", "dlf_code", "fd_gradients", "dag_gradients", "valid_map", "softmin_ratio"]
+__all__ = ["DLF_NAMES", "BORDERS", "dlf_code", "fd_gradients", "dag_gradients", "valid_map", "softmin_ratio",
+           "kernel_tau"]
 
 # Weights of the 3x3 DLFs, as (edge neighbour weight, corner neighbour weight);
 # the centre weight is minus their sum, so nabla^2 z = sum_k w_k (z_k - z_c).
@@ -157,9 +158,32 @@ def exp32(x):
     return y if x_d == x_d else x
 
 
+def kernel_tau(tau: float) -> float:
+    """tau as the kernels use it: rounded to float32 (as the paper-faithful kernels always did), unless that
+    rounding would make it 0 or inf (tau below about 1e-45 or above 3.4e38), where it stays float64.
+
+    Any positive finite tau that the validation accepts then gives finite weights (see :func:`softmin_weights_row`).
+    """
+    with np.errstate(over="ignore", under="ignore"):
+        t32 = np.float32(tau)
+    return float(t32) if 0 < t32 < np.inf else float(tau)
+
+
+#: exp(x) overflows float32 above this: a truncation ratio e^(1/tau) beyond it is +inf.
+_EXP32_MAX_ARG = 88.72
+
+
 def softmin_ratio(tau: float, truncate: bool) -> np.float32:
-    """The weight ratio beyond which the truncated softmin (eq. 14) snaps to (1, 0): e^(1/tau), or inf (no truncation)."""
-    return np.float32(math.exp(1.0 / float(np.float32(tau)))) if truncate else np.float32(np.inf)
+    """The weight ratio beyond which the truncated softmin (eq. 14) snaps to (1, 0): e^(1/tau), or inf (no truncation).
+
+    For tau below about 0.0113 e^(1/tau) exceeds float32 (and, below 0.0014, float64): the ratio is +inf
+    then, which changes nothing, since two regularised weights never differ by more than about
+    1 / SOFTMIN_EPS = 1e8 = e^18.4; the truncation cannot fire for tau < 1 / 18.5 anyway.
+    """
+    if not truncate:
+        return np.float32(np.inf)
+    inv = 1.0 / kernel_tau(tau)
+    return np.float32(math.exp(inv)) if inv < _EXP32_MAX_ARG else np.float32(np.inf)
 
 
 @pixel
@@ -191,8 +215,20 @@ def truncated_softmin(s_1, s_2, tau, truncate):
     softmin weights differ by more than a factor e^(1/tau), i.e. when
     |s_2 - s_1| > 1 (eq. 14).
     """
-    ratio = np.float32(math.exp(1.0 / tau)) if truncate else np.float32(np.inf)
-    return softmin_pair(exp32(-s_1 / tau), exp32(-s_2 / tau), ratio)
+    inv = 1.0 / np.float64(tau)
+    ratio = np.float32(math.exp(inv)) if truncate and inv < _EXP32_MAX_ARG else np.float32(np.inf)
+    return softmin_pair(exp32(scaled_smoothness(s_1, tau)), exp32(scaled_smoothness(s_2, tau)), ratio)
+
+
+@pixel
+def scaled_smoothness(s, tau):
+    """-s / tau rounded to float32, computed in float64 (``tau`` float64, see :func:`kernel_tau`).
+
+    For a tau that is a float32 this is exactly the float32 quotient (a float64 quotient of two float32
+    values rounds to the same float32); for any other positive tau it is the correctly rounded value,
+    never NaN (s = 0 gives -0) and -inf where s / tau overflows (exp gives 0).
+    """
+    return np.float32(-np.float64(s) / np.float64(tau))
 
 
 @pixel
@@ -309,7 +345,7 @@ def fd_gradients(z: np.ndarray, valid: np.ndarray, *, border: str = "one-sided")
 def dag_gradients(z: np.ndarray, valid: np.ndarray, *, dlf: str = "1d", tau: float = 1.0, truncate: bool = True) -> np.ndarray:
     """DAG depth gradients (eq. 10-14), shape (2, H, W): (z_u, z_v), NaN where undefined."""
     out = np.empty((2,) + z.shape, dtype=np.float32)
-    _dag_map_kernel(z, valid, dlf_code(dlf), np.float32(tau), bool(truncate), out)
+    _dag_map_kernel(z, valid, dlf_code(dlf), kernel_tau(tau), bool(truncate), out)
     return out
 
 
@@ -448,6 +484,32 @@ def laplacian_row(z, valid, r, runs, n_runs, dlf, axis, s):
                     lap += corner_w * ((((above_l[i] - c) + (above_r[i] - c)) + (below_l[i] - c)) + (below_r[i] - c))
                     out[i] = abs(lap)
         u = b
+
+
+@row(fastmath={"contract"})
+def softmin_weights_row(s, z, tau, rel, p):
+    """p[u] = exp(-s[u] / tau_u), the unnormalised softmin weight (eq. 13) of each pixel of a row.
+
+    ``tau`` is float64 (:func:`kernel_tau`). ``rel`` = 0 (the paper-faithful mode): tau_u = tau in depth
+    units, as :func:`softmin_row` when tau is a float32 (the same bits), else computed in float64 so that a
+    tau beyond float32 (1e-300, 1e300) still gives finite weights. ``rel`` > 0 (the scale-invariant mode):
+    tau_u = tau z[u] / rel, relative to the pixel's own depth (``rel`` = ``surfnorm.units.REFERENCE_DEPTH``),
+    so the weight depends on the relative smoothness s / z only, not on the unit of depth nor on any other
+    pixel. Compiled with FMA contraction, as :func:`softmin_row`.
+    """
+    tau32 = np.float32(tau)
+    if rel > 0.0:
+        k = rel / tau
+        for u in range(s.shape[0]):
+            z_u = np.float64(z[u])
+            x = -(np.float64(s[u]) / z_u) * k
+            p[u] = exp32(np.float32(x if (z_u > 0.0) & (x == x) else 0.0))  # (never read where z <= 0; s = 0: 1)
+    elif np.float64(tau32) == tau:
+        for u in range(s.shape[0]):
+            p[u] = exp32(-s[u] / tau32)
+    else:
+        for u in range(s.shape[0]):
+            p[u] = exp32(np.float32(-np.float64(s[u]) / tau))
 
 
 @row(fastmath={"contract"})

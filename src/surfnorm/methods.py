@@ -70,6 +70,11 @@ class Method:
     options: dict = field(default_factory=dict)
     mnr: bool = False  # the recipe ends with MNR, which run does itself (fused), taking mnr_dlf
     ties: bool = False  # run takes ``tie_tol`` (near-ties as ties), which the scale-invariant mode passes
+    relative: bool = False  # run takes ``relative`` (tau relative to each pixel's depth), which that mode passes
+    # Normals unchanged when depth (and tau) are multiplied by a power of two: the paper-faithful mode may then
+    # rescale a frame whose depth would leave float32's range (surfnorm.units, "Range"). False for fits whose
+    # result depends on the unit of depth (PlaneSVD's offset, SDA-SNE's penalty), which compute in float64.
+    equivariant: bool = True
 
 
 @dataclass(frozen=True)

@@ -36,11 +36,19 @@ The eigenvector is the null vector of (A - lambda I): the largest cross
 product of two of its rows. Arithmetic is float64 (the point offsets q - p are
 small differences of large coordinates); the output is float32.
 
-Normals face the camera (n . p_i < 0). Invalid neighbours are left out (their
-depth is never read: the point cloud holds 0 there, weighted 0); a
-pixel gets the fill value when it is invalid itself, when fewer than 3 points
-(p_i included) are valid in its window, or when they fix no plane (all on a
-line).
+Normals face the camera (n . p_i < 0, :mod:`surfnorm.orientation`). Invalid
+neighbours are left out (their depth is never read: the point cloud holds 0
+there, weighted 0); a pixel gets the fill value when it is invalid itself,
+when fewer than 3 points (p_i included) are valid in its window, or when they
+fix no plane. A window fixes no plane when its valid pixels lie on one line
+of the image (e.g. one row, one column, a diagonal): their rays, and so
+their 3D points whatever the depths, lie in one plane through the camera
+centre, and every fit returns that plane, seen edge-on (a normal
+perpendicular to the viewing ray, 1 % of the pixels of KITTI's sparse LiDAR
+depth). The test is exact and free of scale: the 2x2 scatter matrix of the
+valid pixels' (u, v) offsets, whose entries are small integers, has
+determinant 0. (Points collinear in 3D, which fix no plane either, give a
+rank-1 matrix, caught by :func:`null_vector`.)
 """
 
 from __future__ import annotations
@@ -50,6 +58,7 @@ import math
 import numpy as np
 
 from ._config import njit, pixel
+from .orientation import facing_sign
 
 __all__ = ["plane_svd", "plane_pca", "vector_svd", "point_cloud"]
 
@@ -89,6 +98,30 @@ def point_cloud(z, valid, cam, pad=0):
     P_valid = np.empty((H + 2 * pad, W + 2 * pad), dtype=np.bool_)
     _point_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), pad, P, P_valid)
     return P, P_valid
+
+
+@pixel
+def pixel_spread(m, s_u, s_v, s_uu, s_uv, s_vv):
+    """m^2 det of the scatter matrix of the valid pixels' offsets (d_u, d_v) in a window: 0 exactly when they
+    lie on one image line (the sums are small integers, so this is exact in float64)."""
+    return (m * s_uu - s_u * s_u) * (m * s_vv - s_v * s_v) - (m * s_uv - s_u * s_v) * (m * s_uv - s_u * s_v)
+
+
+@pixel
+def window_spans(valid, v, u, h):
+    """True if the valid pixels of the window of half-width h around (v, u) do not all lie on one image line."""
+    m = s_u = s_v = s_uu = s_uv = s_vv = 0.0
+    for q_v in range(v - h, v + h + 1):
+        for q_u in range(u - h, u + h + 1):
+            w = 1.0 if valid[q_v, q_u] else 0.0
+            d_v, d_u = np.float64(q_v - v), np.float64(q_u - u)
+            m += w
+            s_u += w * d_u
+            s_v += w * d_v
+            s_uu += w * d_u * d_u
+            s_uv += w * d_u * d_v
+            s_vv += w * d_v * d_v
+    return pixel_spread(m, s_u, s_v, s_uu, s_uv, s_vv) > 0.0
 
 
 @pixel
@@ -181,13 +214,12 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
 
 @pixel
 def write_facing(out, v, u, n_x, n_y, n_z, ok, p_x, p_y, p_z, fill):
-    """Store the unit normal at (v, u), turned to face the camera (n . p < 0), or the fill value."""
+    """Store the unit normal at (v, u), turned to face the camera (:mod:`surfnorm.orientation`), or the fill value."""
     if ok:
-        if n_x * p_x + n_y * p_y + n_z * p_z > 0.0:
-            n_x, n_y, n_z = -n_x, -n_y, -n_z
-        out[v, u, 0] = n_x
-        out[v, u, 1] = n_y
-        out[v, u, 2] = n_z
+        sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)
+        out[v, u, 0] = sign * n_x
+        out[v, u, 1] = sign * n_y
+        out[v, u, 2] = sign * n_z
     else:
         out[v, u, 0] = fill
         out[v, u, 1] = fill
@@ -253,9 +285,25 @@ _PLANE_PCA, _PLANE_SVD, _VECTOR_SVD = 0, 1, 2  # ``kind`` of the fit kernels
 
 
 @pixel
-def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
-    """The normal of one window from its moments: PlanePCA, VectorSVD or PlaneSVD (``kind``); returns (n, ok)."""
+def relative_moments(rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
+    """The window's point and moments in units of p_z / rel (``rel`` > 0: PlaneSVD in the scale-invariant mode),
+    unchanged for rel = 0. PlaneSVD's fit mixes the normal with the offset d (a length), so its result depends on
+    the unit of depth; measured relative to the pixel's own depth it does not, and no other pixel matters."""
+    l = rel / p_z if rel > 0.0 else 1.0
+    l2 = l * l
+    return (p_x * l, p_y * l, p_z * l, s_x * l, s_y * l, s_z * l, s_xx * l2, s_xy * l2, s_xz * l2, s_yy * l2, s_yz * l2,
+            s_zz * l2)
+
+
+@pixel
+def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, rel):
+    """The normal of one window from its moments: PlanePCA, VectorSVD or PlaneSVD (``kind``); returns (n, ok).
+
+    ``rel``: see :func:`relative_moments` (PlaneSVD only; the other two fits do not depend on the unit)."""
     n_x = n_y = n_z = 0.0
+    if kind == _PLANE_SVD:
+        p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = relative_moments(
+            rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
     ok = False
     if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
         sigma = smallest_eigenvalue(s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
@@ -278,7 +326,7 @@ def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_
 
 
 @njit
-def _window_fit_kernel(P, valid, h, kind, fill, out):
+def _window_fit_kernel(P, valid, h, kind, rel, fill, out):
     """PlanePCA, PlaneSVD or VectorSVD (``kind``) over any window, pixel by pixel (the 3x3 one has a tiled path)."""
     H, W = out.shape[:2]
     for o_v in range(H):
@@ -288,9 +336,9 @@ def _window_fit_kernel(P, valid, h, kind, fill, out):
             n_x = n_y = n_z = 0.0
             if valid[v, u]:
                 m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
-                if m >= 3:  # p and at least two other points
+                if m >= 3 and window_spans(valid, v, u, h):  # p and two other points, not on one image line
                     n_x, n_y, n_z, ok = fit_normal(kind, P[0, v, u], P[1, v, u], P[2, v, u], m, s_x, s_y, s_z,
-                                                   s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+                                                   s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, rel)
             write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
@@ -312,8 +360,8 @@ _TILE = 128
 _PITCH = 136  # >= _TILE + 2, a multiple of 8
 # rows of ``work``
 _M, _SX, _SY, _SZ, _S00, _S01, _S02, _S11, _S12, _S22 = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-_T1, _T2, _T3, _G0, _G1, _G2, _LAM, _ACT = 10, 11, 12, 13, 14, 15, 16, 17
-_WORK_ROWS = 18
+_T1, _T2, _T3, _G0, _G1, _G2, _LAM, _ACT, _SPANS = 10, 11, 12, 13, 14, 15, 16, 17, 18
+_WORK_ROWS = 19
 
 
 @njit
@@ -352,6 +400,7 @@ def tile_moments(R, i):
     m = 0.0
     s_x = s_y = s_z = 0.0
     s_xx = s_xy = s_xz = s_yy = s_yz = s_zz = 0.0
+    s_u = s_v = s_uu = s_uv = s_vv = 0.0  # the pixel offsets, for pixel_spread
     for r in range(3):
         for d_u in range(3):
             q = 4 * r * _PITCH + i + d_u
@@ -359,14 +408,24 @@ def tile_moments(R, i):
             m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = add_offset(
                 m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz,
                 (R[q] - p_x) * w, (R[q + _PITCH] - p_y) * w, (R[q + 2 * _PITCH] - p_z) * w, w)
-    return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, R[c + 3 * _PITCH]
+            o_u, o_v = np.float64(d_u - 1), np.float64(r - 1)
+            s_u += w * o_u
+            s_v += w * o_v
+            s_uu += w * (o_u * o_u)
+            s_uv += w * (o_u * o_v)
+            s_vv += w * (o_v * o_v)
+    spans = pixel_spread(m, s_u, s_v, s_uu, s_uv, s_vv) > 0.0
+    return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, R[c + 3 * _PITCH], spans
 
 
 @pixel
-def tile_prepare(R, n, kind, work):
+def tile_prepare(R, n, kind, rel, work):
     """Sweep 1: moments, scatter matrix, coefficients of the characteristic polynomial, start of Newton."""
     for i in range(n):
-        m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, w_p = tile_moments(R, i)
+        m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, w_p, spans = tile_moments(R, i)
+        if kind == _PLANE_SVD:
+            p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = relative_moments(
+                rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
         if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
             s_00, s_01, s_02, s_11, s_12, s_22 = s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
         else:
@@ -395,7 +454,8 @@ def tile_prepare(R, n, kind, work):
         work[_T2 * _PITCH + i] = t_2
         work[_T3 * _PITCH + i] = t_3
         work[_LAM * _PITCH + i] = 0.0
-        work[_ACT * _PITCH + i] = 1.0 if (w_p != 0.0) & (m >= 3) else 0.0
+        work[_ACT * _PITCH + i] = 1.0 if (w_p != 0.0) & (m >= 3) & spans else 0.0
+        work[_SPANS * _PITCH + i] = 1.0 if spans else 0.0
 
 
 @pixel
@@ -420,7 +480,7 @@ def tile_newton(n, kind, work):
 
 
 @pixel
-def tile_finish(R, n, kind, fill, work, out_flat):
+def tile_finish(R, n, kind, rel, fill, work, out_flat):
     """Sweep 3: the normal (null vector of the shifted matrix), facing the camera, or the fill value."""
     for i in range(n):
         c = 4 * _PITCH + i + 1
@@ -430,27 +490,28 @@ def tile_finish(R, n, kind, fill, work, out_flat):
         s_00, s_01, s_02 = work[_S00 * _PITCH + i], work[_S01 * _PITCH + i], work[_S02 * _PITCH + i]
         s_11, s_12, s_22 = work[_S11 * _PITCH + i], work[_S12 * _PITCH + i], work[_S22 * _PITCH + i]
         if kind == _PLANE_SVD:
-            c_x = p_x + work[_SX * _PITCH + i] / m  # centroid
-            c_y = p_y + work[_SY * _PITCH + i] / m
-            c_z = p_z + work[_SZ * _PITCH + i] / m
+            l = rel / p_z if rel > 0.0 else 1.0  # as relative_moments (the sums in work are already scaled)
+            c_x = p_x * l + work[_SX * _PITCH + i] / m  # centroid
+            c_y = p_y * l + work[_SY * _PITCH + i] / m
+            c_z = p_z * l + work[_SZ * _PITCH + i] / m
             mu = m * lam / (m - lam)
             n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
                                             s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
                                             s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
         else:
             n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
-        ok = ok & (w_p != 0.0) & (m >= 3)
-        flip = n_x * p_x + n_y * p_y + n_z * p_z > 0.0
-        n_x = -n_x if flip else n_x
-        n_y = -n_y if flip else n_y
-        n_z = -n_z if flip else n_z
+        ok = ok & (w_p != 0.0) & (m >= 3) & (work[_SPANS * _PITCH + i] != 0.0)
+        sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)
+        n_x = sign * n_x
+        n_y = sign * n_y
+        n_z = sign * n_z
         out_flat[3 * i] = np.float32(n_x) if ok else fill
         out_flat[3 * i + 1] = np.float32(n_y) if ok else fill
         out_flat[3 * i + 2] = np.float32(n_z) if ok else fill
 
 
 @njit
-def _tiled_fit_kernel(P_t, kind, fill, out):
+def _tiled_fit_kernel(P_t, kind, rel, fill, out):
     """PlanePCA, PlaneSVD or VectorSVD (``kind``) over the 3x3 window, from the tiled cloud."""
     H, W = out.shape[:2]
     n_tiles = P_t.shape[0]
@@ -463,10 +524,10 @@ def _tiled_fit_kernel(P_t, kind, fill, out):
         for o_v in range(H):
             start = t * tile_size + o_v * 4 * _PITCH  # padded rows o_v .. o_v + 2
             R = flat[start:start + 12 * _PITCH]
-            tile_prepare(R, n, kind, work)
+            tile_prepare(R, n, kind, rel, work)
             tile_newton(n, kind, work)
             out_flat = out[o_v].reshape(3 * W)[3 * c0:3 * (c0 + n)]
-            tile_finish(R, n, kind, fill, work, out_flat)
+            tile_finish(R, n, kind, rel, fill, work, out_flat)
 
 
 def tiled_cloud(z, valid, cam):
@@ -477,19 +538,22 @@ def tiled_cloud(z, valid, cam):
     return P_t
 
 
-def _run_fit(kind, z, valid, cam, out, window, fill):
+def _run_fit(kind, z, valid, cam, out, window, fill, relative=0.0):
     if int(window) == 3 and out.flags.c_contiguous:
-        _tiled_fit_kernel(tiled_cloud(z, valid, cam), kind, np.float32(fill), out)
+        _tiled_fit_kernel(tiled_cloud(z, valid, cam), kind, float(relative), np.float32(fill), out)
         return out
     h = int(window) // 2
     P, P_valid = point_cloud(z, valid, cam, pad=h)
-    _window_fit_kernel(P, P_valid, h, kind, np.float32(fill), out)
+    _window_fit_kernel(P, P_valid, h, kind, float(relative), np.float32(fill), out)
     return out
 
 
-def plane_svd(z, valid, cam, out, *, window=3, fill=0.0):
-    """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch."""
-    return _run_fit(_PLANE_SVD, z, valid, cam, out, window, fill)
+def plane_svd(z, valid, cam, out, *, window=3, fill=0.0, relative=0.0):
+    """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch.
+
+    ``relative`` > 0 (the scale-invariant mode): each window's points in units of its pixel's depth / relative
+    (:func:`relative_moments`), so that the fit does not depend on the unit of depth."""
+    return _run_fit(_PLANE_SVD, z, valid, cam, out, window, fill, relative)
 
 
 def plane_pca(z, valid, cam, out, *, window=3, fill=0.0):

@@ -32,7 +32,9 @@ the kernels use that form. Details of the authors' code that we follow:
   neighbours out.
 
 The raw 3F2N normal points away from the camera (n . P = +1 on a plane); we
-flip each normal so that n . P < 0, which changes no folded angular error.
+flip each normal so that n . P < 0, which changes no folded angular error;
+an edge-on normal (n . P = 0 up to rounding) is oriented by the fixed rule of
+:mod:`surfnorm.orientation`, not by the rounding.
 
 Invalid depth is never read: an invalid neighbour gives no candidate, a
 gradient falls back to the one-sided difference beside a gap, and a pixel
@@ -64,6 +66,7 @@ import numpy as np
 
 from ._config import njit, pixel
 from .gradients import stencil, usable
+from .orientation import facing_sign
 from .translate import write_unit
 
 __all__ = ["three_filters", "sne_roadseg", "THIRD_FILTERS"]
@@ -124,10 +127,11 @@ def candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p):
 
 @pixel
 def camera_facing(n_x, n_y, n_z, u_c, v_c, f_x, f_y):
-    """(n_x, n_y, n_z) turned, if needed, so that n . P < 0 (P = Z (u_c / f_x, v_c / f_y, 1))."""
-    s = 1.0
-    if n_x * (u_c * f_y) + n_y * (v_c * f_x) + n_z * (f_x * f_y) > 0.0:  # (n . P) f_x f_y / Z
-        s = -1.0
+    """(n_x, n_y, n_z) turned, if needed, to face the camera (:mod:`surfnorm.orientation`).
+
+    P = Z (u_c / f_x, v_c / f_y, 1) enters as its positive multiple P f_x f_y / Z.
+    """
+    s = facing_sign(n_x, n_y, n_z, u_c * f_y, v_c * f_x, f_x * f_y)
     return s * n_x, s * n_y, s * n_z
 
 
@@ -301,9 +305,8 @@ def finish(n_x, n_y, n_z, count, u_c, v_c, f_x, f_y):
     n_x = n_x if count > 0 else 0.0
     n_y = n_y if count > 0 else 0.0
     n_z = -1.0 if (n_x == 0.0) & (n_y == 0.0) else n_z
-    # n . P > 0 with P = Z (u_c / f_x, v_c / f_y, 1), multiplied through by f_x f_y > 0
-    away = n_x * (u_c * f_y) + n_y * (v_c * f_x) + n_z * (f_x * f_y) > 0.0
-    scale = (-1.0 if away else 1.0) / math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+    # facing the camera (surfnorm.orientation), with P = Z (u_c / f_x, v_c / f_y, 1) multiplied by f_x f_y / Z > 0
+    scale = facing_sign(n_x, n_y, n_z, u_c * f_y, v_c * f_x, f_x * f_y) / math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
     return n_x * scale, n_y * scale, n_z * scale
 
 

@@ -23,8 +23,8 @@ import math
 import numpy as np
 
 from ._config import njit, pixel, row
-from .gradients import (clamp, copy_row, dlf_code, fast_row, fd_gradient, laplacian_row, segment, softmin_pair, softmin_ratio,
-                        softmin_row, stencil, usable)
+from .gradients import (clamp, copy_row, dlf_code, fast_row, fd_gradient, kernel_tau, laplacian_row, segment, softmin_pair,
+                        softmin_ratio, softmin_weights_row, stencil, usable)
 from .mnr import mnr_row, self_smoothness_row
 
 __all__ = ["d2nt", "d2nt_v3", "cp2tv"]
@@ -169,11 +169,12 @@ def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, 
 
 
 @row
-def prepare_dag_row(z, valid, r, dlf, tau, col, runs_r, s, p_v_r):
-    """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness."""
+def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
+    """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness
+    (``rel``: see :func:`surfnorm.gradients.softmin_weights_row`)."""
     n_runs = fast_row(valid, r, col, runs_r)
     laplacian_row(z, valid, r, runs_r, n_runs, dlf, 1, s)
-    softmin_row(s, tau, p_v_r)
+    softmin_weights_row(s, z[r], tau, rel, p_v_r)
     return n_runs
 
 
@@ -208,7 +209,7 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
 
 
 @njit
-def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, fill, out):
+def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, out):
     """D2NT with DAG gradients (eq. 9-14), row by row.
 
     Row buffers (rolling, row r in slot r % 3) hold each row's fast runs and
@@ -221,13 +222,14 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, fill, out):
     runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
     p_v = np.empty((3, W), np.float32)
     s, p_h = np.empty(W, np.float32), np.empty(W, np.float32)
-    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, col, runs[0], s, p_v[0])
+    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, rel, col, runs[0], s, p_v[0])
     for v in range(H):
         if v + 1 < H:
-            n_runs[(v + 1) % 3] = prepare_dag_row(z, valid, v + 1, dlf, tau, col, runs[(v + 1) % 3], s, p_v[(v + 1) % 3])
+            n_runs[(v + 1) % 3] = prepare_dag_row(z, valid, v + 1, dlf, tau, rel, col, runs[(v + 1) % 3], s,
+                                                  p_v[(v + 1) % 3])
         if dlf == 0:  # 1D DLF: the horizontal neighbours are scored with the horizontal filter
             laplacian_row(z, valid, v, runs[v % 3], n_runs[v % 3], 0, 0, s)
-            softmin_row(s, tau, p_h)
+            softmin_weights_row(s, z[v], tau, rel, p_h)
         else:
             p_h[:] = p_v[v % 3]
         dag_row(z, valid, v, runs[v % 3], n_runs[v % 3], p_h, p_v[(v - 1) % 3], p_v[(v + 1) % 3], f_x, f_y, u_c,
@@ -235,19 +237,19 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, fill, out):
 
 
 @row
-def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, ratio, mnr_dlf, fill, fill_counts, col, runs, n_runs,
+def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs, n_runs,
                     p_v, sm_v, s, p_h, ok_row, raw, has):
     """d2nt_v3, step 1 for row q: row data of row q + 1, then the unrefined normals of row q (slots: see the kernel)."""
     H, W = z.shape
     if q + 1 < H:
         j = (q + 1) % 4
-        n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, col, runs[j], s, p_v[j])
+        n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, rel, col, runs[j], s, p_v[j])
         laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, 1, sm_v[j])
     if q < H:
         j = q % 4
         if dlf == 0:
             laplacian_row(z, valid, q, runs[j], n_runs[j], 0, 0, s)
-            softmin_row(s, tau, p_h)
+            softmin_weights_row(s, z[q], tau, rel, p_h)
         else:
             copy_row(p_v[j], p_h)
         dag_row(z, valid, q, runs[j], n_runs[j], p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4], f_x, f_y, u_c,
@@ -274,7 +276,7 @@ def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h,
 
 
 @njit
-def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, tie_tol, fill, out):
+def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf, tie_tol, fill, out):
     """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep.
 
     The unrefined normals live only in a rolling buffer of 3 rows: row v + 1
@@ -295,36 +297,43 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, ratio, mnr_dlf, tie_
     # (as when MNR runs on a finished map): fill_counts.
     fill_sq = fill * fill + fill * fill + fill * fill
     fill_counts = (fill_sq > 0) & (fill_sq < np.inf)
-    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, col, runs[0], s, p_v[0])
+    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, rel, col, runs[0], s, p_v[0])
     laplacian_row(z, valid, 0, runs[0], n_runs[0], mnr_dlf, 1, sm_v[0])
     for r in range(-1, H):
         # estimate row q = r + 1 (needs the weights of rows q - 1 .. q + 1), then refine row v = r
-        v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, ratio, mnr_dlf, fill, fill_counts, col, runs,
+        v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs,
                         n_runs, p_v, sm_v, s, p_h, ok_row, raw, has)
         if r >= 0:
             v3_refine_row(z, valid, r, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns,
                           choice, out[r])
 
 
-def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0):
-    """D2NT with finite-difference (``gradient="fd"``) or DAG (``"dag"``) gradients, into ``out`` (H, W, 3)."""
+def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0,
+         relative=0.0):
+    """D2NT with finite-difference (``gradient="fd"``) or DAG (``"dag"``) gradients, into ``out`` (H, W, 3).
+
+    ``relative`` > 0 (the scale-invariant mode): DAG's tau is relative to each pixel's depth, tau z / relative
+    (see :func:`surfnorm.gradients.softmin_weights_row`); 0: tau in depth units (paper-faithful).
+    """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
     if gradient == "fd":
         _d2nt_fd_kernel(z, valid, *f, border == "reflect", np.float32(fill), out)
     else:
-        _d2nt_dag_kernel(z, valid, *f, dlf_code(dlf), np.float32(tau), softmin_ratio(tau, truncate),
+        _d2nt_dag_kernel(z, valid, *f, dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate),
                          np.float32(fill), out)
     return out
 
 
-def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0):
+def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0,
+            relative=0.0):
     """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3).
 
-    ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.mnr.mnr_row`).
+    ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.mnr.mnr_row`);
+    ``relative``: DAG's tau relative to each pixel's depth in that mode (see :func:`d2nt`).
     """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
-    _d2nt_v3_kernel(z, valid, *f, dlf_code(dlf), np.float32(tau), softmin_ratio(tau, truncate), dlf_code(mnr_dlf),
-                    np.float32(tie_tol), np.float32(fill), out)
+    _d2nt_v3_kernel(z, valid, *f, dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate),
+                    dlf_code(mnr_dlf), np.float32(tie_tol), np.float32(fill), out)
     return out
 
 

@@ -20,20 +20,52 @@ millimetres it picks one at every bump.
     The thresholds are absolute: tau (default 1) in the unit of the depth
     you pass, as in the paper and the authors' code.
 ``scale_invariant=True``
-    Each frame's depth is multiplied by ``REFERENCE_DEPTH / m`` before the
-    kernels, with m the median of its valid depth (after the mask), so tau is
-    relative: ``tau * m / REFERENCE_DEPTH`` in the caller's unit, i.e. 1 % of
-    the median depth with the defaults. :data:`REFERENCE_DEPTH` = 100 makes
-    the two modes agree on a frame whose median valid depth is 100 units
-    (all but SDA-SNE's near-ties, see "Ties" below),
-    about the typical depth of the 3F2N objects (their median foreground
-    depths run from 11 to 397, median 130). Normals are then the same, to
-    float precision, for any uniform unit of depth.
+    tau is relative to each pixel's own depth: the softmin weight of a pixel
+    q is exp(-s_q / (tau z_q / REFERENCE_DEPTH)), i.e. its smoothness is
+    measured relative to its depth, and with the defaults a difference of
+    1 % of the depth in the relative smoothness of the two neighbours is
+    what truncates (eq. 14). :data:`REFERENCE_DEPTH` = 100 makes the two
+    modes agree where the depth is 100 units, about the typical depth of the
+    3F2N objects (their median foreground depths run from 11 to 397, median
+    130). Every decision of the mode is local (the pixel's own depth, its
+    neighbours'), so masking a region or a hole in the depth changes no
+    normal outside the neighbourhoods that read it, and the normals are the
+    same, to float precision, for any uniform unit of depth.
+
+    PlaneSVD, whose fit normalises [n; d] with the offset d in depth units,
+    fits each window in units of its pixel's depth / REFERENCE_DEPTH
+    (:func:`surfnorm.plane_fit.relative_moments`), for the same reasons.
+
+    (Before, each frame was rescaled to a median depth of 100: relative to
+    the frame's median, which a hole anywhere moves, and so one 10x10 hole
+    changed 3F2N and SDA-SNE normals far from it.)
+
+Range
+-----
+Depth is also multiplied by a power of two, in both modes, where its
+magnitude would leave float32's range inside the kernels (squares of the
+normal's components overflow above about 1e19 and underflow below 1e-19):
+in the scale-invariant mode always, so that the frame's median valid depth
+lies in [64, 128); in the paper-faithful mode only where a sample of the
+valid depth has a median outside [2^-20, 2^20] (about 1e-6 to 1e6), and
+with tau multiplied by the same power. A power of two is exact in floating
+point, so for every method whose normals do not change when depth is
+scaled (all but PlaneSVD, whose fit mixes a unit-free normal with an
+offset in depth units, and SDA-SNE, whose penalty B = 1e10 is in depth
+units) this gives the same bits as without it, wherever float32 did not
+overflow; those two compute in float64 and are not rescaled in the
+paper-faithful mode (in the scale-invariant mode PlaneSVD is relative per
+window, see above, and SDA-SNE's B stays far above the energies of depth
+near 100). Which power of two is chosen therefore does not
+matter, and a hole that moves the median across a power of two changes
+nothing. Input below about 1e-38 (float32 subnormals) has lost its digits
+before any rescale unless it comes as float64, which is rescaled before it
+is rounded to float32.
 
 Ties
 ----
-Rescaling alone is not enough for methods that *compare* depth-derived
-values exactly. SDA-SNE (:mod:`surfnorm.sda`) takes the sign of 1D
+Relative thresholds alone are not enough for methods that *compare*
+depth-derived values exactly. SDA-SNE (:mod:`surfnorm.sda`) takes the sign of 1D
 Laplacians (its continuity term) and the cheapest of several candidate
 energies, the first on ties. Integer millimetres give exact ties (a zero
 Laplacian on a ramp, two equal energies); the same depth in metres is
@@ -50,10 +82,9 @@ candidate replaces the best so far only if smoother by more than
 :data:`TIE_TOLERANCE` * z_p. The paper-faithful mode compares exactly
 (tolerance 0), bit for bit as before.
 
-Why 1.5e-6 (relative to the pixel's depth). Below it: the two units' rescaled
-depths differ by at most 3 float32 half-ulps per pixel (the input rounding
-and the two final roundings; the median's rounding is common to all pixels
-and cancels in a Laplacian), so a Laplacian -z_b + 2 z_p - z_f differs by at
+Why 1.5e-6 (relative to the pixel's depth). Below it: the two units' depths
+differ by at most 3 float32 half-ulps per pixel relative to each other (the
+input rounding; the power of two of "Range" is exact), so a Laplacian -z_b + 2 z_p - z_f differs by at
 most 12 half-ulps = 6 * 2^-23 |z| = 7.2e-7 |z| (measured on the 3F2N sample
 as mm vs m: at most 4.7e-7); 1.5e-6 is twice that. Above it: the finest
 relative step a 16-bit depth image can hold is 1/65535 = 1.5e-5 of its depth
@@ -67,9 +98,12 @@ differ between the units, 13.7 % with exact comparisons, 0.003 % with 7e-7,
 straddles it. Quantising the rescaled depth instead would straddle grid
 boundaries everywhere, not only at steps near the tolerance.
 
-The median is taken over the pixels you call valid: with a real background
-it is the scene's median depth; where the background is a placeholder (the
-3F2N background is depth 1.0) pass a mask, or the reference is the placeholder.
+No decision depends on the frame as a whole: the power of two of "Range" comes
+from the frame's median but, being exact, changes no normal of the methods
+whose normals do not depend on the unit (all but PlaneSVD and SDA-SNE, see
+"Range", and PlaneSVD in this mode); for SDA-SNE a hole that moves the median
+across a power of two (a factor of 2 in the median) changes the rounding of
+its float64 sums.
 
 Disparity
 ---------
@@ -85,35 +119,71 @@ gives metric depth for the paper-faithful mode instead.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["REFERENCE_DEPTH", "TIE_TOLERANCE", "relative_depth"]
+__all__ = ["REFERENCE_DEPTH", "TIE_TOLERANCE", "relative_depth", "range_exponent", "power_of_two_exponent"]
 
-#: Median valid depth that a frame is rescaled to in the scale-invariant mode (see the module docstring).
+#: The depth at which tau is in depth units in the scale-invariant mode (tau relative to depth: tau z / 100).
 REFERENCE_DEPTH = 100.0
 
 #: Relative tolerance of near-ties in the scale-invariant mode (see the module docstring, "Ties").
 TIE_TOLERANCE = 1.5e-6
 
+#: The paper-faithful mode rescales a frame only if its sampled median depth lies outside [2^-20, 2^20].
+SAFE_EXPONENT = 20
 
-def _relative_frame(z: np.ndarray, valid: np.ndarray, disparity: bool) -> np.ndarray:
-    z64 = z.astype(np.float64)
+_SAMPLES = 1024
+
+
+def power_of_two_exponent(m: float) -> int:
+    """k such that m 2^k lies in [64, 128) (REFERENCE_DEPTH = 100 lies there), for a positive finite m."""
+    return 7 - math.frexp(m)[1]
+
+
+def range_exponent(z: np.ndarray) -> int:
+    """0, or the k of :func:`power_of_two_exponent` when a strided sample of the valid (finite, positive)
+    values of the frame ``z`` (float32, C-contiguous) has a median outside [2^-20, 2^20]. Cheap: at most
+    about 1024 values are read, and the median is taken only when some of them lie outside."""
+    flat = z.reshape(-1)
+    sample = flat[:: max(1, flat.size // _SAMPLES)]
+    with np.errstate(invalid="ignore"):
+        sample = sample[(sample > 0) & (sample < np.inf)]
+    if sample.size == 0:
+        return 0
+    lo, hi = 2.0 ** -SAFE_EXPONENT, 2.0 ** SAFE_EXPONENT
+    if sample.min() >= lo and sample.max() <= hi:
+        return 0
+    m = float(np.median(sample.astype(np.float64)))
+    return 0 if lo <= m <= hi else power_of_two_exponent(m)
+
+
+def scaled_frame(src: np.ndarray, k: int) -> np.ndarray:
+    """float32(src 2^k), multiplied in float64 (so float64 input keeps its digits), C-contiguous."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        return np.ascontiguousarray(np.ldexp(np.asarray(src, dtype=np.float64), k), dtype=np.float32)
+
+
+def _relative_frame(src: np.ndarray, valid: np.ndarray, disparity: bool) -> np.ndarray:
+    z64 = np.asarray(src, dtype=np.float64)
     if disparity:
         z64 = np.where(valid, 1.0 / np.where(valid, z64, 1.0), 0.0)
     if not valid.any():
-        return np.ascontiguousarray(z64, dtype=np.float32)
-    m = float(np.median(z64[valid]))
-    return np.ascontiguousarray(np.where(valid, z64 * (REFERENCE_DEPTH / m), 0.0), dtype=np.float32)
+        return np.ascontiguousarray(np.where(valid, z64, 0.0), dtype=np.float32)
+    k = power_of_two_exponent(float(np.median(z64[valid])))
+    with np.errstate(over="ignore", under="ignore"):
+        return np.ascontiguousarray(np.where(valid, np.ldexp(z64, k), 0.0), dtype=np.float32)
 
 
 def relative_depth(z: np.ndarray, valid: np.ndarray, *, disparity: bool = False) -> np.ndarray:
-    """Depth rescaled per frame so that its median valid value is :data:`REFERENCE_DEPTH`, float32.
+    """Depth of the scale-invariant mode: multiplied per frame by the power of two that brings its median
+    valid depth into [64, 128), float32.
 
-    ``z`` (H, W) or (N, H, W) float32 and ``valid`` of the same shape come
-    from the validators; with ``disparity`` the values are inverted first.
-    Invalid pixels become 0 (they are never read). Computed in float64, so a
-    frame and the same frame in another unit differ only by the float32
-    rounding of their inputs.
+    ``z`` (H, W) or (N, H, W), any real dtype (float64 keeps its digits), and ``valid`` of the same shape
+    come from the validators; with ``disparity`` the values are inverted first. Invalid pixels become 0
+    (they are never read). The power of two is exact, so which one is chosen changes no decision of the
+    mode (see the module docstring, "Range").
     """
     if z.ndim == 2:
         return _relative_frame(z, valid, disparity)

@@ -26,8 +26,41 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from .._choices import ORIENTATION_TIE
+
 # The regulariser of the softmin, as the NumPy backend (gradients.SOFTMIN_EPS).
 SOFTMIN_EPS = 1e-8
+
+# exp(x) overflows float32 above this (gradients._EXP32_MAX_ARG).
+_EXP32_MAX_ARG = 88.72
+
+
+# The largest float32, and half the smallest positive one (below it a value rounds to 0).
+_F32_MAX, _F32_HALF_TINY = 3.4028234663852886e38, 7.006492321624085e-46
+
+
+def _fits_float32(x: float) -> bool:
+    """x rounds to a finite, non-zero float32 (plain Python, so that torch.compile traces it)."""
+    return _F32_HALF_TINY < abs(x) <= _F32_MAX
+
+
+def kernel_tau(tau: float) -> float:
+    """tau rounded to float32 unless that makes it 0 or inf (as gradients.kernel_tau)."""
+    return float(np.float32(tau)) if _fits_float32(tau) else float(tau)
+
+
+def facing_sign(n_x, n_y, n_z, p_x, p_y, p_z):
+    """+1 or -1 per pixel: the factor that turns n to face the camera from P (surfnorm.orientation's rule).
+
+    Where |n . P| <= t |n| |P| (t = ORIENTATION_TIE, edge-on) the first of n_z, n_y, n_x whose magnitude
+    exceeds t |n| is made negative, so that rounding never decides the sign.
+    """
+    d = n_x * p_x + n_y * p_y + n_z * p_z
+    t2 = ORIENTATION_TIE * ORIENTATION_TIE * (n_x * n_x + n_y * n_y + n_z * n_z)
+    edge_on = d * d <= t2 * (p_x * p_x + p_y * p_y + p_z * p_z)
+    key = torch.where(n_z * n_z > t2, n_z, torch.where(n_y * n_y > t2, n_y, n_x))
+    key = torch.where(edge_on, key, d)
+    return 1.0 - 2.0 * (key > 0).to(n_x.dtype)
 
 # (edge weight, corner weight) of the 3x3 DLFs, as gradients._DLF_EDGE / _DLF_CORNER.
 _DLF_WEIGHTS = {"alpha": (1.0, 0.0), "beta": (1.0, 1.0), "gamma": (0.5, 0.25)}
@@ -123,14 +156,21 @@ def truncated_softmin(s_1, s_2, tau: float, truncate: bool):
     Where the truncation applies, the weights are the constants 1 and 0, and
     the gradient flows through the difference they select.
     """
-    p_1 = torch.exp(-s_1 / tau)
-    p_2 = torch.exp(-s_2 / tau)
+    tau_k = kernel_tau(tau)
+    if _fits_float32(tau_k) and float(np.float32(tau_k)) == tau_k:  # tau as the kernels use it (float32), the usual case
+        p_1 = torch.exp(-s_1 / tau_k)
+        p_2 = torch.exp(-s_2 / tau_k)
+    else:  # a tau beyond float32 (1e-300, 1e300): -s / tau in float64, as gradients.scaled_smoothness
+        p_1 = torch.exp((-s_1.double() / tau_k).to(s_1.dtype))
+        p_2 = torch.exp((-s_2.double() / tau_k).to(s_2.dtype))
     total = SOFTMIN_EPS + p_1 + p_2
     lambda_1 = (p_1 + 0.5 * SOFTMIN_EPS) / total
     lambda_2 = (p_2 + 0.5 * SOFTMIN_EPS) / total
     if truncate:
-        # the threshold e^(1/tau) rounded to float32, as the NumPy backend compares against
-        ratio = float(np.float32(math.exp(1.0 / float(np.float32(tau)))))
+        # the threshold e^(1/tau) rounded to float32, as the NumPy backend compares against (+inf where that
+        # overflows: gradients.softmin_ratio)
+        inv = 1.0 / tau_k
+        ratio = float(np.float32(math.exp(inv))) if inv < _EXP32_MAX_ARG else math.inf
         first = lambda_1 / (lambda_2 + SOFTMIN_EPS) > ratio
         second = ~first & (lambda_2 / (lambda_1 + SOFTMIN_EPS) > ratio)
         one, zero = torch.ones_like(lambda_1), torch.zeros_like(lambda_1)
@@ -295,7 +335,8 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
        middle values for an even count); where none is left, n_x = n_y = 0;
        where n_x = n_y = 0 exactly, n_z = -1;
     4. normalise, and turn each normal so that n . P < 0 (the raw 3F2N
-       normal points away from the camera: n . P = +1 on a plane).
+       normal points away from the camera: n . P = +1 on a plane), an
+       edge-on one by the fixed rule of surfnorm.orientation.
 
     ``border="reflect"`` is OpenCV's BORDER_REFLECT_101, as the authors' code:
     the gradient across the image border is 0 and the mirrored neighbour
@@ -348,8 +389,8 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
     zero = torch.zeros_like(n_x)
     n_x, n_y = torch.where(none_left, zero, n_x), torch.where(none_left, zero, n_y)
     n_z = torch.where((n_x == 0) & (n_y == 0), -torch.ones_like(n_z), torch.where(none_left, zero, n_z))
-    # face the camera: n . P / Z = n_x (u - c_x) / f_x + n_y (v - c_y) / f_y + n_z < 0
-    away = (n_x * (u_c / fx) + n_y * (v_c / fy) + n_z) > 0
-    sign = 1.0 - 2.0 * away.to(z.dtype)
+    # face the camera (surfnorm.orientation), P = Z ((u - c_x) / f_x, (v - c_y) / f_y, 1) times f_x f_y / Z,
+    # as the NumPy backend
+    sign = facing_sign(n_x, n_y, n_z, u_c * fy, v_c * fx, fx * fy)
     n = unit(sign * n_x, sign * n_y, sign * n_z, g.valid & ok_u & ok_v, fill)
     return n.to(out_dtype)

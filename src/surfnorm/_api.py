@@ -8,6 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ._bands import on_threads, whole
 from ._validate import as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, valid_pixels
 from .camera import Intrinsics
 from .errors import InputError
@@ -34,11 +35,13 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
     return [Intrinsics.from_matrix(arr)] * n
 
 
-def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
+def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, bands=whole):
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
     if tie_tol and method.ties:
         options = dict(options, tie_tol=tie_tol)
+    if method.bands and bands is not whole:
+        options = dict(options, bands=bands)
     if not refined:
         # A recipe ending with MNR (d2nt_v3) refines inside its own run, fused: no full-size temporary.
         return method.run(z, valid, cam, out, **options)
@@ -47,7 +50,7 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0):
     mnr_dlf = options["mnr_dlf"]
     run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
     raw = method.run(z, valid, cam, np.empty(out.shape, np.float32), **run_options)
-    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol)
+    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol, bands=bands)
 
 
 # Thread pools for stacks of frames, kept between calls: starting two threads and stopping them costs about
@@ -80,11 +83,22 @@ def _map(func, n: int, workers: int) -> None:
     list(pool.map(func, range(n)))
 
 
-def _valid(z, mask):
+def _valid(z, mask, bands=whole):
     # One Numba pass (compiled on first use; imported here so that ``import surfnorm`` compiles nothing).
     from .gradients import valid_map
 
-    return valid_map(z, mask)
+    if bands is whole:
+        return valid_map(z, mask)
+    out = np.empty(z.shape, dtype=np.bool_)
+    bands(lambda a, b: valid_map(z[a:b], None if mask is None else mask[a:b], out=out[a:b]), z.shape[0])
+    return out
+
+
+def _workers(threads) -> int:
+    workers = threads if threads is not None else (os.cpu_count() or 1)
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise InputError(f"threads: expected a positive integer, got {threads!r}")
+    return workers
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | None = None,
@@ -104,7 +118,11 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
     mask : ndarray of bool, shape of ``depth``, optional
         False where depth must not be used (in addition to invalid values).
     threads : int, optional
-        Threads for a stack of frames (default: all cores). Ignored for one frame.
+        Threads (default: all cores). A stack of frames runs frames side by
+        side; one frame is split into bands of rows, computed side by side,
+        with the same result to the bit as on one thread (a frame of fewer
+        than 64 rows stays on one thread). Pass 1 where frames already run
+        in parallel (several processes or threads calling ``estimate``).
     scale_invariant : bool
         False (default, paper-faithful): the DAG softmin threshold ``tau`` is in
         depth units. True: each frame is rescaled to a median valid depth of
@@ -158,13 +176,12 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, threads: int | Non
         tie_tol = TIE_TOLERANCE
     else:
         tie_tol = 0.0
+    workers = _workers(threads)
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask), cam, out, tie_tol=tie_tol)
+        bands = on_threads(workers)
+        return _run(method_obj, refined, dict(clean), z, _valid(z, user_mask, bands), cam, out, tie_tol, bands)
     cams = _intrinsics_list(K, z.shape[0])
-    workers = threads if threads is not None else (os.cpu_count() or 1)
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise InputError(f"threads: expected a positive integer, got {threads!r}")
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
 

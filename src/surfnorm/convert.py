@@ -226,6 +226,11 @@ def _threef2n_params(path: Path) -> Path:
     return path.parent.parent / "params.txt"
 
 
+# Threads per frame (see surfnorm.estimate): all cores in the calling process; 1 in a worker of a pool
+# (processes here, or Dask), which already runs frames side by side.
+_frame_threads: int | None = None
+
+
 def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     from ._api import estimate
     from .io.depth import read_depth
@@ -239,7 +244,8 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
             raise InputError(f"intrinsics: none given and no 3F2N params.txt at {params}")
         cam = read_params(params)
     depth = read_depth(task.input, depth_scale=settings.depth_scale)
-    normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant, **settings.options)
+    normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant,
+                       threads=_frame_threads, **settings.options)
     task.output.parent.mkdir(parents=True, exist_ok=True)
     write_normals(task.output, normals, fmt=settings.fmt)
     with np.errstate(invalid="ignore"):
@@ -320,9 +326,11 @@ def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, 
 
 
 def _worker_init():
-    """Workers ignore Ctrl-C: the parent handles it for the whole pool (see :func:`convert`)."""
+    """Workers ignore Ctrl-C: the parent handles it for the whole pool (see :func:`convert`), and run one frame on one thread."""
     import signal
 
+    global _frame_threads
+    _frame_threads = 1
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 

@@ -68,6 +68,10 @@ class Method:
     options: dict = field(default_factory=dict)
     mnr: bool = False  # the recipe ends with MNR, which run does itself (fused), taking mnr_dlf
     ties: bool = False  # run takes ``tie_tol`` (near-ties as ties), which the scale-invariant mode passes
+    # How one frame is split over threads. True: run takes ``bands`` and runs each of its stages through it
+    # in row bands, every band reading the rows around it that it needs (its halo) from the whole frame, so
+    # the result is the same to the bit (see surfnorm._bands). False: one frame runs on one thread.
+    bands: bool = False
 
 
 @dataclass(frozen=True)

@@ -82,6 +82,10 @@ def authors_K(cam):
     return np.array([[cam.fx, 0, cam.cx + 1], [0, cam.fy, cam.cy + 1], [0, 0, 1]])
 
 
+#: The clock of :func:`interleaved`: wall-clock time; ``benchmarks/threads.py --cpu`` swaps in the thread's CPU time.
+CLOCK = time.perf_counter
+
+
 def interleaved(funcs, repeats):
     """Median seconds of each function, called in turn ``repeats`` times (after one untimed call each)."""
     for f in funcs:
@@ -89,9 +93,9 @@ def interleaved(funcs, repeats):
     times = [[] for _ in funcs]
     for _ in range(repeats):
         for f, t in zip(funcs, times):
-            t0 = time.perf_counter()
+            t0 = CLOCK()
             f()
-            t.append(time.perf_counter() - t0)
+            t.append(CLOCK() - t0)
     return [statistics.median(t) for t in times]
 
 

@@ -65,17 +65,20 @@ def stages(mod, z, valid, cam, clock):
     t.append(clock())
     # Kernels since the scale-invariant near-tie tolerance take it after these arguments (None: exact, the default).
     tol = (None,) if "tol" in inspect.signature(mod._sda_step.py_func).parameters else ()
-    mod._sda_laplacians(s, ok, *tol, l_u, l_v, a_u, a_v)
+    # Kernels since the row bands (one frame on several threads) take the rows to compute; here all of them.
+    banded = "v0" in inspect.signature(mod._sda_step.py_func).parameters
+    rows, padded_rows = ((0, z.shape[0]), (1, shape[0] - 1)) if banded else ((), ())
+    mod._sda_laplacians(s, ok, *tol, l_u, l_v, a_u, a_v, *padded_rows)
     t.append(clock())
-    mod._sda_init(s, ok, False, *tol, l_u, l_v, a_u, a_v, con, *sets[0])
+    mod._sda_init(s, ok, False, *tol, l_u, l_v, a_u, a_v, con, *sets[0], *rows)
     t.append(clock())
     cur = 0
     for i in range(1, 4):
-        mod._sda_step(s, ok, 1.0 / (i + 1), *tol, a_u, a_v, con, *sets[cur], *sets[1 - cur])
+        mod._sda_step(s, ok, 1.0 / (i + 1), *tol, a_u, a_v, con, *sets[cur], *sets[1 - cur], *rows)
         cur = 1 - cur
         t.append(clock())
     out = np.empty(z.shape + (3,), np.float32)
-    mod._cp2tv_kernel(s, *sets[cur][:4], cam.fx, cam.fy, cam.cx, cam.cy, np.float32(0), out)
+    mod._cp2tv_kernel(s, *sets[cur][:4], cam.fx, cam.fy, cam.cx, cam.cy, np.float32(0), out, *rows)
     t.append(clock())
     return np.diff(t) * 1e3
 

@@ -16,7 +16,10 @@ with a warm compile cache (subprocesses; beside Numba's own floor: its import an
 the first call of a one-line cached function), the peak memory of one d2nt_v3 call
 (tracemalloc for NumPy arrays, and the growth of the process's peak RSS, which
 also sees Numba's own allocations), and the throughput of a stack of 16
-frames on 1 and 2 threads, into a new output and into a reused one (``out=``).
+frames on 1 and 2 threads, into a new output and into a reused one (``out=``); one
+1280x960 frame on 1, 2 and all cores (``threads=N``: row bands, bit-identical) for
+the D2NT family, SDA-SNE and the default method; and their time per pixel from
+320x240 to 3840x2160 (one thread).
 
 Writes ``speed.md`` (the table printed) and ``speed.json`` (figures, versions,
 commit, CPU, thread counts, load average) into ``--out``.
@@ -79,6 +82,10 @@ def authors_K(cam):
     return np.array([[cam.fx, 0, cam.cx + 1], [0, cam.fy, cam.cy + 1], [0, 0, 1]])
 
 
+#: The clock of :func:`interleaved`: wall-clock time; ``benchmarks/threads.py --cpu`` swaps in the thread's CPU time.
+CLOCK = time.perf_counter
+
+
 def interleaved(funcs, repeats):
     """Median seconds of each function, called in turn ``repeats`` times (after one untimed call each)."""
     for f in funcs:
@@ -86,9 +93,9 @@ def interleaved(funcs, repeats):
     times = [[] for _ in funcs]
     for _ in range(repeats):
         for f, t in zip(funcs, times):
-            t0 = time.perf_counter()
+            t0 = CLOCK()
             f()
-            t.append(time.perf_counter() - t0)
+            t.append(CLOCK() - t0)
     return [statistics.median(t) for t in times]
 
 
@@ -314,6 +321,68 @@ def time_batches(repeats, quick):
     return rows
 
 
+def default_method():
+    """``surfnorm.estimate``'s default method at run time."""
+    import inspect
+
+    return inspect.signature(surfnorm.estimate).parameters["method"].default
+
+
+def scaling_methods():
+    """The D2NT family, SDA-SNE and the default method (in that order, once each)."""
+    return list(dict.fromkeys(["d2nt_basic", "d2nt_v2", "d2nt_v3", "sda_sne", default_method()]))
+
+
+def thread_counts():
+    return sorted({1, 2, os.cpu_count() or 1})
+
+
+def time_frame_threads(repeats, quick):
+    """One 1280x960 frame (5 % holes) on 1, 2 and all cores (row bands), interleaved; and whether the bits agree."""
+    z, cam = seeded_frame(2, h=960, w=1280, holes=0.05)
+    rows = []
+    counts = thread_counts()
+    for method in (["d2nt_v3", "sda_sne"] if quick else scaling_methods()):
+        out = {n: np.empty(z.shape + (3,), np.float32) for n in counts}
+        funcs = [lambda n=n: surfnorm.estimate(z, cam, method=method, threads=n, out=out[n]) for n in counts]
+        times = interleaved(funcs, repeats)
+        same = all(np.array_equal(out[n].view(np.uint32), out[1].view(np.uint32)) for n in counts)
+        row = {"method": method, "shape": list(z.shape), "threads": counts, "ms": [t * 1e3 for t in times],
+               "speed_up": [times[0] / t for t in times], "bit_identical": same, "repeats": repeats}
+        rows.append(row)
+        print(f"  {method:11s} " + ", ".join(f"{n} thread(s) {t * 1e3:7.2f} ms ({times[0] / t:4.2f}x)"
+                                             for n, t in zip(counts, times))
+              + f"; bit-identical: {same}", flush=True)
+    return rows
+
+
+SIZES = [(240, 320), (480, 640), (720, 1280), (960, 1280), (1536, 2048), (2160, 3840)]
+
+
+def time_per_pixel(repeats, quick):
+    """ns per pixel on one thread from 320x240 to 3840x2160 (same scene, 5 % holes), into a reused output
+    and into a new one; the ratio to 640x480 shows a cache cliff if there is one."""
+    rows = []
+    frames = {hw: seeded_frame(3, h=hw[0], w=hw[1], holes=0.05) for hw in (SIZES[:3] if quick else SIZES)}
+    for method in (["d2nt_v3"] if quick else scaling_methods()):
+        for (h, w), (z, cam) in frames.items():
+            n = max(3, int(repeats * 640 * 480 / (h * w)))
+            buffer = np.empty((h, w, 3), np.float32)
+            reused, new = interleaved([lambda: surfnorm.estimate(z, cam, method=method, threads=1, out=buffer),
+                                       lambda: surfnorm.estimate(z, cam, method=method, threads=1)], n)
+            rows.append({"method": method, "shape": [h, w], "ns_per_pixel": reused * 1e9 / (h * w),
+                         "new_output_ns_per_pixel": new * 1e9 / (h * w), "repeats": n})
+        base = next(r for r in rows if r["method"] == method and r["shape"] == [480, 640])
+        for r in rows:
+            if r["method"] == method:
+                r["vs_640x480"] = r["ns_per_pixel"] / base["ns_per_pixel"]
+                r["new_output_vs_640x480"] = r["new_output_ns_per_pixel"] / base["new_output_ns_per_pixel"]
+        print(f"  {method:11s} ns/pixel (out=; new output): " + ", ".join(
+            f"{r['shape'][1]}x{r['shape'][0]} {r['ns_per_pixel']:.2f}; {r['new_output_ns_per_pixel']:.2f}"
+            for r in rows if r["method"] == method), flush=True)
+    return rows
+
+
 def machine():
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
                platform.processor()) if os.path.exists("/proc/cpuinfo") else platform.processor()
@@ -393,6 +462,26 @@ def markdown(record):
         lines.append(f"| {b['method']} | {b['one_thread_ms']:.1f} | {b['two_threads_ms']:.1f} | {b['speed_up']:.2f}x "
                      f"| {b['out_one_thread_ms']:.1f} | {b['out_two_threads_ms']:.1f} | {b['out_speed_up']:.2f}x "
                      f"| {'1.7x' if b['method'] != 'memory floor' else '(bound)'} |")
+    if record.get("frame_threads"):
+        counts = record["frame_threads"][0]["threads"]
+        lines += ["", f"One 1280x960 frame split into row bands (`threads=N`, reused `out=`), default method "
+                  f"{record['default_method']}; target for d2nt_v3 and sda_sne: 1.7x on 2 threads", "",
+                  "| method | " + " | ".join(f"{n} thread(s) (ms)" for n in counts) + " | "
+                  + " | ".join(f"speed-up {n}" for n in counts[1:]) + " | bit-identical |",
+                  "|---|" + "---:|" * (2 * len(counts) - 1) + "---|"]
+        for r in record["frame_threads"]:
+            lines.append(f"| {r['method']} | " + " | ".join(f"{t:.2f}" for t in r["ms"]) + " | "
+                         + " | ".join(f"{x:.2f}x" for x in r["speed_up"][1:]) + f" | {r['bit_identical']} |")
+    if record.get("per_pixel"):
+        sizes = list(dict.fromkeys(tuple(r["shape"]) for r in record["per_pixel"]))
+        lines += ["", "Time per pixel on one thread (ns), reused `out=` / new output; in brackets the ratio to 640x480 "
+                  "(target for the D2NT family: within 1.5x up to 3840x2160)", "",
+                  "| method | " + " | ".join(f"{w}x{h}" for h, w in sizes) + " |", "|---|" + "---:|" * len(sizes)]
+        for method in dict.fromkeys(r["method"] for r in record["per_pixel"]):
+            rs = {tuple(r["shape"]): r for r in record["per_pixel"] if r["method"] == method}
+            lines.append(f"| {method} | " + " | ".join(
+                f"{rs[hw]['ns_per_pixel']:.2f} ({rs[hw]['vs_640x480']:.2f}x) / {rs[hw]['new_output_ns_per_pixel']:.2f} "
+                f"({rs[hw]['new_output_vs_640x480']:.2f}x)" for hw in sizes) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -428,12 +517,17 @@ def main():
     print(f"  memory: {memory}", flush=True)
     print("batches:", flush=True)
     batch = time_batches(max(10, repeats // 3) if not args.quick else 3, args.quick)
+    print("one frame on several threads:", flush=True)
+    frame_threads = time_frame_threads(max(10, repeats // 3) if not args.quick else 3, args.quick)
+    print("time per pixel against frame size:", flush=True)
+    per_pixel = time_per_pixel(max(10, repeats // 3) if not args.quick else 3, args.quick)
     record = {"about": __doc__.splitlines()[0], "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
               "machine": machine(), "repeats": repeats, "load_before": load_before,
               "load_after": [round(x, 2) for x in os.getloadavg()], "frames": frames, "floor": floor, "baselines": baselines,
               "startup": {"import_s": imp, "import_process_s": imp_wall, "first_call_s": t_first,
                           "import_and_first_s": t_both, "numba_floor_s": numba_floor},
-              "memory": memory, "batch": batch}
+              "memory": memory, "batch": batch, "default_method": default_method(), "frame_threads": frame_threads,
+              "per_pixel": per_pixel}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     table = markdown(record)

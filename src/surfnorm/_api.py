@@ -8,6 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ._bands import on_threads, whole
 from ._validate import (as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, split_masked,
                         valid_pixels)
 from .camera import Intrinsics
@@ -35,13 +36,15 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
     return [Intrinsics.from_matrix(arr)] * n
 
 
-def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relative=0.0):
+def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relative=0.0, bands=whole):
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
     if tie_tol and method.ties:
         options = dict(options, tie_tol=tie_tol)
     if relative and method.relative:
         options = dict(options, relative=relative)
+    if method.bands and bands is not whole:
+        options = dict(options, bands=bands)
     if not refined:
         # A recipe ending with MNR (d2nt_v3) refines inside its own run, fused: no full-size temporary.
         return method.run(z, valid, cam, out, **options)
@@ -50,7 +53,7 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relativ
     mnr_dlf = options["mnr_dlf"]
     run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
     raw = method.run(z, valid, cam, np.empty(out.shape, np.float32), **run_options)
-    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol)
+    return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol, bands=bands)
 
 
 def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -98,11 +101,22 @@ def _map(func, n: int, workers: int) -> None:
     list(pool.map(func, range(n)))
 
 
-def _valid(z, mask):
+def _valid(z, mask, bands=whole):
     # One Numba pass (compiled on first use; imported here so that ``import surfnorm`` compiles nothing).
     from .gradients import valid_map
 
-    return valid_map(z, mask)
+    if bands is whole:
+        return valid_map(z, mask)
+    out = np.empty(z.shape, dtype=np.bool_)
+    bands(lambda a, b: valid_map(z[a:b], None if mask is None else mask[a:b], out=out[a:b]), z.shape[0])
+    return out
+
+
+def _workers(threads) -> int:
+    workers = threads if threads is not None else (os.cpu_count() or 1)
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise InputError(f"threads: expected a positive integer, got {threads!r}")
+    return workers
 
 
 def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int | None = None,
@@ -127,7 +141,11 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
         A NumPy masked array's masked pixels (in ``depth`` or in ``mask``)
         are not used either, whatever values lie under the mask.
     threads : int, optional
-        Threads for a stack of frames (default: all cores). Ignored for one frame.
+        Threads (default: all cores). A stack of frames runs frames side by
+        side; one frame is split into bands of rows, computed side by side,
+        with the same result to the bit as on one thread (a frame of fewer
+        than 64 rows stays on one thread). Pass 1 where frames already run
+        in parallel (several processes or threads calling ``estimate``).
     scale_invariant : bool
         False (default, paper-faithful): the DAG softmin threshold ``tau`` is in
         depth units. True: ``tau`` is relative to each pixel's own depth
@@ -185,23 +203,22 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
         # rescaled is not finite and positive, so the validity computed below from z covers both.
         z = relative_depth(src, valid_pixels(z, user_mask), disparity=disparity)
         tie_tol, relative = TIE_TOLERANCE, REFERENCE_DEPTH
+    workers = _workers(threads)
 
-    def frame(i):
+    def frame(i, bands=whole):
         """Depth, validity and options of frame i (None: the only frame), rescaled into range if needed."""
         z_i, src_i, options = (z, src, clean) if i is None else (z[i], src[i], clean)
         m_i = user_mask if i is None or user_mask is None else user_mask[i]
         if not relative:
             z_i, options = _in_range(method_obj, options, src_i, z_i)
-        return z_i, _valid(z_i, m_i), dict(options)
+        return z_i, _valid(z_i, m_i, bands), dict(options)
 
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
-        z_0, valid_0, options_0 = frame(None)
-        return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative)
+        bands = on_threads(workers)
+        z_0, valid_0, options_0 = frame(None, bands)
+        return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative, bands)
     cams = _intrinsics_list(K, z.shape[0])
-    workers = threads if threads is not None else (os.cpu_count() or 1)
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise InputError(f"threads: expected a positive integer, got {threads!r}")
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
 

@@ -51,6 +51,11 @@ def row(*args, **kwargs):
     take a dozen per row and stage) otherwise costs two atomic count updates,
     measured at about 0.1 ms per 480x640 frame and stage. Allocating inside
     one is a compile error, which keeps the rule honest.
+
+    Call one with ``np.int64(0)``, not ``0``, where an argument is a constant:
+    Numba compiles a separate specialisation of a jitted callee for every
+    literal integer it is passed (``laplacian_row`` was compiled twice for
+    d2nt_v3 alone), which costs seconds on a fresh install's first call.
     """
     options = {**NJIT, "_nrt": False, **kwargs}
     if args and callable(args[0]):

@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from ._bands import whole
 from ._config import njit, pixel, select
 from .plane_fit import point_cloud
 
@@ -188,36 +189,38 @@ _angle_weighted_row = _make_row(angle_term)
 
 
 @njit
-def _area_weighted_kernel(P, valid, fill, out):
-    """AreaWeighted: w_j * unit(r_j x r_j+1) with w_j = ||r_j x r_j+1|| / 2 is (r_j x r_j+1) / 2."""
+def _area_weighted_kernel(P, valid, fill, out, v0, v1):
+    """AreaWeighted: w_j * unit(r_j x r_j+1) with w_j = ||r_j x r_j+1|| / 2 is (r_j x r_j+1) / 2 (rows v0 .. v1 - 1)."""
     ok, flat = valid.view(np.uint8), out.reshape(out.shape[0], out.shape[1] * 3)
-    for v in range(1, out.shape[0] + 1):
+    for v in range(v0 + 1, v1 + 1):
         _area_weighted_row(P[0], P[1], P[2], ok, v, fill, flat)
 
 
 @njit
-def _angle_weighted_kernel(P, valid, fill, out):
-    """AngleWeighted: w_j = the angle between r_j and r_j+1 at p, times the unit triangle normal."""
+def _angle_weighted_kernel(P, valid, fill, out, v0, v1):
+    """AngleWeighted: w_j = the angle between r_j and r_j+1 at p, times the unit triangle normal (rows v0 .. v1 - 1)."""
     ok, flat = valid.view(np.uint8), out.reshape(out.shape[0], out.shape[1] * 3)
-    for v in range(1, out.shape[0] + 1):
+    for v in range(v0 + 1, v1 + 1):
         _angle_weighted_row(P[0], P[1], P[2], ok, v, fill, flat)
 
 
-def _run(kernel, z, valid, cam, out, fill):
+def _run(kernel, z, valid, cam, out, fill, bands):
     # The kernels write rows of out as flat (3 W) views, which needs out C-contiguous; another layout
-    # goes through a temporary.
+    # goes through a temporary. Two stages in row bands: the cloud, then the normals (halo: 1 row of the cloud).
     target = out if out.flags.c_contiguous else np.empty(out.shape, np.float32)
-    kernel(*point_cloud(z, valid, cam, pad=1), np.float32(fill), target)
+    P, P_valid = point_cloud(z, valid, cam, pad=1, bands=bands)
+    fill32 = np.float32(fill)
+    bands(lambda a, b: kernel(P, P_valid, fill32, target, a, b), z.shape[0])
     if target is not out:
         out[...] = target
     return out
 
 
-def area_weighted(z, valid, cam, out, *, fill=0.0):
+def area_weighted(z, valid, cam, out, *, fill=0.0, bands=whole):
     """AreaWeighted (eq. 2, Table I): triangle normals around p weighted by triangle area."""
-    return _run(_area_weighted_kernel, z, valid, cam, out, fill)
+    return _run(_area_weighted_kernel, z, valid, cam, out, fill, bands)
 
 
-def angle_weighted(z, valid, cam, out, *, fill=0.0):
+def angle_weighted(z, valid, cam, out, *, fill=0.0, bands=whole):
     """AngleWeighted (eq. 2, Table I): triangle normals around p weighted by their angle at p."""
-    return _run(_angle_weighted_kernel, z, valid, cam, out, fill)
+    return _run(_angle_weighted_kernel, z, valid, cam, out, fill, bands)

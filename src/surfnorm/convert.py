@@ -226,6 +226,11 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
 
 # ---------------------------------------------------------------------------- one file
 
+# Threads per frame (see surfnorm.estimate): all cores in the calling process; 1 in a worker of a pool
+# (processes here, or Dask), which already runs frames side by side.
+_frame_threads: int | None = None
+
+
 def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     from ._api import estimate
     from .io.depth import depth_suffix, read_depth
@@ -241,7 +246,8 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     byte_order = settings.byte_order if depth_suffix(task.input) == ".pgm" else None  # other files in the folder
     depth = read_depth(task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity,
                        byte_order=byte_order)
-    normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant, **settings.options)
+    normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant,
+                       threads=_frame_threads, **settings.options)
     task.output.parent.mkdir(parents=True, exist_ok=True)
     write_normals(task.output, normals, fmt=settings.fmt)
     with np.errstate(invalid="ignore"):
@@ -376,9 +382,12 @@ def _die_with(main_pid: int, poll_s: float = 0.5):
 
 
 def _worker_init(main_pid: int | None = None):
-    """Workers ignore Ctrl-C (the parent handles it for the whole pool, see :func:`convert`) and die with ``main_pid``."""
+    """Workers ignore Ctrl-C (the parent handles it for the whole pool, see :func:`convert`), die with
+    ``main_pid``, and run one frame on one thread."""
     import signal
 
+    global _frame_threads
+    _frame_threads = 1
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if main_pid is not None:
         _die_with(main_pid)

@@ -103,6 +103,7 @@ def _convert_shard(tasks, settings):
     """One Dask task: convert ``tasks`` in order."""
     # the module, looked up at call time (the attribute ``surfnorm.convert`` is the function)
     convert = importlib.import_module("surfnorm.convert")
+    convert._frame_threads = 1  # the cluster's threads already run shards side by side
     return [convert.convert_file(task, settings) for task in tasks]
 
 

@@ -33,31 +33,33 @@ area_weighted, angle_weighted = _kernel("averaging", "area_weighted"), _kernel("
 D2NT_PAPER = "Feng et al., D2NT: A High-Performing Depth-to-Normal Translator, ICRA 2023"
 
 
-def _d2nt_basic(z, valid, cam, out, *, border, fill):
-    return d2nt(z, valid, cam, out, gradient="fd", border=border, fill=fill)
+def _d2nt_basic(z, valid, cam, out, *, border, fill, **bands):
+    return d2nt(z, valid, cam, out, gradient="fd", border=border, fill=fill, **bands)
 
 
-def _d2nt_dag(z, valid, cam, out, *, dlf, tau, truncate, fill, relative=0.0):
-    return d2nt(z, valid, cam, out, gradient="dag", dlf=dlf, tau=tau, truncate=truncate, fill=fill, relative=relative)
+def _d2nt_dag(z, valid, cam, out, *, dlf, tau, truncate, fill, relative=0.0, **bands):
+    return d2nt(z, valid, cam, out, gradient="dag", dlf=dlf, tau=tau, truncate=truncate, fill=fill, relative=relative,
+                **bands)
 
 
-def _d2nt_v3(z, valid, cam, out, *, dlf, tau, truncate, mnr_dlf, fill, tie_tol=0.0, relative=0.0):
+def _d2nt_v3(z, valid, cam, out, *, dlf, tau, truncate, mnr_dlf, fill, tie_tol=0.0, relative=0.0, **bands):
     return d2nt_v3(z, valid, cam, out, dlf=dlf, tau=tau, truncate=truncate, mnr_dlf=mnr_dlf, fill=fill, tie_tol=tie_tol,
-                   relative=relative)
+                   relative=relative, **bands)
 
 
 register(Method("d2nt_basic", "depth-to-normal", D2NT_PAPER + ", eq. 9",
-                "D2NT translation with finite-difference gradients", _d2nt_basic, BORDER_OPTIONS))
+                "D2NT translation with finite-difference gradients", _d2nt_basic, BORDER_OPTIONS, bands=True))
 register(Method("d2nt_v2", "depth-to-normal", D2NT_PAPER + ", eq. 9-14",
-                "D2NT with discontinuity-aware gradient (DAG) filter", _d2nt_dag, DAG_OPTIONS, relative=True))
+                "D2NT with discontinuity-aware gradient (DAG) filter", _d2nt_dag, DAG_OPTIONS, relative=True, bands=True))
 register(Method("d2nt_v3", "depth-to-normal", D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
                 "D2NT with DAG filter and MRF-based normal refinement (MNR)", _d2nt_v3, DAG_OPTIONS, mnr=True,
-                ties=True, relative=True))
+                ties=True, relative=True, bands=True))
 register(Method("cp2tv", "depth-to-normal",
                 "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
                 "cross product of two finite-difference tangent vectors",
-                lambda z, valid, cam, out, *, border, fill: cp2tv(z, valid, cam, out, border=border, fill=fill),
-                BORDER_OPTIONS))
+                lambda z, valid, cam, out, *, border, fill, **bands: cp2tv(z, valid, cam, out, border=border, fill=fill,
+                                                                           **bands),
+                BORDER_OPTIONS, bands=True))
 
 # --- 3F2N and SNE-RoadSeg (three_filters.py) -------------------------------------------------
 
@@ -67,17 +69,17 @@ THREE_F2N_PAPER = "Fan et al., Three-Filters-to-Normal: An Accurate and Ultrafas
 register(Method("3f2n_mean", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
                 "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours",
                 partial(_three_filters, third="mean"),
-                BORDER_OPTIONS))
+                BORDER_OPTIONS, bands=True))
 register(Method("3f2n_median", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
                 "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours",
                 partial(_three_filters, third="median"),
-                BORDER_OPTIONS))
+                BORDER_OPTIONS, bands=True))
 register(Method("sne_roadseg", "depth-to-normal",
                 "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
                 "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
                 "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
                 _sne_roadseg,
-                BORDER_OPTIONS))
+                BORDER_OPTIONS, bands=True))
 
 # --- SDA-SNE (sda.py) ----------------------------------------------------------------------------
 
@@ -96,10 +98,10 @@ register(Method("sda_sne", "energy minimisation",
                 "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
                 "Dynamic Programming, 3DV 2022",
                 "depth gradients chosen by multi-directional dynamic programming, then CP2TV",
-                lambda z, valid, cam, out, *, iterations, base, border, fill, tie_tol=0.0:
+                lambda z, valid, cam, out, *, iterations, base, border, fill, tie_tol=0.0, **bands:
                     _sda_sne(z, valid, cam, out, iterations=iterations, base=base, border=border, fill=fill,
-                             tie_tol=tie_tol),
-                SDA_OPTIONS, ties=True, equivariant=False))
+                             tie_tol=tie_tol, **bands),
+                SDA_OPTIONS, ties=True, equivariant=False, bands=True))
 
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
 
@@ -111,27 +113,27 @@ register(Method("plane_svd", "energy minimisation",
                 "Wang et al., Comparison of local plane fitting methods for range data, CVPR 2001 "
                 "(as formulated by Klasing et al., ICRA 2009); D2NT Table I",
                 "least-squares plane with offset: smallest right singular vector of [Q+, 1]",
-                plane_svd, WINDOW_OPTIONS, relative=True, equivariant=False))
+                plane_svd, WINDOW_OPTIONS, relative=True, equivariant=False, bands=True))
 register(Method("plane_pca", "energy minimisation",
                 "Klasing et al., Realtime segmentation of range data using continuous nearest neighbors, ICRA 2009; "
                 "D2NT Table I",
                 "smallest eigenvector of the covariance of the window's points about their centroid",
-                plane_pca, WINDOW_OPTIONS))
+                plane_pca, WINDOW_OPTIONS, bands=True))
 register(Method("vector_svd", "energy minimisation",
                 "Jordan and Mordohai, A quantitative evaluation of surface normal estimation in point clouds, "
                 "IROS 2014; D2NT Table I",
                 "smallest right singular vector of the matrix of the vectors q - p",
-                vector_svd, WINDOW_OPTIONS))
+                vector_svd, WINDOW_OPTIONS, bands=True))
 register(Method("area_weighted", "averaging",
                 "Klasing et al., Comparison of surface normal estimation methods for range sensing applications, "
                 "ICRA 2009; D2NT eq. 2 and Table I",
                 "mean of the 8 triangle normals around the pixel, weighted by triangle area",
-                area_weighted))
+                area_weighted, bands=True))
 register(Method("angle_weighted", "averaging",
                 "Jin et al., A comparison of algorithms for vertex normal computation, The Visual Computer 2005; "
                 "D2NT eq. 2 and Table I",
                 "mean of the 8 triangle normals around the pixel, weighted by their angle at the pixel",
-                angle_weighted))
+                angle_weighted, bands=True))
 
 # --- Sensor depth (ours): adaptive_fit.py, auto.py -------------------------------------------------
 

@@ -371,12 +371,13 @@ def _valid_masked_kernel(z, mask, out):
             out[v, u] = (d > 0) & (d < np.inf) & mask[v, u]
 
 
-def valid_map(z: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
-    """Pixels whose depth may be used (finite, positive, in ``mask``): one pass, one allocation.
+def valid_map(z: np.ndarray, mask: np.ndarray | None, out: np.ndarray | None = None) -> np.ndarray:
+    """Pixels whose depth may be used (finite, positive, in ``mask``): one pass, one allocation (none with ``out``).
 
     Same result as :func:`surfnorm._validate.valid_pixels` (NumPy, three passes).
     """
-    out = np.empty(z.shape, dtype=np.bool_)
+    if out is None:
+        out = np.empty(z.shape, dtype=np.bool_)
     if mask is None:
         _valid_kernel(z, out)
     else:

@@ -75,6 +75,10 @@ class Method:
     # rescale a frame whose depth would leave float32's range (surfnorm.units, "Range"). False for fits whose
     # result depends on the unit of depth (PlaneSVD's offset, SDA-SNE's penalty), which compute in float64.
     equivariant: bool = True
+    # How one frame is split over threads. True: run takes ``bands`` and runs each of its stages through it
+    # in row bands, every band reading the rows around it that it needs (its halo) from the whole frame, so
+    # the result is the same to the bit (see surfnorm._bands). False: one frame runs on one thread.
+    bands: bool = False
 
 
 @dataclass(frozen=True)

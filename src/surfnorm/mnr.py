@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._bands import whole
 from ._config import njit, pixel, row
 from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment
 
@@ -131,24 +132,29 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
 
 
 @njit
-def _mnr_kernel(z, valid, has_normal, normals, dlf, tie_tol, fill, out):
-    """MNR of a whole normal map, row by row; smoothness computed once per pixel into rolling rows."""
+def _mnr_kernel(z, valid, has_normal, normals, dlf, tie_tol, fill, out, v0, v1):
+    """MNR of rows v0 .. v1 - 1 of a normal map, row by row; smoothness computed once per pixel into rolling rows.
+
+    Halo: row v reads the normals of rows v - 1 .. v + 1 and the smoothness of rows v - 1 .. v + 1 (each from
+    its 3x3 neighbourhood of depth), so a band starting at v0 > 0 first prepares row v0 - 1.
+    """
     H, W = z.shape
     col = np.empty(W, np.bool_)
     runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
     mruns, choice = np.empty((W // 2 + 1, 2), np.int64), np.empty(3 * W, np.int32)
     s_v = np.empty((3, W), np.float32)
     s_h, s_self = np.empty(W, np.float32), np.empty(W, np.float32)
-    n_runs[0] = fast_row(valid, 0, col, runs[0])
-    laplacian_row(z, valid, 0, runs[0], n_runs[0], dlf, 1, s_v[0])
-    for v in range(H):
+    for r in range(max(v0 - 1, 0), v0 + 1):
+        n_runs[r % 3] = fast_row(valid, r, col, runs[r % 3])
+        laplacian_row(z, valid, r, runs[r % 3], n_runs[r % 3], dlf, np.int64(1), s_v[r % 3])
+    for v in range(v0, v1):
         if v + 1 < H:
             j = (v + 1) % 3
             n_runs[j] = fast_row(valid, v + 1, col, runs[j])
-            laplacian_row(z, valid, v + 1, runs[j], n_runs[j], dlf, 1, s_v[j])
+            laplacian_row(z, valid, v + 1, runs[j], n_runs[j], dlf, np.int64(1), s_v[j])
         j = v % 3
         if dlf == 0:
-            laplacian_row(z, valid, v, runs[j], n_runs[j], 0, 0, s_h)
+            laplacian_row(z, valid, v, runs[j], n_runs[j], np.int64(0), np.int64(0), s_h)
         else:
             s_h[:] = s_v[j]
         self_smoothness_row(s_h, s_v[j], dlf == 0, s_self)
@@ -164,11 +170,18 @@ def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(valid & np.isfinite(sq) & (sq > 0))
 
 
-def mnr(z, valid, normals, out, *, dlf="alpha", fill=0.0, tie_tol=0.0):
+def mnr(z, valid, normals, out, *, dlf="alpha", fill=0.0, tie_tol=0.0, bands=whole):
     """MNR on ``normals`` (H, W, 3) guided by depth ``z``, into ``out`` (must not alias ``normals``).
 
     ``tie_tol``: relative near-tie tolerance of the scale-invariant mode (see :func:`mnr_row`).
+    ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`); two stages.
     """
-    has_normal = has_normal_map(normals, valid)
-    _mnr_kernel(z, valid, has_normal, normals, dlf_code(dlf), np.float32(tie_tol), np.float32(fill), out)
+    has_normal = np.empty(valid.shape, np.bool_)
+
+    def has(a, b):
+        has_normal[a:b] = has_normal_map(normals[a:b], valid[a:b])
+
+    bands(has, z.shape[0])
+    args = (dlf_code(dlf), np.float32(tie_tol), np.float32(fill))
+    bands(lambda a, b: _mnr_kernel(z, valid, has_normal, normals, *args, out, a, b), z.shape[0])
     return out

@@ -57,6 +57,7 @@ import math
 
 import numpy as np
 
+from ._bands import whole
 from ._config import njit, pixel
 from .orientation import facing_sign
 
@@ -67,15 +68,18 @@ _NEWTON_TOL = 1e-14
 
 
 @njit
-def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, pad, P, P_valid):
+def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, pad, P, P_valid, v0, v1):
     """P[:, v + pad, u + pad] = z K^-1 [u, v, 1]^T (eq. 3) in float64, in a border of ``pad`` invalid pixels.
 
-    Where depth is invalid (and in the border) P is 0 and P_valid False; z is not read there.
+    Where depth is invalid (and in the border) P is 0 and P_valid False; z is not read there. Image rows
+    v0 .. v1 - 1 (the first band also writes the top border, the last the bottom one).
     """
     H, W = z.shape
-    P[:, :, :] = 0.0
-    P_valid[:, :] = False
-    for v in range(H):
+    r0 = v0 + pad if v0 > 0 else 0
+    r1 = v1 + pad if v1 < H else H + 2 * pad
+    P[:, r0:r1, :] = 0.0
+    P_valid[r0:r1, :] = False
+    for v in range(v0, v1):
         y_ray = (v - c_y) / f_y
         for u in range(W):
             if valid[v, u]:
@@ -86,7 +90,7 @@ def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, pad, P, P_valid):
                 P_valid[v + pad, u + pad] = True
 
 
-def point_cloud(z, valid, cam, pad=0):
+def point_cloud(z, valid, cam, pad=0, bands=whole):
     """The organised point cloud of validated depth ``z``: P (3, H + 2 pad, W + 2 pad), P_valid (H + 2 pad, W + 2 pad).
 
     P holds x, y, z planes (contiguous rows, so that row loops vectorise) in float64; it is zero
@@ -96,7 +100,8 @@ def point_cloud(z, valid, cam, pad=0):
     H, W = z.shape
     P = np.empty((3, H + 2 * pad, W + 2 * pad), dtype=np.float64)
     P_valid = np.empty((H + 2 * pad, W + 2 * pad), dtype=np.bool_)
-    _point_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), pad, P, P_valid)
+    f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+    bands(lambda a, b: _point_cloud_kernel(z, valid, *f, pad, P, P_valid, a, b), H)
     return P, P_valid
 
 
@@ -326,10 +331,12 @@ def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_
 
 
 @njit
-def _window_fit_kernel(P, valid, h, kind, rel, fill, out):
-    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over any window, pixel by pixel (the 3x3 one has a tiled path)."""
+def _window_fit_kernel(P, valid, h, kind, rel, fill, out, v0, v1):
+    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over any window, pixel by pixel (the 3x3 one has a tiled path).
+
+    Rows v0 .. v1 - 1 (halo: h rows of the cloud)."""
     H, W = out.shape[:2]
-    for o_v in range(H):
+    for o_v in range(v0, v1):
         for o_u in range(W):
             v, u = o_v + h, o_u + h  # p in the padded cloud
             ok = False
@@ -365,8 +372,10 @@ _WORK_ROWS = 19
 
 
 @njit
-def _tiled_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, P_t):
-    """The point cloud of eq. 3 (as :func:`_point_cloud_kernel`, same arithmetic) in the tiled layout."""
+def _tiled_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, P_t, v0, v1):
+    """The point cloud of eq. 3 (as :func:`_point_cloud_kernel`, same arithmetic) in the tiled layout.
+
+    Image rows v0 .. v1 - 1 (the first band also writes the top padded row, the last the bottom one)."""
     H, W = z.shape
     n_tiles = P_t.shape[0]
     x_ray = np.empty(W + 2)
@@ -375,7 +384,7 @@ def _tiled_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, P_t):
     for t in range(n_tiles):
         c0 = t * _TILE
         n = min(W - c0, _TILE) + 2  # padded columns c0 - 1 .. c0 + n - 2 of the image
-        for pv in range(H + 2):
+        for pv in range(v0 + 1 if v0 > 0 else 0, v1 + 1 if v1 < H else H + 2):
             row = P_t[t, pv]
             v = pv - 1
             row[:, :] = 0.0
@@ -511,8 +520,8 @@ def tile_finish(R, n, kind, rel, fill, work, out_flat):
 
 
 @njit
-def _tiled_fit_kernel(P_t, kind, rel, fill, out):
-    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over the 3x3 window, from the tiled cloud."""
+def _tiled_fit_kernel(P_t, kind, rel, fill, out, v0, v1):
+    """PlanePCA, PlaneSVD or VectorSVD (``kind``) over the 3x3 window, from the tiled cloud; rows v0 .. v1 - 1."""
     H, W = out.shape[:2]
     n_tiles = P_t.shape[0]
     flat = P_t.reshape(P_t.size)
@@ -521,7 +530,7 @@ def _tiled_fit_kernel(P_t, kind, rel, fill, out):
     for t in range(n_tiles):
         c0 = t * _TILE
         n = min(W - c0, _TILE)
-        for o_v in range(H):
+        for o_v in range(v0, v1):
             start = t * tile_size + o_v * 4 * _PITCH  # padded rows o_v .. o_v + 2
             R = flat[start:start + 12 * _PITCH]
             tile_prepare(R, n, kind, rel, work)
@@ -530,37 +539,42 @@ def _tiled_fit_kernel(P_t, kind, rel, fill, out):
             tile_finish(R, n, kind, rel, fill, work, out_flat)
 
 
-def tiled_cloud(z, valid, cam):
+def tiled_cloud(z, valid, cam, bands=whole):
     """The cloud of :func:`point_cloud` (pad 1) in the tiled layout of the 3x3 fast path, with weights."""
     H, W = z.shape
     P_t = np.empty((-(-W // _TILE), H + 2, 4, _PITCH), dtype=np.float64)
-    _tiled_cloud_kernel(z, valid, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), P_t)
+    f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+    bands(lambda a, b: _tiled_cloud_kernel(z, valid, *f, P_t, a, b), H)
     return P_t
 
 
-def _run_fit(kind, z, valid, cam, out, window, fill, relative=0.0):
+def _run_fit(kind, z, valid, cam, out, window, fill, relative=0.0, bands=whole):
+    # Two stages (the cloud, then the fits, which read the cloud's rows around theirs), each in row bands.
+    H, fill32, rel = z.shape[0], np.float32(fill), float(relative)
     if int(window) == 3 and out.flags.c_contiguous:
-        _tiled_fit_kernel(tiled_cloud(z, valid, cam), kind, float(relative), np.float32(fill), out)
+        P_t = tiled_cloud(z, valid, cam, bands)
+        bands(lambda a, b: _tiled_fit_kernel(P_t, kind, rel, fill32, out, a, b), H)
         return out
     h = int(window) // 2
-    P, P_valid = point_cloud(z, valid, cam, pad=h)
-    _window_fit_kernel(P, P_valid, h, kind, float(relative), np.float32(fill), out)
+    P, P_valid = point_cloud(z, valid, cam, pad=h, bands=bands)
+    bands(lambda a, b: _window_fit_kernel(P, P_valid, h, kind, rel, fill32, out, a, b), H)
     return out
 
 
-def plane_svd(z, valid, cam, out, *, window=3, fill=0.0, relative=0.0):
+def plane_svd(z, valid, cam, out, *, window=3, fill=0.0, relative=0.0, bands=whole):
     """PlaneSVD (Table I): smallest right singular vector b = [n; d] of [Q^+, 1] over a window x window patch.
 
     ``relative`` > 0 (the scale-invariant mode): each window's points in units of its pixel's depth / relative
-    (:func:`relative_moments`), so that the fit does not depend on the unit of depth."""
-    return _run_fit(_PLANE_SVD, z, valid, cam, out, window, fill, relative)
+    (:func:`relative_moments`), so that the fit does not depend on the unit of depth.
+    ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`)."""
+    return _run_fit(_PLANE_SVD, z, valid, cam, out, window, fill, relative, bands)
 
 
-def plane_pca(z, valid, cam, out, *, window=3, fill=0.0):
+def plane_pca(z, valid, cam, out, *, window=3, fill=0.0, bands=whole):
     """PlanePCA (Table I): smallest eigenvector of the covariance of Q^+ about its centroid."""
-    return _run_fit(_PLANE_PCA, z, valid, cam, out, window, fill)
+    return _run_fit(_PLANE_PCA, z, valid, cam, out, window, fill, bands=bands)
 
 
-def vector_svd(z, valid, cam, out, *, window=3, fill=0.0):
+def vector_svd(z, valid, cam, out, *, window=3, fill=0.0, bands=whole):
     """VectorSVD (Table I): smallest right singular vector of the matrix of the vectors q - p."""
-    return _run_fit(_VECTOR_SVD, z, valid, cam, out, window, fill)
+    return _run_fit(_VECTOR_SVD, z, valid, cam, out, window, fill, bands=bands)

@@ -67,6 +67,7 @@ import numba.extending
 import numpy as np
 
 from ._choices import SDA_BASES, SDA_MAX_ITERATIONS
+from ._bands import whole
 from ._config import njit, pixel, select
 from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, third_nz, write_unit
 
@@ -175,12 +176,13 @@ def initial_gradient(s_b, s_p, s_f, has_b, has_f, a_b, a_p, a_f, mirrored, refle
 
 
 @njit
-def _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v):
+def _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v, r0, r1):
     """Signed Laplacians L (1 where missing, as the authors' padding) and roughness A = |L| (inf where missing).
 
-    |L| <= ``tol`` |S_p| counts as exactly 0 (``tol`` None: only an exact 0; see :data:`surfnorm.units.TIE_TOLERANCE`)."""
+    Padded rows r0 .. r1 - 1 (within 1 .. Hp - 2). |L| <= ``tol`` |S_p| counts as exactly 0 (``tol`` None:
+    only an exact 0; see :data:`surfnorm.units.TIE_TOLERANCE`)."""
     Hp, Wp = s.shape
-    for v in range(1, Hp - 1):
+    for v in range(r0, r1):
         for u in range(1, Wp - 1):
             if ok[v, u]:
                 tol_p = tolerance_at(tol, s[v, u])
@@ -200,14 +202,15 @@ def _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v):
 
 
 @njit(noalias=True)
-def _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v):
-    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at every inner pixel.
+def _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, v0, v1):
+    """Continuity flags (packed 2 bits each: l, r, u, d) and initial gradients, at the inner pixels of image rows v0 .. v1 - 1.
 
     Branch-free over i = u - _P (see :func:`_sda_step`); an invalid pixel gets no flags and no gradient.
+    Halo: the Laplacians of 2 rows above and below.
     """
     Hp, Wp = s.shape
     n = Wp - 2 * _P
-    for v in range(_P, Hp - _P):
+    for v in range(v0 + _P, v1 + _P):
         # Three loops per row, each of which LLVM vectorises (fused, it did not).
         for i in range(n):
             u = i + _P
@@ -280,10 +283,12 @@ def pick(k, c0, c1, c2, c3, c4, c5, c6, c7, c8):
 
 
 @njit(noalias=True)
-def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2):
+def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2,
+              v0, v1):
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
-    Every inner pixel of the second set is written. Returns True if some pixel
+    Every inner pixel of image rows v0 .. v1 - 1 of the second set is written (halo: the first set's rows
+    v0 - 1 .. v1; a pass reads only the previous pass, so row bands of one pass run side by side). Returns True if some pixel
     took another candidate than keep (index 2). Written without branches (all
     nine candidates are formed, one is selected with :func:`select`) so that
     LLVM vectorises it; every array read here is surfnorm's own (depth is zeroed
@@ -294,7 +299,7 @@ def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, 
     Hp, Wp = s.shape
     B = SDA_PENALTY
     moved = 0
-    for v in range(_P, Hp - _P):
+    for v in range(v0 + _P, v1 + _P):
         for i in range(Wp - 2 * _P):
             u = i + _P
             valid_p = ok[v, u]
@@ -372,31 +377,42 @@ def _kernel_tol(tie_tol):
     return float(tie_tol) if tie_tol else None
 
 
-def _run_sda(signal, valid, iterations, border, tie_tol=0.0):
-    """The dynamic programming on padded arrays. Returns [g_u, g_v, e_u, e_v, signal] padded, and the passes applied."""
-    H, W = signal.shape
+def _run_sda(signal, valid, iterations, border, tie_tol=0.0, bands=whole):
+    """The dynamic programming on padded arrays. Returns [g_u, g_v, e_u, e_v, signal] padded, and the passes applied.
+
+    ``signal(a, b)``: rows a .. b - 1 of the signal, float64. Every stage runs in row bands
+    (``bands``, see :mod:`surfnorm._bands`); a pass waits for the previous one.
+    """
+    H, W = valid.shape
     shape = (H + 2 * _P, W + 2 * _P)
-    inner = (slice(_P, -_P), slice(_P, -_P))
-    s = np.zeros(shape)
-    s[inner] = np.where(valid, signal, 0.0)  # user depth is never read where invalid
-    ok = np.zeros(shape, dtype=np.bool_)
-    ok[inner] = valid
+    s = _padded(shape, np.float64, 0.0)
+    ok = _padded(shape, np.bool_, False)
+
+    def inner(a, b):
+        s[a + _P:b + _P, _P:-_P] = np.where(valid[a:b], signal(a, b), 0.0)  # user depth is never read where invalid
+        ok[a + _P:b + _P, _P:-_P] = valid[a:b]
+
+    bands(inner, H)
     a_u = _padded(shape, np.float64, _INF)
     a_v = _padded(shape, np.float64, _INF)
     con = _padded(shape, np.uint8, 0)
     sets = [[_padded(shape, np.float64, 0.0), _padded(shape, np.float64, 0.0),
              _padded(shape, np.float64, _INF), _padded(shape, np.float64, _INF),
              _padded(shape, np.int8, _NO_STATE), _padded(shape, np.int8, _NO_STATE)] for _ in range(2)]
-    l_u = np.ones(shape)
-    l_v = np.ones(shape)
+    l_u = _padded(shape, np.float64, 1.0)  # the Laplacians write every row and column but the outermost
+    l_v = _padded(shape, np.float64, 1.0)
     tol = _kernel_tol(tie_tol)
-    _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v)
-    _sda_init(s, ok, border == "reflect", tol, l_u, l_v, a_u, a_v, con, *sets[0])
+    # padded rows 1 .. Hp - 2: the first and last bands also cover the margin rows that the image rows' halo reads
+    bands(lambda a, b: _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v, 1 if a == 0 else a + _P,
+                                       shape[0] - 1 if b == H else b + _P), H)
+    reflect = border == "reflect"
+    bands(lambda a, b: _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, *sets[0], a, b), H)
     cap = MAX_ITERATIONS if iterations is None else iterations
     passes = 0
     cur = 0
     for i in range(1, cap + 1):
-        if not _sda_step(s, ok, 1.0 / (i + 1), tol, a_u, a_v, con, *sets[cur], *sets[1 - cur]):
+        c, old, new = 1.0 / (i + 1), sets[cur], sets[1 - cur]
+        if not any(bands(lambda a, b: _sda_step(s, ok, c, tol, a_u, a_v, con, *old, *new, a, b), H)):
             break
         cur = 1 - cur
         passes = i
@@ -411,21 +427,22 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided", tie_tol=0.
     applied (the pass whose stop test fired is not counted). ``iterations``
     None runs until stable, at most :data:`MAX_ITERATIONS` passes. ``tie_tol``: see :data:`surfnorm.units.TIE_TOLERANCE`.
     """
-    (g_u, g_v, e_u, e_v, _), passes = _run_sda(np.asarray(signal, dtype=np.float64), valid, iterations, border, tie_tol)
+    signal = np.asarray(signal, dtype=np.float64)
+    (g_u, g_v, e_u, e_v, _), passes = _run_sda(lambda a, b: signal[a:b], valid, iterations, border, tie_tol)
     inner = (slice(_P, -_P), slice(_P, -_P))
     return (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
 
 
 @njit(noalias=True)
-def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
+def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1):
     """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)).
 
     ``s`` (depth, zero where invalid), gradients and energies are padded by _P; a gradient with
     infinite energy does not exist. Branch-free, into a flat view of each row of ``out`` (C-contiguous),
-    so that the loop vectorises (see :func:`surfnorm.translate.store_unit_flat`).
+    so that the loop vectorises (see :func:`surfnorm.translate.store_unit_flat`). Rows v0 .. v1 - 1.
     """
     H, W = out.shape[0], out.shape[1]
-    for v in range(H):
+    for v in range(v0, v1):
         v_c = v - c_y
         out_flat = out[v].reshape(3 * W)
         for u in range(W):
@@ -443,11 +460,11 @@ def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out):
 
 
 @njit
-def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """3F2N's median filter on SDA gradients of inverse depth (the demo's SDA + 3F2N); padded as above."""
+def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    """3F2N's median filter on SDA gradients of inverse depth (the demo's SDA + 3F2N); padded as above. Rows v0 .. v1 - 1."""
     H, W = z.shape
     buf = np.empty(8)
-    for v in range(H):
+    for v in range(v0, v1):
         for u in range(W):
             ok = False
             if e_u[v + _P, u + _P] < _INF and e_v[v + _P, u + _P] < _INF:
@@ -461,18 +478,30 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect,
                 fill_pixel(out, v, u, fill)
 
 
-def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0, tie_tol=0.0):
+def _inverse(z):
+    def rows(a, b):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 1.0 / z[a:b].astype(np.float64)  # read only where valid
+
+    return rows
+
+
+def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0, tie_tol=0.0,
+            bands=whole):
     """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), into ``out``.
 
     ``tie_tol`` 0 (the paper-faithful mode) compares exactly; the scale-invariant mode passes
-    :data:`surfnorm.units.TIE_TOLERANCE` (see there)."""
+    :data:`surfnorm.units.TIE_TOLERANCE` (see there). ``bands``: how rows are split over threads
+    (see :mod:`surfnorm._bands`): the dynamic programming is a sequence of Jacobi passes (each pixel
+    from the previous pass only), so every pass runs in row bands side by side, then the next."""
     f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+    fill32 = np.float32(fill)
     if base == "3f2n":
-        with np.errstate(divide="ignore", invalid="ignore"):
-            signal = 1.0 / z.astype(np.float64)  # read only where valid
-        (g_u, g_v, e_u, e_v, _), _ = _run_sda(signal, valid, iterations, border, tie_tol)
-        _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, border == "reflect", np.float32(fill), out)
+        (g_u, g_v, e_u, e_v, _), _ = _run_sda(_inverse(z), valid, iterations, border, tie_tol, bands)
+        reflect = border == "reflect"
+        bands(lambda a, b: _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, reflect, fill32, out, a, b), z.shape[0])
     else:
-        (g_u, g_v, e_u, e_v, s), _ = _run_sda(z.astype(np.float64), valid, iterations, border, tie_tol)
-        _cp2tv_kernel(s, g_u, g_v, e_u, e_v, *f, np.float32(fill), out)
+        (g_u, g_v, e_u, e_v, s), _ = _run_sda(lambda a, b: z[a:b].astype(np.float64), valid, iterations, border,
+                                              tie_tol, bands)
+        bands(lambda a, b: _cp2tv_kernel(s, g_u, g_v, e_u, e_v, *f, fill32, out, a, b), z.shape[0])
     return out

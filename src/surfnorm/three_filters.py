@@ -64,6 +64,7 @@ import math
 
 import numpy as np
 
+from ._bands import whole
 from ._config import njit, pixel
 from .gradients import stencil, usable
 from .orientation import facing_sign
@@ -494,8 +495,8 @@ def interior_run(median, z, v, a, b, f_x, f_y, c_x, c_y, rows, flat, fronto, out
 
 
 @njit
-def _tf2n_kernel(z, valid, rows_valid, median, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """3F2N: gradients of 1/Z -> eq. 10 per neighbour -> median (or mean) -> unit, one pass.
+def _tf2n_kernel(z, valid, rows_valid, median, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    """3F2N: gradients of 1/Z -> eq. 10 per neighbour -> median (or mean) -> unit, one pass over rows v0 .. v1 - 1.
 
     ``rows_valid[v]``: row v holds only valid depth. Between such rows the interior of a row is one
     run, whose loop starts at the constant 1 (a run starting elsewhere is not vectorised by LLVM).
@@ -506,7 +507,7 @@ def _tf2n_kernel(z, valid, rows_valid, median, f_x, f_y, c_x, c_y, reflect, fill
     fronto = np.zeros(3 * W, dtype=np.float32)  # (0, 0, -1) for a whole row
     fronto[2::3] = -1.0
     buf = np.empty(8)
-    for v in range(H):
+    for v in range(v0, v1):  # halo: 1 row (3x3 neighbourhoods)
         if row_is_dense(rows_valid, v):
             interior_run(median, z, v, 1, W - 1, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
             generic_pixel(z, valid, v, 0, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out)
@@ -527,18 +528,26 @@ def _camera(cam):
     return float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)
 
 
-def three_filters(z, valid, cam, out, *, third="median", border="one-sided", fill=0.0):
-    """3F2N (Fan et al., RA-L 2021, eq. 7-11) with the ``third`` filter "mean" or "median", into ``out``."""
-    _tf2n_kernel(z, valid, valid.all(axis=1), third == "median", *_camera(cam), border == "reflect", np.float32(fill),
-                 out)
+def three_filters(z, valid, cam, out, *, third="median", border="one-sided", fill=0.0, bands=whole):
+    """3F2N (Fan et al., RA-L 2021, eq. 7-11) with the ``third`` filter "mean" or "median", into ``out``.
+
+    ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`)."""
+    rows_valid = np.empty(z.shape[0], np.bool_)
+
+    def dense(a, b):
+        rows_valid[a:b] = valid[a:b].all(axis=1)
+
+    bands(dense, z.shape[0])
+    args = (third == "median", *_camera(cam), border == "reflect", np.float32(fill))
+    bands(lambda a, b: _tf2n_kernel(z, valid, rows_valid, *args, out, a, b), z.shape[0])
     return out
 
 
 @njit
-def _sne_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """SNE-RoadSeg's estimator: 3F2N gradients and candidates, fused through the polar angle theta."""
+def _sne_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    """SNE-RoadSeg's estimator: 3F2N gradients and candidates, fused through the polar angle theta (rows v0 .. v1 - 1)."""
     H, W = z.shape
-    for v in range(H):
+    for v in range(v0, v1):
         for u in range(W):
             ok = False
             if valid[v, u]:
@@ -579,7 +588,8 @@ def _sne_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
                 fill_pixel(out, v, u, fill)
 
 
-def sne_roadseg(z, valid, cam, out, *, border="one-sided", fill=0.0):
+def sne_roadseg(z, valid, cam, out, *, border="one-sided", fill=0.0, bands=whole):
     """SNE-RoadSeg's surface normal estimator (Fan et al., ECCV 2020, Sec. 3.1), into ``out``."""
-    _sne_kernel(z, valid, *_camera(cam), border == "reflect", np.float32(fill), out)
+    args = (*_camera(cam), border == "reflect", np.float32(fill))
+    bands(lambda a, b: _sne_kernel(z, valid, *args, out, a, b), z.shape[0])
     return out

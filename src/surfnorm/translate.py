@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from ._bands import whole
 from ._config import njit, pixel, row
 from .gradients import (clamp, copy_row, dlf_code, fast_row, fd_gradient, kernel_tau, laplacian_row, segment, softmin_pair,
                         softmin_ratio, softmin_weights_row, stencil, usable)
@@ -125,12 +126,12 @@ def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_r
 
 
 @njit
-def _d2nt_fd_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
-    """D2NT with finite-difference gradients: one pass, row by row."""
+def _d2nt_fd_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    """D2NT with finite-difference gradients: one pass, row by row (rows v0 .. v1 - 1; halo 1 row)."""
     H, W = z.shape
     u_c = centred_columns(W, c_x)
     col, runs = np.empty(W, np.bool_), np.empty((W // 2 + 1, 2), np.int64)
-    for v in range(H):
+    for v in range(v0, v1):
         d2nt_fd_row(z, valid, v, f_x, f_y, u_c, np.float32(v - c_y), reflect, fill, col, runs, out[v])
 
 
@@ -173,7 +174,7 @@ def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
     """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness
     (``rel``: see :func:`surfnorm.gradients.softmin_weights_row`)."""
     n_runs = fast_row(valid, r, col, runs_r)
-    laplacian_row(z, valid, r, runs_r, n_runs, dlf, 1, s)
+    laplacian_row(z, valid, r, runs_r, n_runs, dlf, np.int64(1), s)
     softmin_weights_row(s, z[r], tau, rel, p_v_r)
     return n_runs
 
@@ -209,12 +210,14 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
 
 
 @njit
-def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, out):
-    """D2NT with DAG gradients (eq. 9-14), row by row.
+def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, out, v0, v1):
+    """D2NT with DAG gradients (eq. 9-14), row by row (rows v0 .. v1 - 1 of out).
 
     Row buffers (rolling, row r in slot r % 3) hold each row's fast runs and
     each pixel's softmin weight exp(-s/tau), so every smoothness and
     exponential is computed once per pixel instead of once per neighbour.
+    Halo: row v needs the weights of rows v - 1 .. v + 1 (each from its 3x3
+    neighbourhood), so a band starting at v0 > 0 first prepares row v0 - 1.
     """
     H, W = z.shape
     u_c = centred_columns(W, c_x)
@@ -222,13 +225,15 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
     runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
     p_v = np.empty((3, W), np.float32)
     s, p_h = np.empty(W, np.float32), np.empty(W, np.float32)
-    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, rel, col, runs[0], s, p_v[0])
-    for v in range(H):
+    if v0 > 0:
+        n_runs[(v0 - 1) % 3] = prepare_dag_row(z, valid, v0 - 1, dlf, tau, rel, col, runs[(v0 - 1) % 3], s, p_v[(v0 - 1) % 3])
+    n_runs[v0 % 3] = prepare_dag_row(z, valid, v0, dlf, tau, rel, col, runs[v0 % 3], s, p_v[v0 % 3])
+    for v in range(v0, v1):
         if v + 1 < H:
             n_runs[(v + 1) % 3] = prepare_dag_row(z, valid, v + 1, dlf, tau, rel, col, runs[(v + 1) % 3], s,
                                                   p_v[(v + 1) % 3])
         if dlf == 0:  # 1D DLF: the horizontal neighbours are scored with the horizontal filter
-            laplacian_row(z, valid, v, runs[v % 3], n_runs[v % 3], 0, 0, s)
+            laplacian_row(z, valid, v, runs[v % 3], n_runs[v % 3], np.int64(0), np.int64(0), s)
             softmin_weights_row(s, z[v], tau, rel, p_h)
         else:
             p_h[:] = p_v[v % 3]
@@ -244,11 +249,11 @@ def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_d
     if q + 1 < H:
         j = (q + 1) % 4
         n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, rel, col, runs[j], s, p_v[j])
-        laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, 1, sm_v[j])
+        laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, np.int64(1), sm_v[j])
     if q < H:
         j = q % 4
         if dlf == 0:
-            laplacian_row(z, valid, q, runs[j], n_runs[j], 0, 0, s)
+            laplacian_row(z, valid, q, runs[j], n_runs[j], np.int64(0), np.int64(0), s)
             softmin_weights_row(s, z[q], tau, rel, p_h)
         else:
             copy_row(p_v[j], p_h)
@@ -266,7 +271,7 @@ def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h,
     H = z.shape[0]
     j = v % 4
     if mnr_dlf == 0:
-        laplacian_row(z, valid, v, runs[j], n_runs[j], 0, 0, sm_h)
+        laplacian_row(z, valid, v, runs[j], n_runs[j], np.int64(0), np.int64(0), sm_h)
     else:
         copy_row(sm_v[j], sm_h)
     self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
@@ -276,13 +281,15 @@ def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h,
 
 
 @njit
-def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf, tie_tol, fill, out):
-    """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep.
+def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf, tie_tol, fill, out, v0, v1):
+    """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep over rows v0 .. v1 - 1 of out.
 
     The unrefined normals live only in a rolling buffer of 3 rows: row v + 1
     is estimated just before row v is refined (MNR looks one row up and down).
     Row data (fast runs, softmin weights, MNR smoothness) use 4 slots, rows
-    v - 1 .. v + 2.
+    v - 1 .. v + 2. Halo: refining row v0 needs the unrefined normals of row
+    v0 - 1, which need the weights of row v0 - 2 (3 rows of depth above the
+    band); a band starting at v0 > 0 primes rows q0 - 1 and q0 = v0 - 1.
     """
     H, W = z.shape
     u_c = centred_columns(W, c_x)
@@ -297,43 +304,52 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf,
     # (as when MNR runs on a finished map): fill_counts.
     fill_sq = fill * fill + fill * fill + fill * fill
     fill_counts = (fill_sq > 0) & (fill_sq < np.inf)
-    n_runs[0] = prepare_dag_row(z, valid, 0, dlf, tau, rel, col, runs[0], s, p_v[0])
-    laplacian_row(z, valid, 0, runs[0], n_runs[0], mnr_dlf, 1, sm_v[0])
-    for r in range(-1, H):
+    q0 = max(v0 - 1, 0)  # the first row estimated
+    if q0 > 0:
+        j = (q0 - 1) % 4
+        n_runs[j] = prepare_dag_row(z, valid, q0 - 1, dlf, tau, rel, col, runs[j], s, p_v[j])
+    j = q0 % 4
+    n_runs[j] = prepare_dag_row(z, valid, q0, dlf, tau, rel, col, runs[j], s, p_v[j])
+    laplacian_row(z, valid, q0, runs[j], n_runs[j], mnr_dlf, np.int64(1), sm_v[j])
+    for r in range(q0 - 1, v1):
         # estimate row q = r + 1 (needs the weights of rows q - 1 .. q + 1), then refine row v = r
         v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs,
                         n_runs, p_v, sm_v, s, p_h, ok_row, raw, has)
-        if r >= 0:
+        if r >= v0:
             v3_refine_row(z, valid, r, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns,
                           choice, out[r])
 
 
 def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0,
-         relative=0.0):
+         relative=0.0, bands=whole):
     """D2NT with finite-difference (``gradient="fd"``) or DAG (``"dag"``) gradients, into ``out`` (H, W, 3).
 
     ``relative`` > 0 (the scale-invariant mode): DAG's tau is relative to each pixel's depth, tau z / relative
     (see :func:`surfnorm.gradients.softmin_weights_row`); 0: tau in depth units (paper-faithful).
+    ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`).
     """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
     if gradient == "fd":
-        _d2nt_fd_kernel(z, valid, *f, border == "reflect", np.float32(fill), out)
+        reflect, fill32 = border == "reflect", np.float32(fill)
+        bands(lambda a, b: _d2nt_fd_kernel(z, valid, *f, reflect, fill32, out, a, b), z.shape[0])
     else:
-        _d2nt_dag_kernel(z, valid, *f, dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate),
-                         np.float32(fill), out)
+        dag = (dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate), np.float32(fill))
+        bands(lambda a, b: _d2nt_dag_kernel(z, valid, *f, *dag, out, a, b), z.shape[0])
     return out
 
 
 def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0,
-            relative=0.0):
+            relative=0.0, bands=whole):
     """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3).
 
     ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.mnr.mnr_row`);
     ``relative``: DAG's tau relative to each pixel's depth in that mode (see :func:`d2nt`).
+    ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`).
     """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
-    _d2nt_v3_kernel(z, valid, *f, dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate),
-                    dlf_code(mnr_dlf), np.float32(tie_tol), np.float32(fill), out)
+    args = (dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate), dlf_code(mnr_dlf),
+            np.float32(tie_tol), np.float32(fill))
+    bands(lambda a, b: _d2nt_v3_kernel(z, valid, *f, *args, out, a, b), z.shape[0])
     return out
 
 
@@ -397,18 +413,20 @@ def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, ou
 
 
 @njit
-def _cp2tv_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out):
+def _cp2tv_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    """CP2TV, rows v0 .. v1 - 1 (halo 1 row)."""
     H, W = z.shape
     u_c = np.empty(W, np.float64)
     for u in range(W):
         u_c[u] = u - c_x
     col, runs = np.empty(W, np.bool_), np.empty((W // 2 + 1, 2), np.int64)
-    for v in range(H):
+    for v in range(v0, v1):
         cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out[v])
 
 
-def cp2tv(z, valid, cam, out, *, border="one-sided", fill=0.0):
+def cp2tv(z, valid, cam, out, *, border="one-sided", fill=0.0, bands=whole):
     """CP2TV (Nakagawa et al. 2015): cross product of finite-difference tangent vectors, into ``out``."""
-    _cp2tv_kernel(z, valid, np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy),
-                  border == "reflect", np.float32(fill), out)
+    args = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy), border == "reflect",
+            np.float32(fill))
+    bands(lambda a, b: _cp2tv_kernel(z, valid, *args, out, a, b), z.shape[0])
     return out

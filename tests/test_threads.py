@@ -1,0 +1,145 @@
+"""One frame on several threads (row bands): the same bits as one thread, for every method and option."""
+
+import numpy as np
+import pytest
+
+import surfnorm
+from surfnorm import InputError, _api, _bands
+from surfnorm.camera import Intrinsics
+from surfnorm.methods import resolve
+
+# a principal point that is not a half-integer: a band must not shift it (see surfnorm._bands)
+K = np.array([[97.3, 0, 21.713], [0, 103.9, 17.291], [0, 0, 1]])
+
+
+def scene(h, w, seed, holes=0.08):
+    """Two tilted planes, a sphere cap and a depth step, with random holes (0, NaN, negative)."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    z = 3.0 + 0.011 * u + 0.007 * v
+    z = np.where(u > 0.6 * w, z + 0.8 - 0.02 * v, z)
+    r2 = (u - 0.3 * w) ** 2 + (v - 0.5 * h) ** 2
+    z = np.where(r2 < (0.2 * h) ** 2, z - 0.01 * np.sqrt(np.maximum((0.2 * h) ** 2 - r2, 0)), z)
+    z = (z + rng.normal(0, 0.002, z.shape)).astype(np.float32)
+    bad = rng.random(z.shape) < holes
+    z[bad] = rng.choice(np.array([0.0, np.nan, -1.0], np.float32), size=int(bad.sum()))
+    z[h // 3, :] = 0.0  # a whole empty row
+    return z
+
+
+def option_sets(name):
+    """The option combinations that change a method's code path."""
+    info = surfnorm.methods()[name].options
+    sets = [{}, {"fill": np.nan}]
+    if "border" in info:
+        sets.append({"border": "reflect"})
+    if "dlf" in info:
+        sets += [{"dlf": "alpha"}, {"dlf": "gamma", "truncate": False}]
+    if "mnr_dlf" in info:
+        sets.append({"mnr_dlf": "1d", "fill": 0.5})
+    if "base" in info:
+        sets += [{"base": "3f2n"}, {"iterations": None}, {"iterations": 0, "border": "reflect"}]
+    if "window" in info:
+        sets.append({"window": 5})
+    return sets
+
+
+def interleaved_bands(parts):
+    """A ``bands`` function that runs the given row bands one after another, last band first."""
+
+    def bands(stage, n_rows):
+        spans = [(a, min(b, n_rows)) for a, b in parts if a < n_rows]
+        results = {}
+        for a, b in reversed(spans):
+            results[a] = stage(a, b)
+        return [results[a] for a, _ in spans]
+
+    return bands
+
+
+SHAPES = [(37, 53), (64, 45), (9, 71)]
+# Band edges next to the image border, next to each other (one-row bands) and in the middle.
+PARTS = [[(0, 1), (1, 2), (2, 5), (5, 6), (6, 20), (20, 35), (35, 36), (36, 10**6)],
+         [(0, 13), (13, 10**6)]]
+
+
+@pytest.mark.parametrize("name", list(surfnorm.methods()))
+def test_bands_same_bits_as_one_sweep(name):
+    """Every stage of every method computes any row band exactly as a sweep over all rows does."""
+    cam = Intrinsics.from_matrix(K)
+    for seed, (h, w) in enumerate(SHAPES):
+        z = scene(h, w, seed)
+        mask = np.random.default_rng(seed + 10).random(z.shape) > 0.05
+        for options in option_sets(name):
+            for suffix in ("", "+mnr"):
+                method, refined, clean = resolve(name + suffix, dict(options))
+                for user_mask in (None, mask):
+                    valid = _api._valid(z, user_mask)
+                    one = _api._run(method, refined, dict(clean), z, valid, cam)
+                    for parts in PARTS:
+                        banded = _api._run(method, refined, dict(clean), z, _api._valid(z, user_mask),
+                                           cam, bands=interleaved_bands(parts))
+                        np.testing.assert_array_equal(banded.view(np.uint32), one.view(np.uint32),
+                                                      err_msg=f"{name}{suffix} {options} {(h, w)} {parts}")
+
+
+@pytest.mark.parametrize("name", list(surfnorm.methods()))
+def test_threads_same_bits_as_one_thread(name, monkeypatch):
+    """estimate(threads=N) on one frame: the same bits as threads=1, bands on real threads."""
+    monkeypatch.setattr(_bands, "MIN_ROWS", 4)
+    z = scene(61, 47, 7)
+    mask = np.random.default_rng(3).random(z.shape) > 0.05
+    for options in option_sets(name)[:3]:
+        for suffix in ("", "+mnr"):
+            for kwargs in ({}, {"mask": mask}, {"scale_invariant": True}):
+                one = surfnorm.estimate(z, K, method=name + suffix, threads=1, **kwargs, **options)
+                for threads in (2, 3, 7):
+                    many = surfnorm.estimate(z, K, method=name + suffix, threads=threads, **kwargs, **options)
+                    np.testing.assert_array_equal(many.view(np.uint32), one.view(np.uint32),
+                                                  err_msg=f"{name}{suffix} {options} {kwargs} threads={threads}")
+
+
+def test_bands_really_split_one_frame(monkeypatch):
+    """threads=3 on a 300-row frame runs the kernels on three row bands (at least MIN_ROWS each)."""
+    seen = []
+    real = _bands.on_threads
+
+    def spy(workers):
+        bands = real(workers)
+
+        def recording(stage, n_rows):
+            seen.append(_bands.spans(n_rows, workers))
+            return bands(stage, n_rows)
+
+        return recording if workers > 1 else bands
+
+    monkeypatch.setattr(_api, "on_threads", spy)
+    z = scene(300, 40, 1)
+    surfnorm.estimate(z, K, method="d2nt_v3", threads=3)
+    assert seen and all(s == [(0, 100), (100, 200), (200, 300)] for s in seen)
+    seen.clear()
+    surfnorm.estimate(z[:63], K, method="d2nt_v3", threads=3)  # fewer than 2 * MIN_ROWS rows: one band
+    assert seen and all(s == [(0, 63)] for s in seen)
+
+
+def test_spans_cover_every_row_once():
+    for n_rows in (1, 31, 64, 65, 960, 2161):
+        for workers in (1, 2, 3, 16):
+            parts = _bands.spans(n_rows, workers)
+            assert parts[0][0] == 0 and parts[-1][1] == n_rows
+            assert all(a < b for a, b in parts) and all(p[1] == q[0] for p, q in zip(parts, parts[1:]))
+            assert len(parts) <= workers and (len(parts) == 1 or min(b - a for a, b in parts) >= _bands.MIN_ROWS)
+
+
+@pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2"])
+def test_threads_checked_for_one_frame(threads):
+    with pytest.raises(InputError, match="threads: expected a positive integer"):
+        surfnorm.estimate(np.full((8, 8), 2.0), K, threads=threads)
+
+
+def test_stack_still_runs_frames_side_by_side():
+    """A stack keeps its behaviour (frames on threads, each frame on one thread); same bits as frame by frame."""
+    stack = np.stack([scene(40, 30, s) for s in range(5)])
+    out = surfnorm.estimate(stack, K, method="sda_sne", threads=2)
+    for i in range(5):
+        np.testing.assert_array_equal(out[i], surfnorm.estimate(stack[i], K, method="sda_sne", threads=1))

@@ -39,11 +39,12 @@ def _choice(profile) -> str:
 
 
 def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, fill: float = 0.0, tie_tol: float = 0.0,
-         relative: float = 0.0) -> np.ndarray:
+         relative: float = 0.0, **bands) -> np.ndarray:
     """``d2nt_v3`` (with its defaults) on clean depth, ``adaptive_fit`` on sensor depth; fills ``out``.
 
     ``tie_tol`` and ``relative`` are the scale-invariant mode's, passed on to ``d2nt_v3``
-    (``adaptive_fit`` does not depend on the unit of depth).
+    (``adaptive_fit`` does not depend on the unit of depth); so are the row ``bands`` of one frame
+    on several threads (``adaptive_fit`` runs on one).
     """
     profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
     if _choice(profile) == "adaptive_fit":
@@ -51,4 +52,4 @@ def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, fill: float 
     from .translate import d2nt_v3
 
     return d2nt_v3(z, valid, cam, out, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=fill, tie_tol=tie_tol,
-                   relative=relative)
+                   relative=relative, **bands)

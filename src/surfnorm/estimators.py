@@ -161,4 +161,4 @@ register(Method("auto", "automatic",
                 SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's "
                 "noise floor",
                 "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
-                _auto, ties=True, relative=True))
+                _auto, ties=True, relative=True, bands=True))

@@ -27,7 +27,6 @@ tensor operations instead of Numba kernels. Needs the ``torch`` extra
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Callable
 
 try:
@@ -39,71 +38,63 @@ except ImportError as exc:  # pragma: no cover - exercised only without torch
         "surfnorm.torch needs PyTorch: install the extra with `pip install surfnorm[torch]`") from exc
 
 from ..errors import InputError
-from ..methods import BORDER_OPTIONS, DAG_OPTIONS, FILL, MNR_OPTIONS, MNR_SUFFIX, Option
-from . import _ops
+from ..methods import methods as numpy_methods, resolve as numpy_resolve
+from ..methods import MNR_SUFFIX
+from . import _averaging, _ops, _plane_fit, _sda, _sne
 from ._validate import as_depth, as_intrinsics, as_mask, compute_dtype
 
 __all__ = ["estimate", "DepthToNormal", "methods"]
 
 
-@dataclass(frozen=True)
-class TorchMethod:
-    """A method of the torch backend: ``run(grid, cam, **options)`` -> (B, 3, H, W)."""
-
-    name: str
-    run: Callable
-    options: dict = field(default_factory=dict)
-    mnr: bool = False  # the recipe ends with MNR
+# The torch kernels by method name: ``run(grid, cam, **options) -> (B, 3, H, W)``, where the options are
+# those of the NumPy backend's method (surfnorm.methods: same names, defaults and checks; ``mnr_dlf`` is
+# taken off and applied here, as MNR runs after the kernel). Whether a recipe ends with MNR (d2nt_v3) is
+# read from the NumPy registry too, so the two backends cannot disagree on a method's options.
+_KERNELS: dict[str, Callable] = {}
 
 
-_REGISTRY: dict[str, TorchMethod] = {}
-
-
-def _register(name, run, options=None, mnr=False):
-    _REGISTRY[name] = TorchMethod(name, run, dict(options or {}), mnr)
+def _register(name: str, run: Callable) -> None:
+    _KERNELS[name] = run
 
 
 def _d2nt_dag(g, cam, *, dlf, tau, truncate, fill):
     return _ops.d2nt_dag(g, cam, dlf=dlf, tau=tau, truncate=truncate, fill=fill)
 
 
-_register("d2nt_basic", _ops.d2nt_basic, BORDER_OPTIONS)
-_register("d2nt_v2", _d2nt_dag, DAG_OPTIONS)
-_register("d2nt_v3", _d2nt_dag, DAG_OPTIONS, mnr=True)
-_register("cp2tv", _ops.cp2tv, BORDER_OPTIONS)
-_register("3f2n_mean", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="mean", border=border, fill=fill),
-          BORDER_OPTIONS)
-_register("3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill),
-          BORDER_OPTIONS)
-
-
-def _option_specs(method: TorchMethod, refined: bool) -> dict[str, Option]:
-    specs = {"fill": FILL, **method.options}
-    if method.mnr or refined:
-        specs.update(MNR_OPTIONS)
-    return specs
+_register("d2nt_basic", _ops.d2nt_basic)
+_register("d2nt_v2", _d2nt_dag)
+_register("d2nt_v3", _d2nt_dag)  # + MNR (the NumPy registry marks the recipe)
+_register("cp2tv", _ops.cp2tv)
+_register("3f2n_mean", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="mean", border=border, fill=fill))
+_register("3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill))
+_register("sne_roadseg", _sne.sne_roadseg)
+_register("sda_sne", _sda.sda_sne)
+_register("plane_svd", _plane_fit.plane_svd)
+_register("plane_pca", _plane_fit.plane_pca)
+_register("vector_svd", _plane_fit.vector_svd)
+_register("area_weighted", _averaging.area_weighted)
+_register("angle_weighted", _averaging.angle_weighted)
 
 
 def methods() -> dict[str, dict]:
-    """The methods this backend offers, by name, with their options' defaults (any may take ``+mnr``)."""
-    return {m.name: {k: o.default for k, o in _option_specs(m, False).items()} for m in _REGISTRY.values()}
+    """The methods this backend offers, by name, with their options' defaults (any may take ``+mnr``).
+
+    The same names, options and defaults as :func:`surfnorm.methods`.
+    """
+    registered = numpy_methods()
+    return {name: dict(info.options) for name, info in registered.items() if name in _KERNELS}
 
 
-def _resolve(name, options: dict) -> tuple[TorchMethod, bool, dict]:
+def _resolve(name, options: dict):
+    """(kernel, ends with MNR, refine after, clean options), checked as :func:`surfnorm.estimate` checks them."""
     if not isinstance(name, str):
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
-    base, refined = (name[: -len(MNR_SUFFIX)], True) if name.endswith(MNR_SUFFIX) else (name, False)
-    if base not in _REGISTRY:
-        raise InputError(f"method: expected one of {', '.join(_REGISTRY)} (optionally followed by {MNR_SUFFIX!r}) "
+    base = name[: -len(MNR_SUFFIX)] if name.endswith(MNR_SUFFIX) else name
+    if base not in _KERNELS:
+        raise InputError(f"method: expected one of {', '.join(methods())} (optionally followed by {MNR_SUFFIX!r}) "
                          f"in the torch backend, got {name!r}")
-    method = _REGISTRY[base]
-    specs = _option_specs(method, refined)
-    unknown = sorted(set(options) - set(specs))
-    if unknown:
-        raise InputError(f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, "
-                         f"got unknown option(s) {', '.join(unknown)}")
-    clean = {k: spec.check(k, options[k]) if k in options else spec.default for k, spec in specs.items()}
-    return method, refined, clean
+    method, refined, clean = numpy_resolve(name, options)
+    return _KERNELS[base], method.mnr, refined, clean
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torch.Tensor:
@@ -148,7 +139,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     >>> n.shape, n[0, :, 24, 32].tolist()
     (torch.Size([2, 3, 48, 64]), [0.0, 0.0, -1.0])
     """
-    method_obj, refined, clean = _resolve(method, options)
+    run, ends_with_mnr, refined, clean = _resolve(method, options)
     z, plain = as_depth(depth)
     user_mask = as_mask(mask, z, plain)
     work, out_dtype = compute_dtype(z)
@@ -160,8 +151,8 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     # invalid depth -> 1: never read by the estimators, and no NaN even in discarded branches (B x H x W)
     g = _ops.Grid(torch.where(valid, z, torch.ones_like(z)), valid)
     mnr_dlf = clean.pop("mnr_dlf", None)
-    normals = method_obj.run(g, cam, **clean)
-    if method_obj.mnr:
+    normals = run(g, cam, **clean)
+    if ends_with_mnr:
         normals = _ops.mnr(g, normals, dlf=mnr_dlf, fill=clean["fill"])
     if refined:  # e.g. d2nt_v3+mnr refines twice, as surfnorm.estimate
         normals = _ops.mnr(g, normals, dlf=mnr_dlf, fill=clean["fill"])

@@ -57,28 +57,47 @@ def window_moments(P, valid, window: int):
     return m, (s_x, s_y, s_z), (s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
 
 
-def smallest_root(step, active):
+def smallest_root(step, coefficients, active):
     """The smallest eigenvalue by the NumPy kernel's Newton iteration (``plane_fit.smallest_eigenvalue``).
 
-    ``step(lam)`` is one Newton step on the characteristic polynomial. From 0, every pixel steps while
-    its step exceeds _NEWTON_TOL * lam, at most _NEWTON_STEPS times: the same rule and arithmetic as the
-    NumPy kernel, so the same root even where rounding decides it (a window with one far point: the
-    polynomial's coefficients cancel badly there, and an eigen-solver lands elsewhere). The iteration runs
-    without a graph; the result carries the gradient of the root, through one more step taken with the
-    graph (at a root, d(step)/dA = -(df/dA) / f', the derivative of the root, while its value is ~0 and
-    is left out). On the CPU the loop ends once no pixel moves; elsewhere it runs all _NEWTON_STEPS steps,
-    so that it never waits for the device.
+    ``step(*coefficients, lam)`` is one Newton step on the characteristic polynomial, whose
+    coefficients are (B, H, W) tensors. From 0, every pixel steps while its step exceeds
+    _NEWTON_TOL * lam, at most _NEWTON_STEPS times: the same rule and arithmetic as the NumPy
+    kernel, so the same root even where rounding decides it (a window with one far point: the
+    polynomial's coefficients cancel badly there, and an eigen-solver lands elsewhere). The
+    iteration runs without a graph; the result carries the gradient of the root through one more
+    step taken with the graph (at a root, d(step)/dA = -(df/dA) / f', the derivative of the root,
+    while the step's value, ~0, is left out).
+
+    On the CPU the pixels still moving are gathered after each step (after two steps about one in
+    seven is, on the sample frames, and none after 16), and the loop ends when none is left; on
+    another device all _NEWTON_STEPS steps run on every pixel, so that nothing waits for the device.
     """
     with torch.no_grad():
-        lam = torch.zeros_like(active, dtype=torch.float64)
-        moving = active.clone()
-        for i in range(_NEWTON_STEPS):
-            d = step(lam)
-            moving = moving & (d > _NEWTON_TOL * lam)  # also stops on NaN
-            lam = torch.where(moving, lam + d, lam)
-            if lam.device.type == "cpu" and i % 4 == 3 and not bool(moving.any()):
-                break
-    d = step(lam)
+        lam = torch.zeros(active.shape, dtype=torch.float64, device=active.device)
+        if lam.device.type == "cpu":
+            flat = lam.view(-1)
+            idx = active.reshape(-1).nonzero().squeeze(1)
+            sub = [c.detach().reshape(-1)[idx] for c in coefficients]
+            lam_sub = torch.zeros(idx.shape, dtype=torch.float64)
+            for _ in range(_NEWTON_STEPS):
+                d = step(*sub, lam_sub)
+                moving = d > _NEWTON_TOL * lam_sub  # also stops on NaN
+                lam_sub = torch.where(moving, lam_sub + d, lam_sub)
+                if not bool(moving.all()):
+                    flat[idx] = lam_sub
+                    keep = moving.nonzero().squeeze(1)
+                    idx, lam_sub, sub = idx[keep], lam_sub[keep], [c[keep] for c in sub]
+                    if idx.numel() == 0:
+                        break
+            flat[idx] = lam_sub
+        else:
+            moving = active.clone()
+            for _ in range(_NEWTON_STEPS):
+                d = step(*coefficients, lam)
+                moving = moving & (d > _NEWTON_TOL * lam)
+                lam = torch.where(moving, lam + d, lam)
+    d = step(*coefficients, lam)
     return lam + (d - d.detach())
 
 
@@ -162,7 +181,7 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
     if kind == "plane_svd":
         c = (p_x + s_x / m_safe, p_y + s_y / m_safe, p_z + s_z / m_safe)  # centroid
         coefficients = plane_svd_characteristic(S, c)
-        lam = smallest_root(lambda lam: plane_svd_step(m_safe, *coefficients, lam), active)
+        lam = smallest_root(plane_svd_step, (m_safe,) + coefficients, active)
         mu = m_safe * lam / (m_safe - lam)
         s_00, s_01, s_02, s_11, s_12, s_22 = S
         c_x, c_y, c_z = c
@@ -170,7 +189,7 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
                                         s_11 - lam - mu * c_y * c_y, s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
     else:
         t = characteristic(*S)
-        lam = smallest_root(lambda lam: newton_step(*t, lam), active)
+        lam = smallest_root(newton_step, t, active)
         s_00, s_01, s_02, s_11, s_12, s_22 = S
         n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
     ok = ok & active

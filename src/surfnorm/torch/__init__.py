@@ -12,16 +12,45 @@ Same method names, options and conventions as :func:`surfnorm.estimate`
 tensor operations instead of Numba kernels. Needs the ``torch`` extra
 (``pip install surfnorm[torch]``); ``import surfnorm`` never imports torch.
 
+Every method of :func:`surfnorm.methods` runs here (each also with
+``+mnr``), and on the CPU gives the NumPy backend's normals to 1e-4 per
+component (the tests compare them on the 12 frames of the 3F2N sample, with
+and without holes).
+
 * Device and dtype follow ``depth``: float32 and float64 are computed as
   they are; float16 and bfloat16 are computed in float32 and returned in
-  their own dtype; integer depth gives float32. 3F2N runs in float64 inside
-  (see :func:`surfnorm.torch._ops.three_f2n`).
+  their own dtype; integer depth gives float32. Where the NumPy kernels work
+  in float64 (3F2N, SNE-RoadSeg, SDA-SNE, the plane fits and the averaging
+  methods), so does this backend inside, whatever the input dtype.
 * No host synchronisation in the forward pass: every per-pixel choice is a
   ``torch.where`` on masks, so it runs asynchronously on a GPU and traces
-  under ``torch.compile``.
-* Differentiable with respect to ``depth`` for every method. Where MNR or the
-  truncated softmin select a neighbour, the gradient flows through the
-  selected value; invalid pixels get zero gradient.
+  under ``torch.compile``. One exception: ``sda_sne`` with
+  ``iterations=None`` (until stable) reads once per pass whether every frame
+  has stopped. (On the CPU the plane fits also gather the pixels whose
+  Newton iteration still moves, which is free there.)
+* SDA-SNE's dynamic programming is a Jacobi iteration: each pass is
+  element-wise over all pixels, scanlines and both axes at once (see
+  :mod:`surfnorm.torch._sda`), and each frame of a batch stops on its own,
+  as the NumPy kernel's loop does.
+
+Gradients. Every method is differentiable with respect to ``depth`` almost
+everywhere (``torch.autograd.gradcheck`` passes in float64 for each, with a
+hole). None is non-differentiable as a whole; what carries no gradient, and
+why:
+
+* the discrete choices are piecewise constant: the truncated softmin and
+  MNR (which neighbour), 3F2N's median (which candidate), SDA-SNE's dynamic
+  programming (which of the nine candidates; its energies are computed on
+  detached depth), the plane fits' null vector (which pair of rows). The
+  gradient flows through the value that was chosen; exactly at a tie it is
+  that of the side the forward pass took;
+* constant outputs have zero gradient: the fill value (invalid pixels get
+  zero gradient), and the fronto-parallel fallback (0, 0, -1) of 3F2N,
+  SNE-RoadSeg and SDA-SNE's 3F2N base where no candidate is left;
+* the plane fits' gradient is that of the smallest eigenvalue, undefined
+  where it is repeated (a window whose points spread equally in two
+  directions about their centroid): it is taken through one Newton step at
+  the root, finite but meaningless there.
 """
 
 from __future__ import annotations
@@ -50,6 +79,10 @@ __all__ = ["estimate", "DepthToNormal", "methods"]
 # those of the NumPy backend's method (surfnorm.methods: same names, defaults and checks; ``mnr_dlf`` is
 # taken off and applied here, as MNR runs after the kernel). Whether a recipe ends with MNR (d2nt_v3) is
 # read from the NumPy registry too, so the two backends cannot disagree on a method's options.
+# Adding a method (once surfnorm.estimators registers it): write its kernel as
+# ``run(g: _ops.Grid, cam, *, <its options>, fill) -> (B, 3, H, W)`` in a module of this package (g.z is
+# depth with invalid pixels set to 1, g.valid the validity, cam = (fx, fy, cx, cy) each (B, 1, 1)) and add
+# ``_register("name", module.run)`` below; tests/test_torch.py then compares it with the NumPy backend.
 _KERNELS: dict[str, Callable] = {}
 
 
@@ -110,13 +143,14 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
         tensor may live on depth's device or on the CPU; its values are not
         checked (that would wait for the device); other forms are.
     method : str
-        One of :func:`surfnorm.torch.methods` (d2nt_basic, d2nt_v2, d2nt_v3,
-        cp2tv, 3f2n_mean, 3f2n_median), optionally followed by ``+mnr``.
+        One of :func:`surfnorm.torch.methods` (the names of
+        :func:`surfnorm.methods`), optionally followed by ``+mnr``.
     mask : Tensor of bool, shape (B, 1, H, W) or (H, W), optional
         False where depth must not be used; an (H, W) mask applies to every frame.
     **options
         The method's options, as in :func:`surfnorm.estimate` (``dlf``,
-        ``tau``, ``truncate``, ``border``, ``mnr_dlf``, ``fill``).
+        ``tau``, ``truncate``, ``border``, ``window``, ``iterations``,
+        ``base``, ``mnr_dlf``, ``fill``).
 
     Returns
     -------

@@ -15,7 +15,7 @@ frames, repeated to fill the batch) for every method of
   the same device (``CUDA:0`` where Open3D was built with CUDA, else it is
   listed as unavailable there).
 
-CPU: PyTorch's default threads. Each round times every contender once, in
+CPU: PyTorch's default threads (``--threads`` to set them). Each round times every contender once, in
 turn (interleaved), so that load from other processes falls on all of them
 alike; the table gives the median over rounds, frames per second from it,
 and each contender's speed-up over kornia as the median over rounds of the
@@ -204,8 +204,13 @@ def main():
                         help="devices to time on (cuda only where present; default both)")
     parser.add_argument("--budget", type=float, default=60.0,
                         help="CPU: a contender whose first call takes longer (s) is timed once (default 60)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="CPU: torch.set_num_threads (default: PyTorch's; on a machine shared with other work, "
+                             "1 avoids OpenMP threads waiting on each other)")
     parser.add_argument("--json", help="also write the figures to this JSON file")
     args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
     methods = args.methods or list(st.methods())
     depth_to_normals = kornia_normals()
     o3d = open3d_or_reason()

@@ -56,7 +56,7 @@ def test_the_two_modes_agree_but_for_relative_thresholds(monkeypatch):
     z = (z * (REFERENCE_DEPTH / np.median(z[valid]))).astype(np.float32)  # median 100: no power of two applies
     ties = [m for m in METHODS if resolve(m, {})[0].ties]
     relative = [m for m in METHODS if resolve(m, {})[0].relative]
-    assert ties == ["d2nt_v3", "sda_sne"] and relative == ["d2nt_v2", "d2nt_v3", "plane_svd"]
+    assert ties == ["d2nt_v3", "sda_sne", "auto"] and relative == ["d2nt_v2", "d2nt_v3", "plane_svd", "auto"]
     for method in METHODS + ["cp2tv+mnr"]:
         if method not in ties + relative and not method.endswith("+mnr"):
             np.testing.assert_array_equal(surfnorm.estimate(z, K, method=method, scale_invariant=True),

@@ -12,22 +12,50 @@ Same method names, options and conventions as :func:`surfnorm.estimate`
 tensor operations instead of Numba kernels. Needs the ``torch`` extra
 (``pip install surfnorm[torch]``); ``import surfnorm`` never imports torch.
 
+Every method of :func:`surfnorm.methods` runs here (each also with
+``+mnr``), and on the CPU gives the NumPy backend's normals to 1e-4 per
+component (the tests compare them on the 12 frames of the 3F2N sample, with
+and without holes).
+
 * Device and dtype follow ``depth``: float32 and float64 are computed as
   they are; float16 and bfloat16 are computed in float32 and returned in
-  their own dtype; integer depth gives float32. 3F2N runs in float64 inside
-  (see :func:`surfnorm.torch._ops.three_f2n`).
+  their own dtype; integer depth gives float32. Where the NumPy kernels work
+  in float64 (3F2N, SNE-RoadSeg, SDA-SNE, the plane fits and the averaging
+  methods), so does this backend inside, whatever the input dtype.
 * No host synchronisation in the forward pass: every per-pixel choice is a
   ``torch.where`` on masks, so it runs asynchronously on a GPU and traces
-  under ``torch.compile``.
-* Differentiable with respect to ``depth`` for every method. Where MNR or the
-  truncated softmin select a neighbour, the gradient flows through the
-  selected value; invalid pixels get zero gradient.
+  under ``torch.compile``. One exception: ``sda_sne`` with
+  ``iterations=None`` (until stable) reads once per pass whether every frame
+  has stopped. (On the CPU the plane fits also gather the pixels whose
+  Newton iteration still moves, which is free there.)
+* SDA-SNE's dynamic programming is a Jacobi iteration: each pass is
+  element-wise over all pixels, scanlines and both axes at once (see
+  :mod:`surfnorm.torch._sda`), and each frame of a batch stops on its own,
+  as the NumPy kernel's loop does.
+
+Gradients. Every method is differentiable with respect to ``depth`` almost
+everywhere (``torch.autograd.gradcheck`` passes in float64 for each, with a
+hole). None is non-differentiable as a whole; what carries no gradient, and
+why:
+
+* the discrete choices are piecewise constant: the truncated softmin and
+  MNR (which neighbour), 3F2N's median (which candidate), SDA-SNE's dynamic
+  programming (which of the nine candidates; its energies are computed on
+  detached depth), the plane fits' null vector (which pair of rows). The
+  gradient flows through the value that was chosen; exactly at a tie it is
+  that of the side the forward pass took;
+* constant outputs have zero gradient: the fill value (invalid pixels get
+  zero gradient), and the fronto-parallel fallback (0, 0, -1) of 3F2N,
+  SNE-RoadSeg and SDA-SNE's 3F2N base where no candidate is left;
+* the plane fits' gradient is that of the smallest eigenvalue, undefined
+  where it is repeated (a window whose points spread equally in two
+  directions about their centroid): it is taken through one Newton step at
+  the root, finite but meaningless there.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Callable
 
 try:
@@ -39,71 +67,67 @@ except ImportError as exc:  # pragma: no cover - exercised only without torch
         "surfnorm.torch needs PyTorch: install the extra with `pip install surfnorm[torch]`") from exc
 
 from ..errors import InputError
-from ..methods import BORDER_OPTIONS, DAG_OPTIONS, FILL, MNR_OPTIONS, MNR_SUFFIX, Option
-from . import _ops
+from ..methods import methods as numpy_methods, resolve as numpy_resolve
+from ..methods import MNR_SUFFIX
+from . import _averaging, _ops, _plane_fit, _sda, _sne
 from ._validate import as_depth, as_intrinsics, as_mask, compute_dtype
 
 __all__ = ["estimate", "DepthToNormal", "methods"]
 
 
-@dataclass(frozen=True)
-class TorchMethod:
-    """A method of the torch backend: ``run(grid, cam, **options)`` -> (B, 3, H, W)."""
-
-    name: str
-    run: Callable
-    options: dict = field(default_factory=dict)
-    mnr: bool = False  # the recipe ends with MNR
-
-
-_REGISTRY: dict[str, TorchMethod] = {}
+# The torch kernels by method name: ``run(grid, cam, **options) -> (B, 3, H, W)``, where the options are
+# those of the NumPy backend's method (surfnorm.methods: same names, defaults and checks; ``mnr_dlf`` is
+# taken off and applied here, as MNR runs after the kernel). Whether a recipe ends with MNR (d2nt_v3) is
+# read from the NumPy registry too, so the two backends cannot disagree on a method's options.
+# Adding a method (once surfnorm.estimators registers it): write its kernel as
+# ``run(g: _ops.Grid, cam, *, <its options>, fill) -> (B, 3, H, W)`` in a module of this package (g.z is
+# depth with invalid pixels set to 1, g.valid the validity, cam = (fx, fy, cx, cy) each (B, 1, 1)) and add
+# ``_register("name", module.run)`` below; tests/test_torch.py then compares it with the NumPy backend.
+_KERNELS: dict[str, Callable] = {}
 
 
-def _register(name, run, options=None, mnr=False):
-    _REGISTRY[name] = TorchMethod(name, run, dict(options or {}), mnr)
+def _register(name: str, run: Callable) -> None:
+    _KERNELS[name] = run
 
 
 def _d2nt_dag(g, cam, *, dlf, tau, truncate, fill):
     return _ops.d2nt_dag(g, cam, dlf=dlf, tau=tau, truncate=truncate, fill=fill)
 
 
-_register("d2nt_basic", _ops.d2nt_basic, BORDER_OPTIONS)
-_register("d2nt_v2", _d2nt_dag, DAG_OPTIONS)
-_register("d2nt_v3", _d2nt_dag, DAG_OPTIONS, mnr=True)
-_register("cp2tv", _ops.cp2tv, BORDER_OPTIONS)
-_register("3f2n_mean", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="mean", border=border, fill=fill),
-          BORDER_OPTIONS)
-_register("3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill),
-          BORDER_OPTIONS)
-
-
-def _option_specs(method: TorchMethod, refined: bool) -> dict[str, Option]:
-    specs = {"fill": FILL, **method.options}
-    if method.mnr or refined:
-        specs.update(MNR_OPTIONS)
-    return specs
+_register("d2nt_basic", _ops.d2nt_basic)
+_register("d2nt_v2", _d2nt_dag)
+_register("d2nt_v3", _d2nt_dag)  # + MNR (the NumPy registry marks the recipe)
+_register("cp2tv", _ops.cp2tv)
+_register("3f2n_mean", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="mean", border=border, fill=fill))
+_register("3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill))
+_register("sne_roadseg", _sne.sne_roadseg)
+_register("sda_sne", _sda.sda_sne)
+_register("plane_svd", _plane_fit.plane_svd)
+_register("plane_pca", _plane_fit.plane_pca)
+_register("vector_svd", _plane_fit.vector_svd)
+_register("area_weighted", _averaging.area_weighted)
+_register("angle_weighted", _averaging.angle_weighted)
 
 
 def methods() -> dict[str, dict]:
-    """The methods this backend offers, by name, with their options' defaults (any may take ``+mnr``)."""
-    return {m.name: {k: o.default for k, o in _option_specs(m, False).items()} for m in _REGISTRY.values()}
+    """The methods this backend offers, by name, with their options' defaults (any may take ``+mnr``).
+
+    The same names, options and defaults as :func:`surfnorm.methods`.
+    """
+    registered = numpy_methods()
+    return {name: dict(info.options) for name, info in registered.items() if name in _KERNELS}
 
 
-def _resolve(name, options: dict) -> tuple[TorchMethod, bool, dict]:
+def _resolve(name, options: dict):
+    """(kernel, ends with MNR, refine after, clean options), checked as :func:`surfnorm.estimate` checks them."""
     if not isinstance(name, str):
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
-    base, refined = (name[: -len(MNR_SUFFIX)], True) if name.endswith(MNR_SUFFIX) else (name, False)
-    if base not in _REGISTRY:
-        raise InputError(f"method: expected one of {', '.join(_REGISTRY)} (optionally followed by {MNR_SUFFIX!r}) "
+    base = name[: -len(MNR_SUFFIX)] if name.endswith(MNR_SUFFIX) else name
+    if base not in _KERNELS:
+        raise InputError(f"method: expected one of {', '.join(methods())} (optionally followed by {MNR_SUFFIX!r}) "
                          f"in the torch backend, got {name!r}")
-    method = _REGISTRY[base]
-    specs = _option_specs(method, refined)
-    unknown = sorted(set(options) - set(specs))
-    if unknown:
-        raise InputError(f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, "
-                         f"got unknown option(s) {', '.join(unknown)}")
-    clean = {k: spec.check(k, options[k]) if k in options else spec.default for k, spec in specs.items()}
-    return method, refined, clean
+    method, refined, clean = numpy_resolve(name, options)
+    return _KERNELS[base], method.mnr, refined, clean
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torch.Tensor:
@@ -119,13 +143,14 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
         tensor may live on depth's device or on the CPU; its values are not
         checked (that would wait for the device); other forms are.
     method : str
-        One of :func:`surfnorm.torch.methods` (d2nt_basic, d2nt_v2, d2nt_v3,
-        cp2tv, 3f2n_mean, 3f2n_median), optionally followed by ``+mnr``.
+        One of :func:`surfnorm.torch.methods` (the names of
+        :func:`surfnorm.methods`), optionally followed by ``+mnr``.
     mask : Tensor of bool, shape (B, 1, H, W) or (H, W), optional
         False where depth must not be used; an (H, W) mask applies to every frame.
     **options
         The method's options, as in :func:`surfnorm.estimate` (``dlf``,
-        ``tau``, ``truncate``, ``border``, ``mnr_dlf``, ``fill``).
+        ``tau``, ``truncate``, ``border``, ``window``, ``iterations``,
+        ``base``, ``mnr_dlf``, ``fill``).
 
     Returns
     -------
@@ -148,7 +173,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     >>> n.shape, n[0, :, 24, 32].tolist()
     (torch.Size([2, 3, 48, 64]), [0.0, 0.0, -1.0])
     """
-    method_obj, refined, clean = _resolve(method, options)
+    run, ends_with_mnr, refined, clean = _resolve(method, options)
     z, plain = as_depth(depth)
     user_mask = as_mask(mask, z, plain)
     work, out_dtype = compute_dtype(z)
@@ -160,8 +185,8 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     # invalid depth -> 1: never read by the estimators, and no NaN even in discarded branches (B x H x W)
     g = _ops.Grid(torch.where(valid, z, torch.ones_like(z)), valid)
     mnr_dlf = clean.pop("mnr_dlf", None)
-    normals = method_obj.run(g, cam, **clean)
-    if method_obj.mnr:
+    normals = run(g, cam, **clean)
+    if ends_with_mnr:
         normals = _ops.mnr(g, normals, dlf=mnr_dlf, fill=clean["fill"])
     if refined:  # e.g. d2nt_v3+mnr refines twice, as surfnorm.estimate
         normals = _ops.mnr(g, normals, dlf=mnr_dlf, fill=clean["fill"])

@@ -109,6 +109,11 @@ _register("area_weighted", _averaging.area_weighted)
 _register("angle_weighted", _averaging.angle_weighted)
 
 
+#: Registered methods that run only in :func:`surfnorm.estimate` so far: the sensor-depth estimator, whose
+#: windows differ per pixel (an integral-image port is the plan), and the default that chooses it.
+NUMPY_ONLY = ("adaptive_fit", "auto")
+
+
 def methods() -> dict[str, dict]:
     """The methods this backend offers, by name, with their options' defaults (any may take ``+mnr``).
 
@@ -123,6 +128,9 @@ def _resolve(name, options: dict):
     if not isinstance(name, str):
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
     base = name[: -len(MNR_SUFFIX)] if name.endswith(MNR_SUFFIX) else name
+    if base in NUMPY_ONLY:
+        raise InputError(f"method: {name!r} runs only in surfnorm.estimate (NumPy) so far; on tensors use one of "
+                         f"{', '.join(methods())}")
     if base not in _KERNELS:
         raise InputError(f"method: expected one of {', '.join(methods())} (optionally followed by {MNR_SUFFIX!r}) "
                          f"in the torch backend, got {name!r}")

@@ -75,7 +75,9 @@ MAX_WINDOW = 31
 #: The radii a window may take (x2 apart, and ``max_window``'s): few distinct radii in a row keep the box
 #: sums cheap, and a window widened x2 stays on the ladder.
 RADII = (1, 2, 4, 8, 16, 32, 64, 128)
-#: Times a window that fits within the noise is tried twice as wide.
+#: Times a window that fits within the noise is tried twice as wide. On the simulated sensors 2 is better by
+#: 0.15 degrees (13.35 against 13.50); 3 was kept for the wider planes of real scenes (7.5 against 8.4 degrees on
+#: the real frames of the sensor benchmark).
 N_WIDEN = 3
 #: Fewest valid pixels a window is grown to hold (sparse depth).
 MIN_POINTS = 12

@@ -233,9 +233,10 @@ def test_dask_client_is_handed_the_tasks(tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "surfnorm.distributed", types.SimpleNamespace(run_on_dask=run_on_dask))
     seen = []
-    summary = convert(srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client="CLIENT", progress=seen.append,
+    client = types.SimpleNamespace(submit=lambda *a, **k: None, nthreads=lambda: {})  # what convert checks a client has
+    summary = convert(srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client=client, progress=seen.append,
                       shard_size=5)
-    assert calls[0][2] == "CLIENT" and len(calls[0][0]) == 3 and calls[0][1].depth_scale == 1000
+    assert calls[0][2] is client and len(calls[0][0]) == 3 and calls[0][1].depth_scale == 1000
     assert calls[0][3] == 5
     assert [r.status for r in summary.results] == ["written", "written", "error"]
     assert summary.errors[0].message.endswith("2.png: no result from the Dask cluster")

@@ -453,7 +453,12 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     settings = _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity,
                          byte_order)
     if client is not None and not (callable(getattr(client, "submit", None)) and callable(getattr(client, "nthreads", None))):
-        raise InputError(f"client: expected a dask.distributed.Client, got {type(client).__name__} {client!r:.60}")
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            pass  # without Dask, run_on_dask's message (how to install it) is the useful one
+        else:
+            raise InputError(f"client: expected a dask.distributed.Client, got {type(client).__name__} {client!r:.60}")
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise InputError(f"jobs: expected a positive integer, got {jobs!r}")
     output_dir = Path(output_dir)

@@ -24,6 +24,12 @@ Principal points are 0-based pixel centres (the OpenCV and ROS convention)
 except in the 3F2N ``params.txt``. Lens distortion is not modelled: undistort
 the depth first. Errors are :class:`~surfnorm.errors.DataFileError` naming
 the file, what was expected and what was found.
+
+Files are read with limits, so that a hostile one is an error and never a
+crash or gigabytes of memory: at most ``MAX_FILE_BYTES`` (1 MiB), lists and
+mappings at most ``MAX_DEPTH`` (16) deep, no YAML aliases, every value a real
+number (``true`` or ``"500"`` is not one), and an OpenCV matrix's ``rows``,
+``cols``, ``dt`` and ``data`` checked before OpenCV reads it.
 """
 
 from __future__ import annotations

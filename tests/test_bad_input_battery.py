@@ -183,7 +183,8 @@ TORCH = [
     ("K-shape", dict(K=np.eye(4)), "K"),
     ("K-huge-focal", dict(K=[[1e300, 0, 7.5], [0, 60, 5.5], [0, 0, 1]]), "K"),
     ("mask-shape", dict(mask=np.ones((3, 3), bool)), "mask"),
-    ("method-unknown", dict(method="plane_svd"), "method"),
+    ("method-unknown", dict(method="d2nt_v4"), "method"),
+    ("method-numpy-only", dict(method="adaptive_fit"), "method"),
     ("tau-zero", dict(method="d2nt_v2", tau=0.0), "tau"),
     ("dlf-unknown", dict(method="d2nt_v3", dlf="x"), "dlf"),
     ("fill-overflows-float32", dict(fill=1e40), "fill"),
@@ -205,4 +206,4 @@ def test_torch_estimate_refuses_bad_arguments_by_name(changes, name):
 
 
 def test_the_battery_counts():
-    assert (len(ESTIMATE), len(REFINE), len(INTRINSICS), len(TORCH)) == (78, 9, 8, 12)  # 107 cases
+    assert (len(ESTIMATE), len(REFINE), len(INTRINSICS), len(TORCH)) == (78, 9, 8, 13)  # 108 cases

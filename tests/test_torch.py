@@ -112,7 +112,7 @@ class TestParity:
         # Issue 16, acceptance 1: every method of surfnorm.methods() (the parity tests above take their
         # list from st.methods(), so a method missing here would be missing there too)
         assert list(st.methods()) == [m for m in surfnorm.methods() if m not in st.NUMPY_ONLY]
-        with pytest.raises(surfnorm.InputError, match="runs only in surfnorm.estimate"):
+        with pytest.raises(surfnorm.InputError, match="runs only in surfnorm.estimate"):  # named, not "unknown"
             st.estimate(torch.ones(8, 8), torch.eye(3), method="auto")
 
     def test_options_match_the_numpy_backend(self):

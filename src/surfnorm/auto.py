@@ -38,10 +38,12 @@ def _choice(profile) -> str:
     return "d2nt_v3" if profile.floor < CLEAN_FLOOR else "adaptive_fit"
 
 
-def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, fill: float = 0.0, tie_tol: float = 0.0,
-         relative: float = 0.0, **bands) -> np.ndarray:
-    """``d2nt_v3`` (with its defaults) on clean depth, ``adaptive_fit`` on sensor depth; fills ``out``.
+def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, tau: float = 1.0, fill: float = 0.0,
+         tie_tol: float = 0.0, relative: float = 0.0, **bands) -> np.ndarray:
+    """``d2nt_v3`` (its defaults, and ``tau``) on clean depth, ``adaptive_fit`` on sensor depth; fills ``out``.
 
+    ``tau`` is d2nt_v3's (in depth units, as there), an option so that the paper-faithful mode's range rescale
+    of extreme depth (:mod:`surfnorm.units`) scales it with the depth.
     ``tie_tol`` and ``relative`` are the scale-invariant mode's, passed on to ``d2nt_v3``
     (``adaptive_fit`` does not depend on the unit of depth); so are the row ``bands`` of one frame
     on several threads (``adaptive_fit`` runs on one).
@@ -51,5 +53,5 @@ def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, fill: float 
         return adaptive_fit(z, valid, cam, out, fill=fill, profile=profile)
     from .translate import d2nt_v3
 
-    return d2nt_v3(z, valid, cam, out, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=fill, tie_tol=tie_tol,
+    return d2nt_v3(z, valid, cam, out, dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", fill=fill, tie_tol=tie_tol,
                    relative=relative, **bands)

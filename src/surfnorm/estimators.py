@@ -161,4 +161,6 @@ register(Method("auto", "automatic",
                 SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's "
                 "noise floor",
                 "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
-                _auto, ties=True, relative=True, bands=True))
+                _auto, {"tau": Option(1.0, DAG_OPTIONS["tau"].check, "softness tau of d2nt_v3's softmin (eq. 13), "
+                                      "where auto picks d2nt_v3")},
+                ties=True, relative=True, bands=True))

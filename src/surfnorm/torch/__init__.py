@@ -129,8 +129,8 @@ def _resolve(name, options: dict):
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
     base = name[: -len(MNR_SUFFIX)] if name.endswith(MNR_SUFFIX) else name
     if base in NUMPY_ONLY:
-        raise InputError(f"method: {name!r} runs only in surfnorm.estimate (NumPy) so far; on tensors use one of "
-                         f"{', '.join(methods())}")
+        raise InputError(f"method: expected one of {', '.join(methods())} in the torch backend, got {name!r}, which "
+                         f"runs only in surfnorm.estimate (NumPy) so far")
     if base not in _KERNELS:
         raise InputError(f"method: expected one of {', '.join(methods())} (optionally followed by {MNR_SUFFIX!r}) "
                          f"in the torch backend, got {name!r}")

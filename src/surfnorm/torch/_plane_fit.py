@@ -31,7 +31,7 @@ from __future__ import annotations
 import torch
 
 from ._averaging import point_cloud, ring_offsets
-from ._ops import Grid
+from ._ops import Grid, facing_sign
 
 # As surfnorm.plane_fit (not imported: that module loads Numba).
 _NEWTON_STEPS = 64
@@ -39,12 +39,14 @@ _NEWTON_TOL = 1e-14
 
 
 def window_moments(P, valid, window: int):
-    """m and the sums of r and r r^T over the window (``plane_fit.window_moments``), each (B, H, W) float64."""
+    """m and the sums of r and r r^T over the window (``plane_fit.window_moments``), each (B, H, W) float64,
+    and whether the valid pixels do not all lie on one image line (``plane_fit.window_spans``)."""
     h = window // 2
     at = ring_offsets(P, valid, h)
     p = P.unbind(1)
     zero = torch.zeros_like(p[0])
     m = s_x = s_y = s_z = s_xx = s_xy = s_xz = s_yy = s_yz = s_zz = zero
+    s_u = s_v = s_uu = s_uv = s_vv = zero  # the pixel offsets (small integers: exact in float64)
     for dv in range(-h, h + 1):
         for du in range(-h, h + 1):
             q, ok = at(dv, du)
@@ -54,7 +56,10 @@ def window_moments(P, valid, window: int):
             s_x, s_y, s_z = s_x + r_x, s_y + r_y, s_z + r_z
             s_xx, s_xy, s_xz = s_xx + r_x * r_x, s_xy + r_x * r_y, s_xz + r_x * r_z
             s_yy, s_yz, s_zz = s_yy + r_y * r_y, s_yz + r_y * r_z, s_zz + r_z * r_z
-    return m, (s_x, s_y, s_z), (s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+            s_u, s_v = s_u + w * du, s_v + w * dv
+            s_uu, s_uv, s_vv = s_uu + w * (du * du), s_uv + w * (du * dv), s_vv + w * (dv * dv)
+    spread = (m * s_uu - s_u * s_u) * (m * s_vv - s_v * s_v) - (m * s_uv - s_u * s_v) ** 2
+    return m, (s_x, s_y, s_z), (s_xx, s_xy, s_xz, s_yy, s_yz, s_zz), spread > 0.0
 
 
 def smallest_root(step, coefficients, active):
@@ -168,8 +173,8 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
 
 def _fit(kind: str, g: Grid, cam, window: int, fill: float):
     P = point_cloud(g, cam)
-    m, (s_x, s_y, s_z), R = window_moments(P, g.valid, window)
-    active = g.valid & (m >= 3)  # p and at least two other points
+    m, (s_x, s_y, s_z), R, spans = window_moments(P, g.valid, window)
+    active = g.valid & (m >= 3) & spans  # p and at least two other points, not all on one image line
     m_safe = torch.where(active, m, torch.ones_like(m))
     p_x, p_y, p_z = P.unbind(1)
     if kind == "vector_svd":  # the matrix of the offsets q - p themselves
@@ -193,8 +198,7 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
         s_00, s_01, s_02, s_11, s_12, s_22 = S
         n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
     ok = ok & active
-    flip = (n_x * p_x + n_y * p_y + n_z * p_z) > 0.0
-    sign = 1.0 - 2.0 * flip.to(n_x.dtype)
+    sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)  # surfnorm.orientation's rule
     n = torch.stack((sign * n_x, sign * n_y, sign * n_z), dim=1)
     return torch.where(ok.unsqueeze(1), n, torch.full_like(n, fill)).to(g.z.dtype)
 

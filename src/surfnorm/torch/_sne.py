@@ -17,7 +17,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from ._ops import Grid, fd_gradient, pixel_offsets, unit
+from ._ops import Grid, facing_sign, fd_gradient, pixel_offsets, unit
 
 # The 8 neighbours (dv, du), in the order of surfnorm.three_filters._NEIGHBOURS (the sum of S follows it).
 NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -37,9 +37,9 @@ def atan_of_ratio(num, den):
 
 
 def camera_facing(n_x, n_y, n_z, u_c, v_c, fx, fy):
-    """Turn n so that n . P < 0, as ``surfnorm.three_filters.camera_facing`` (same expression, same rounding)."""
-    away = (n_x * (u_c * fy) + n_y * (v_c * fx) + n_z * (fx * fy)) > 0.0
-    sign = 1.0 - 2.0 * away.to(n_x.dtype)
+    """Turn n to face the camera by surfnorm.orientation's rule, as ``surfnorm.three_filters.camera_facing``
+    (P enters as its positive multiple P f_x f_y / Z)."""
+    sign = facing_sign(n_x, n_y, n_z, u_c * fy, v_c * fx, fx * fy)
     return sign * n_x, sign * n_y, sign * n_z
 
 

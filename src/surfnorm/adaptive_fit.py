@@ -24,16 +24,16 @@ of any size costs four look-ups per moment.
 
 Support chosen from the data. Sensor depth is quantised and noisy at a level
 that depends on the sensor and on the distance. The frame's own noise is
-measured first: the second differences of w along rows and columns vanish on
+measured first (:func:`noise_profile`): the second differences of w vanish on
 planes (w is affine there), so their robust RMS (sigma-clipped at 5 sigma, which
-drops depth discontinuities) in bins of depth gives the noise sigma_z(z). In
-units of the distance between neighbouring pixels' points (z / f) this is
-rho(z) = sigma_z f / z. A window of radius r estimates a slope with standard
-deviation rho * sqrt(3) / ((2r + 1) sqrt(r (r + 1))) ~ rho / r^2 (radians), so
-the radius r = ceil(alpha sqrt(rho)) keeps the noise-induced error near a
-constant angle at every depth and for every sensor: clean depth gets 3x3
-windows, a Kinect frame at 4 m gets 15x15 or more. Where the window holds too
-few valid pixels (sparse LiDAR depth, holes) it grows (x1.5, up to
+drops depth discontinuities; at strides 1, 2 and 4, which separates noise from
+curvature) in bins of depth gives the noise sigma_z(z). In units of the distance
+between neighbouring pixels' points (z / f) this is rho(z) = sigma_z f / z. A
+window of radius r estimates a slope with standard deviation
+rho * sqrt(3) / ((2r + 1) sqrt(r (r + 1))) ~ rho / r^2 (radians). Each pixel
+starts from the radius ceil(ALPHA sqrt(rho)) (on a x2 ladder of radii), and
+the widening below makes it as wide as the data allow. Where the window holds
+too few valid pixels (sparse LiDAR depth, holes) it grows (x1.5, up to
 ``max_window``) until its n valid pixels pin the slope at least half as well
 as the full window would (2 n r (r + 1) at least (2 r_0 + 1)^2 r_0 (r_0 + 1)),
 and hold at least ``MIN_POINTS``.
@@ -70,7 +70,8 @@ from ._config import njit, pixel, select
 
 __all__ = ["adaptive_fit", "noise_profile", "NoiseProfile", "radius_table", "ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW"]
 
-#: Radius gain: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors (``surfnorm bench --simulate``).
+#: Radius gain of the starting window: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors
+#: (``python benchmarks/sensor_sim.py``), with KAPPA.
 ALPHA = 1.0
 #: A fit is trusted when its residual per degree of freedom is below (KAPPA * sigma_w)^2.
 KAPPA = 3.0

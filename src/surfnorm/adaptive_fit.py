@@ -61,6 +61,7 @@ depend on the unit of depth.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -283,30 +284,37 @@ def radius_table(depths: np.ndarray, rho: np.ndarray, *, alpha: float = ALPHA, w
     rho_t = np.interp(np.log(zs), np.log(depths), rho) if z1 > z0 else np.full(_TABLE, rho[0])
     r_max = (max_window - 1) // 2
     if window is None:
-        wanted = np.clip(np.ceil(alpha * np.sqrt(rho_t)), 1, r_max)
-        r_t = np.array([allowed_radius(x, r_max) for x in wanted], np.int64)
+        r_t = allowed_radii(np.clip(np.ceil(alpha * np.sqrt(rho_t)), 1, r_max), r_max)
     else:
         r_t = np.full(_TABLE, (window - 1) // 2, np.int64)
     inv_step = (_TABLE - 1) / (z1 - z0) if z1 > z0 else 0.0
     return z0, inv_step, r_t, rho_t.astype(np.float64)
 
 
-def allowed_radius(r: float, r_max: int) -> int:
-    """The smallest radius of ``RADII`` that is at least r, at most r_max."""
-    for x in RADII:
-        if x >= r:
-            return min(x, r_max)
-    return r_max
+def allowed_radii(r: np.ndarray, r_max: int) -> np.ndarray:
+    """For each r, the smallest radius of ``RADII`` that is at least r, at most r_max (int64)."""
+    ladder = np.asarray(RADII)
+    at = np.minimum(np.searchsorted(ladder, r, side="left"), ladder.size - 1)
+    return np.minimum(np.where(ladder[at] >= r, ladder[at], r_max), r_max).astype(np.int64)
+
+
+@functools.lru_cache(maxsize=None)
+def _tables(r_max: int) -> tuple[np.ndarray, np.ndarray]:
+    r = np.arange(r_max + 1)
+    widen = np.where(r > 0, allowed_radii(2 * r, r_max), 1).astype(np.int64)
+    grow = np.where(r > 0, allowed_radii(np.ceil(1.5 * r), r_max), 1).astype(np.int64)
+    widen.flags.writeable = grow.flags.writeable = False  # cached: shared by every call
+    return widen, grow
 
 
 def widen_table(r_max: int) -> np.ndarray:
     """widen[r]: the radius a passing window of radius r is tried at next (x2)."""
-    return np.array([allowed_radius(2 * r, r_max) if r else 1 for r in range(r_max + 1)], np.int64)
+    return _tables(r_max)[0]
 
 
 def growth_table(r_max: int) -> np.ndarray:
     """grow[r]: the radius a window of radius r grows to when too few of its pixels are valid (x1.5)."""
-    return np.array([allowed_radius(math.ceil(1.5 * r), r_max) if r else 1 for r in range(r_max + 1)], np.int64)
+    return _tables(r_max)[1]
 
 
 # --- the fit ---------------------------------------------------------------------------------------

@@ -158,3 +158,11 @@ def test_default_is_auto():
     import inspect
 
     assert inspect.signature(surfnorm.estimate).parameters["method"].default == "auto"
+
+
+def test_auto_tau_is_checked():
+    z, K = scene(2)
+    with pytest.raises(InputError, match=r"^tau: expected a positive"):
+        surfnorm.estimate(z, K, tau=0.0)
+    with pytest.raises(InputError, match=r"options of method 'auto'.*unknown option\(s\) window"):
+        surfnorm.estimate(z, K, window=5)

@@ -38,3 +38,34 @@ def test_metric_errors():
         metrics.angular_error(np.ones((2, 2)), np.ones((2, 2)))
     with pytest.raises(InputError, match=r"mask: expected shape \(2, 2\) to match normals, got shape \(3,\)"):
         metrics.mean_angular_error(np.ones((2, 2, 3)), np.ones((2, 2, 3)), np.ones(3, bool))
+
+
+def test_plane_error_known_answer():
+    """Two planes; normals at known angles, one pixel without a normal: mean over the pixels with one, coverage."""
+    n = np.zeros((2, 3, 3))
+    n[0] = [0.0, 0.0, -1.0]  # plane 0 (row 0): exact
+    tilt = np.radians(10.0)
+    n[1] = [np.sin(tilt), 0.0, np.cos(tilt)]  # plane 1 (row 1): 10 degrees off, facing away (folded)
+    n[1, 2] = 0.0  # no normal
+    planes = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    masks = np.zeros((2, 2, 3), bool)
+    masks[0, 0] = True
+    masks[1, 1] = True
+    mean, cover = metrics.plane_error(n, planes, masks)
+    assert mean == pytest.approx((0 + 0 + 0 + 10 + 10) / 5)
+    assert cover == pytest.approx(5 / 6)
+
+
+def test_plane_error_no_normal_at_all():
+    mean, cover = metrics.plane_error(np.zeros((2, 2, 3)), [[0, 0, -1.0]], np.ones((1, 2, 2), bool))
+    assert np.isnan(mean) and cover == 0.0
+
+
+@pytest.mark.parametrize("args, message", [
+    ((np.zeros((2, 2)), [[0, 0, -1.0]], np.ones((1, 2, 2), bool)), r"normals: expected shape \(H, W, 3\), got shape \(2, 2\)"),
+    ((np.zeros((2, 2, 3)), [0, 0, -1.0], np.ones((1, 2, 2), bool)), r"plane_normals: expected shape \(P, 3\), got shape \(3,\)"),
+    ((np.zeros((2, 2, 3)), [[0, 0, -1.0]], np.ones((2, 2), bool)), r"plane_masks: expected shape \(1, 2, 2\), got shape \(2, 2\)"),
+])
+def test_plane_error_bad_input(args, message):
+    with pytest.raises(InputError, match=message):
+        metrics.plane_error(*args)

@@ -403,82 +403,49 @@ def box_row(top, bottom, r, pick, cols, m_row):
             out[u] = select(pick[u], cols[W] - cols[max(u - r, 0)], out[u])
 
 
-@njit(noalias=True, _nrt=False)
-def fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof):
-    """Least-squares fits w = a + g_u (u' - x) + g_v (v' - y) of a row's pixels from their window
-    moments; branch-free so that it vectorises (the same arithmetic as :func:`affine_fit`).
-
-    A window that is the whole (2r+1)^2 square (every pixel valid, none clipped) has known
-    coordinate moments: mean (x, y), sum of squared offsets (2r+1)^2 r (r+1) / 3 per axis, no
-    cross term. dof = n - 3, or 0 where the fit is undetermined (fewer than 4 points, or
-    points on a line: 1 - corr(u, v)^2 below 1e-6).
-    """
-    W = m_row.shape[1]
-    for u in range(W):
-        n = m_row[0, u]
-        x = u - 0.5 * W
-        r = r_row[u]
-        k = 2 * r + 1
-        full = n == k * k
-        inv_n = 1.0 / max(n, 1.0)
-        mw = m_row[6, u] * inv_n
-        mu = select(full, x, m_row[1, u] * inv_n)
-        mv = select(full, y, m_row[2, u] * inv_n)
-        c_full = n * (r * (r + 1)) * (1.0 / 3.0)
-        cuu = select(full, c_full, m_row[3, u] - m_row[1, u] * mu)
-        cuv = select(full, 0.0, m_row[4, u] - m_row[1, u] * mv)
-        cvv = select(full, c_full, m_row[5, u] - m_row[2, u] * mv)
-        cuw = m_row[7, u] - n * mu * mw
-        cvw = m_row[8, u] - n * mv * mw
-        cww = m_row[9, u] - m_row[6, u] * mw
-        det = cuu * cvv - cuv * cuv
-        ok = (n >= 4.0) & (cuu > 0.0) & (cvv > 0.0) & (det > 1e-6 * cuu * cvv)
-        inv_det = 1.0 / select(ok, det, 1.0)
-        gu = (cvv * cuw - cuv * cvw) * inv_det
-        gv = (cuu * cvw - cuv * cuw) * inv_det
-        g_u[u] = gu
-        g_v[u] = gv
-        a[u] = mw + gu * (x - mu) + gv * (y - mv)
-        rss[u] = max(cww - gu * cuw - gv * cvw, 0.0)
-        dof[u] = select(ok, n - 3.0, 0.0)
-
-
 @pixel
-def affine_fit(m, r, x, y):
-    """One window's fit from its moment sums m (window centred on (x, y)): (ok, a, g_u, g_v, rss, dof).
+def affine_fit(n, s_u, s_v, s_uu, s_uv, s_vv, s_w, s_uw, s_vw, s_ww, r, x, y):
+    """Least-squares w = a + g_u (u' - x) + g_v (v' - y) over a window centred on (x, y), from its
+    moment sums (count n; sums of u', v', u'u', u'v', v'v', w, u'w, v'w, ww).
 
-    The per-pixel form of :func:`fit_row`, used for the shifted windows.
+    Returns (a, g_u, g_v, rss, dof): the residual sum of squares and its degrees of freedom n - 3,
+    or dof = 0 where the fit is undetermined (fewer than 4 points, or points on a line:
+    1 - corr(u, v)^2 below 1e-6). A window that is the whole (2r+1)^2 square (every pixel valid,
+    none clipped) has known coordinate moments: mean (x, y), sum of squared offsets
+    (2r+1)^2 r (r+1) / 3 per axis, no cross term. Branch-free (selects only), so that the row loop
+    calling it vectorises.
     """
-    n = m[0]
-    if n < 4.0:
-        return False, 0.0, 0.0, 0.0, 0.0, 1.0
-    inv_n = 1.0 / n
-    mw = m[6] * inv_n
     k = 2 * r + 1
-    if n == k * k:
-        mu = x
-        mv = y
-        cuu = n * (r * (r + 1)) * (1.0 / 3.0)
-        cvv = cuu
-        cuv = 0.0
-    else:
-        mu = m[1] * inv_n
-        mv = m[2] * inv_n
-        cuu = m[3] - m[1] * mu
-        cuv = m[4] - m[1] * mv
-        cvv = m[5] - m[2] * mv
-    cuw = m[7] - n * mu * mw
-    cvw = m[8] - n * mv * mw
-    cww = m[9] - m[6] * mw
+    full = n == k * k
+    inv_n = 1.0 / max(n, 1.0)
+    mw = s_w * inv_n
+    mu = select(full, x, s_u * inv_n)
+    mv = select(full, y, s_v * inv_n)
+    c_full = n * (r * (r + 1)) * (1.0 / 3.0)
+    cuu = select(full, c_full, s_uu - s_u * mu)
+    cuv = select(full, 0.0, s_uv - s_u * mv)
+    cvv = select(full, c_full, s_vv - s_v * mv)
+    cuw = s_uw - n * mu * mw
+    cvw = s_vw - n * mv * mw
+    cww = s_ww - s_w * mw
     det = cuu * cvv - cuv * cuv
-    if not (cuu > 0.0 and cvv > 0.0 and det > 1e-6 * cuu * cvv):
-        return False, 0.0, 0.0, 0.0, 0.0, 1.0
-    inv_det = 1.0 / det
+    ok = (n >= 4.0) & (cuu > 0.0) & (cvv > 0.0) & (det > 1e-6 * cuu * cvv)
+    inv_det = 1.0 / select(ok, det, 1.0)
     g_u = (cvv * cuw - cuv * cvw) * inv_det
     g_v = (cuu * cvw - cuv * cuw) * inv_det
     a = mw + g_u * (x - mu) + g_v * (y - mv)
     rss = max(cww - g_u * cuw - g_v * cvw, 0.0)
-    return True, a, g_u, g_v, rss, n - 3.0
+    return a, g_u, g_v, rss, select(ok, n - 3.0, 0.0)
+
+
+@njit(noalias=True, _nrt=False)
+def fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof):
+    """:func:`affine_fit` for every pixel of row ``y``, from the row's window moments ``m_row`` (10, W)."""
+    W = m_row.shape[1]
+    for u in range(W):
+        a[u], g_u[u], g_v[u], rss[u], dof[u] = affine_fit(
+            m_row[0, u], m_row[1, u], m_row[2, u], m_row[3, u], m_row[4, u], m_row[5, u], m_row[6, u], m_row[7, u],
+            m_row[8, u], m_row[9, u], r_row[u], u - 0.5 * W, y)
 
 
 @njit(noalias=True, _nrt=False)
@@ -628,8 +595,9 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 window_sums(ring, slot, H, W, v + dv, u + du, r, m)
                 if m[0] < n_min:
                     continue
-                ok_k, a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(m, r, x + du, y + dv)
-                if not ok_k:
+                a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9],
+                                                           r, x + du, y + dv)
+                if not dof_k > 0.0:
                     continue
                 score = rss_k / dof_k
                 a_p = a_k - gu_k * du - gv_k * dv

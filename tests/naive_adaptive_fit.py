@@ -122,15 +122,17 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
             else:
                 # quadrant windows; those whose plane passes through the pixel itself come first
                 wp = 1.0 / zp
-                best = rss / (n - 3) if ok else np.inf
+                # residuals far below the noise (a thousandth of its level) are rounding: they tie
+                best = max(rss / (n - 3), 1e-3 * limit) if ok else np.inf
                 best_in = ok and (a - wp) ** 2 <= kappa ** 2 * max(best, limit)
                 for dv, du in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
                     nk, okk, ak, guk, gvk, rssk = _fit(z32, valid, v, u, v + dv * r, u + du * r, r)
                     if nk < max(6, 0.25 * n) or not okk:
                         continue
-                    score = rssk / (nk - 3)
+                    score = max(rssk / (nk - 3), 1e-3 * limit)
                     inside = (ak - wp) ** 2 <= kappa ** 2 * max(score, limit)
-                    if (inside, -score) > (best_in, -best):
+                    # a better class, or the same class with a residual lower by more than the tie margin
+                    if inside > best_in or (inside == best_in and score < (1 - 1e-3) * best):
                         best, best_in, ok, a, gu, gv = score, inside, True, ak, guk, gvk
             if not ok:
                 continue

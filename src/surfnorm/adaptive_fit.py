@@ -46,7 +46,10 @@ smallest residual per degree of freedom (the Kuwahara principle) among those
 whose plane passes through the pixel itself (within kappa times the fit's
 residual or the noise): a pixel near an edge takes its normal from its own
 side, and a thin part seen against a far background does not take the
-background's plane. A window that fits within the noise is tried twice as
+background's plane. Residuals within ``TIE`` of each other tie (and so do
+residuals far below the noise, which are rounding), and ties go to the first
+window (the centred one, then the quadrants in a fixed order), so that the
+choice does not depend on the unit of depth. A window that fits within the noise is tried twice as
 wide, up to ``N_WIDEN`` times, and kept while it still fits: planes get wide
 windows, curved surfaces and edges keep small ones. A window whose valid pixels
 lie on a line (they fix no plane), or with fewer than 4 of them, gives no fit;
@@ -102,6 +105,13 @@ _MAX_SPREAD = 1.25
 _CLIP_SIGMAS = 5.0
 _CLIP_ROUNDS = 5
 _N_MOMENTS = 10
+#: Ties between windows. Quantised depth makes mirror-image windows fit equally well, and a window
+#: whose points fit a plane exactly has a residual made of rounding; rounding then decides, and it
+#: differs with the unit of depth (integer millimetres against float32 metres move a residual by
+#: about 1e-4 of itself). So residuals per degree of freedom below TIE times the noise level count
+#: as that level, a window replaces the best so far only with a residual lower by more than TIE of
+#: it, and within that margin the first window in the fixed order wins, in every unit.
+TIE = 1e-3
 
 
 # --- noise profile -------------------------------------------------------------------------------
@@ -586,7 +596,7 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
             # times its residual or the noise): a thin part seen against a far background must not
             # take the background's plane because that one fits its own points better.
             w_p = 1.0 / z_row[u]
-            best = rss[u] / dof[u] if ok else np.inf
+            best = max(rss[u] / dof[u], TIE * limit[u]) if ok else np.inf
             best_in = ok and (a[u] - w_p) ** 2 <= kappa * kappa * max(best, limit[u])
             n_min = max(6.0, 0.25 * m_row[0, u])
             for k in range(_SHIFTS.shape[0]):
@@ -599,10 +609,10 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                                                            r, x + du, y + dv)
                 if not dof_k > 0.0:
                     continue
-                score = rss_k / dof_k
+                score = max(rss_k / dof_k, TIE * limit[u])
                 a_p = a_k - gu_k * du - gv_k * dv
                 inside = (a_p - w_p) ** 2 <= kappa * kappa * max(score, limit[u])
-                if (inside and not best_in) or (inside == best_in and score < best):
+                if (inside and not best_in) or (inside == best_in and score < best * (1.0 - TIE)):
                     best = score
                     best_in = inside
                     g_u[u] = gu_k

@@ -8,9 +8,15 @@ wins: the adaptive plane fit of inverse depth (``adaptive_fit``). The choice
 is the depth's noise floor (:class:`surfnorm.adaptive_fit.NoiseProfile`): the
 median second difference of inverse depth, in units of the point spacing.
 Rendered frames measure 0.00-0.08, real PrimeSense, Kinect v1, RealSense D435
-and LiDAR frames 0.3-4; ``CLEAN_FLOOR`` lies between, and where a frame sits
-near it both estimators give about the same normals (the noise is then about
-a tenth of the point spacing).
+and LiDAR frames 0.3-4.
+
+Between ``CLEAN_FLOOR`` and ``NOISY_FLOOR`` the two are blended: the normal is
+the normalised mean of both, weighted linearly by where the floor lies in that
+band. A hard threshold would make the output jump where a floor sits on it:
+between the units of one depth map (millimetres against metres move the floor
+by about 1e-4 of itself), between a frame with and without a hole, and between
+consecutive frames of a video. Blended, the output moves continuously with the
+floor, and both estimators run only for frames inside the band.
 """
 
 from __future__ import annotations
@@ -19,28 +25,52 @@ import math
 
 import numpy as np
 
-from .adaptive_fit import adaptive_fit, noise_profile
+from .adaptive_fit import NoiseProfile, adaptive_fit, noise_profile
 
-__all__ = ["auto", "choose", "CLEAN_FLOOR"]
+__all__ = ["auto", "choose", "adaptive_weight", "CLEAN_FLOOR", "NOISY_FLOOR"]
 
-#: Noise floor (units of the point spacing) below which depth counts as clean.
-CLEAN_FLOOR = 0.15
+#: Noise floor (units of the point spacing) at or below which depth counts as clean: ``d2nt_v3`` alone.
+CLEAN_FLOOR = 0.10
+#: Noise floor at or above which depth counts as sensor depth: ``adaptive_fit`` alone.
+NOISY_FLOOR = 0.20
+
+
+def adaptive_weight(profile: NoiseProfile) -> float:
+    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth).
+
+    A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
+    """
+    if not profile.floor == profile.floor:
+        return 1.0
+    return min(max((profile.floor - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)
 
 
 def choose(z: np.ndarray, valid: np.ndarray, cam) -> str:
-    """The estimator ``auto`` runs on this frame: ``"d2nt_v3"`` or ``"adaptive_fit"``."""
-    profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
-    return _choice(profile)
+    """What ``auto`` runs on this frame: ``"d2nt_v3"``, ``"adaptive_fit"`` or ``"blend"`` (both, weighted)."""
+    t = adaptive_weight(noise_profile(z, valid, math.sqrt(cam.fx * cam.fy)))
+    return "d2nt_v3" if t == 0.0 else "adaptive_fit" if t == 1.0 else "blend"
 
 
-def _choice(profile) -> str:
-    # A NaN floor: too few pixels with valid neighbours to measure one (sparse depth, as from a LiDAR).
-    return "d2nt_v3" if profile.floor < CLEAN_FLOOR else "adaptive_fit"
+def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray) -> np.ndarray:
+    """``out`` = the unit normal along (1 - t) a + t b, from two normal maps with NaN where they have none.
+
+    Where only one has a normal, that one; where neither, ``fill``. Where the two point in opposite
+    directions (the mean vanishes), the one with the larger weight.
+    """
+    have_a, have_b = ~np.isnan(a[..., 0]), ~np.isnan(b[..., 0])
+    m = (1.0 - t) * np.nan_to_num(a, nan=0.0) + t * np.nan_to_num(b, nan=0.0)
+    m = np.where((have_a & ~have_b)[..., None], a, np.where((have_b & ~have_a)[..., None], b, m))
+    norm = np.linalg.norm(m, axis=-1, keepdims=True)
+    cancelled = norm[..., 0] < 1e-6
+    m = np.where(cancelled[..., None], b if t >= 0.5 else a, m / np.where(cancelled[..., None], 1.0, norm))
+    out[...] = np.where((have_a | have_b)[..., None], m, np.float32(fill))
+    return out
 
 
 def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, tau: float = 1.0, fill: float = 0.0,
          tie_tol: float = 0.0, relative: float = 0.0, **bands) -> np.ndarray:
-    """``d2nt_v3`` (its defaults, and ``tau``) on clean depth, ``adaptive_fit`` on sensor depth; fills ``out``.
+    """``d2nt_v3`` (its defaults, and ``tau``) on clean depth, ``adaptive_fit`` on sensor depth, and their
+    blend between (see the module docstring); fills ``out``.
 
     ``tau`` is d2nt_v3's (in depth units, as there), an option so that the paper-faithful mode's range rescale
     of extreme depth (:mod:`surfnorm.units`) scales it with the depth.
@@ -48,10 +78,15 @@ def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, tau: float =
     (``adaptive_fit`` does not depend on the unit of depth); so are the row ``bands`` of one frame
     on several threads (``adaptive_fit`` runs on one).
     """
-    profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
-    if _choice(profile) == "adaptive_fit":
-        return adaptive_fit(z, valid, cam, out, fill=fill, profile=profile)
     from .translate import d2nt_v3
 
-    return d2nt_v3(z, valid, cam, out, dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", fill=fill, tie_tol=tie_tol,
-                   relative=relative, **bands)
+    profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
+    t = adaptive_weight(profile)
+    if t == 1.0:
+        return adaptive_fit(z, valid, cam, out, fill=fill, profile=profile)
+    d2nt_options = dict(dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", tie_tol=tie_tol, relative=relative, **bands)
+    if t == 0.0:
+        return d2nt_v3(z, valid, cam, out, fill=fill, **d2nt_options)
+    a = d2nt_v3(z, valid, cam, np.empty_like(out), fill=np.nan, **d2nt_options)
+    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile)
+    return blend(a, b, t, fill, out)

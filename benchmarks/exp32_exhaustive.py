@@ -19,7 +19,7 @@ import time
 import numba
 import numpy as np
 
-from surfnorm.gradients import exp32, softmin_row
+from surfnorm.kernels.gradients import exp32, softmin_row
 
 
 @numba.njit(nogil=True)

@@ -24,8 +24,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 import surfnorm  # noqa: E402
-from surfnorm import sda as new  # noqa: E402
-from surfnorm.gradients import valid_map  # noqa: E402
+from surfnorm.kernels import sda as new  # noqa: E402
+from surfnorm.kernels.gradients import valid_map  # noqa: E402
 from surfnorm.io.threef2n import find_frames, read_frame  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +37,7 @@ def load_old(rev):
     text = subprocess.run(["git", "show", f"{rev}:src/surfnorm/sda.py"], cwd=ROOT, check=True,
                           capture_output=True, text=True).stdout
     text = text.replace("from ._config import", "from surfnorm._config import").replace(
-        "from .three_filters import", "from surfnorm.three_filters import").replace(
+        "from .three_filters import", "from surfnorm.kernels.three_filters import").replace(
         "from ._choices import", "from surfnorm._choices import")
     folder = tempfile.mkdtemp(prefix="sda-old-")
     Path(folder, "sda_old.py").write_text(text)

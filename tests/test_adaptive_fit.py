@@ -9,8 +9,8 @@ import pytest
 
 import surfnorm
 from surfnorm import InputError
-from surfnorm.adaptive_fit import noise_profile
-from surfnorm.auto import choose
+from surfnorm.kernels.adaptive_fit import noise_profile
+from surfnorm.kernels.auto import choose
 from surfnorm.camera import Intrinsics
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 

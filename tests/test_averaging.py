@@ -1,4 +1,4 @@
-"""AreaWeighted and AngleWeighted (surfnorm.averaging) against naive references and closed-form surfaces."""
+"""AreaWeighted and AngleWeighted (surfnorm.kernels.averaging) against naive references and closed-form surfaces."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 import surfnorm
 from surfnorm import _api
-from surfnorm.averaging import RING
+from surfnorm.kernels.averaging import RING
 from surfnorm.errors import InputError
 
 from . import surfaces
@@ -131,7 +131,7 @@ def test_bad_fill_is_refused():
 
 
 def test_angle_polynomial_matches_arctan2():
-    from surfnorm.averaging import angle_from
+    from surfnorm.kernels.averaging import angle_from
 
     rng = np.random.default_rng(0)
     s = np.abs(rng.normal(size=4000)) * 10.0 ** rng.uniform(-8, 8, 4000)

@@ -15,7 +15,7 @@ import pytest
 
 import surfnorm
 from surfnorm._validate import valid_pixels
-from surfnorm.gradients import valid_map
+from surfnorm.kernels.gradients import valid_map
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.metrics import mean_angular_error
 
@@ -118,8 +118,8 @@ def test_refine_equals_naive_mnr_on_any_normals():
 
 def test_mnr_near_tie_tolerance_equals_naive():
     """The scale-invariant mode's MNR rule (a candidate must be smoother by more than tie_tol * z): kernel = reference."""
-    from surfnorm.mnr import mnr
-    from surfnorm.translate import d2nt_v3
+    from surfnorm.kernels.mnr import mnr
+    from surfnorm.kernels.translate import d2nt_v3
 
     rng = np.random.default_rng(7)
     v, u = np.mgrid[0:41, 0:53]
@@ -163,7 +163,7 @@ def test_softmin_exp_is_correctly_rounded():
     # The kernels' exp(-s / tau) (softmin_row: exp32 in float64, FMA-contracted, rounded once) against exp in
     # float64 rounded to float32, on the arguments the softmin sees and at the edges of the float32 range.
     # (An exhaustive run over all 1.1e9 float32 in [-104.5, 0] found no difference: benchmarks/README.md.)
-    from surfnorm.gradients import softmin_row
+    from surfnorm.kernels.gradients import softmin_row
 
     rng = np.random.default_rng(0)
     x = np.concatenate([-rng.random(200_000) * 110, -rng.random(100_000) * 1e-3, -rng.exponential(1.0, 100_000),

@@ -1,4 +1,4 @@
-"""PlaneSVD, PlanePCA, VectorSVD (surfnorm.plane_fit) against naive references and closed-form surfaces."""
+"""PlaneSVD, PlanePCA, VectorSVD (surfnorm.kernels.plane_fit) against naive references and closed-form surfaces."""
 
 from __future__ import annotations
 
@@ -189,7 +189,7 @@ def test_averaging_option_on_plane_fit_is_refused():
 
 
 def test_newton_eigenvalue_matches_eigvalsh():
-    from surfnorm.plane_fit import smallest_eigenvalue
+    from surfnorm.kernels.plane_fit import smallest_eigenvalue
 
     rng = np.random.default_rng(1)
     for _ in range(300):
@@ -201,7 +201,7 @@ def test_newton_eigenvalue_matches_eigvalsh():
 
 
 def test_plane_svd_eigenvalue_is_smallest_of_the_4x4():
-    from surfnorm.plane_fit import plane_svd_lambda
+    from surfnorm.kernels.plane_fit import plane_svd_lambda
 
     rng = np.random.default_rng(2)
     for _ in range(300):

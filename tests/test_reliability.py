@@ -102,7 +102,7 @@ def test_the_reported_3f2n_tie_is_oriented_alike_in_every_unit_and_backend():
 
 
 def test_facing_sign_rule():
-    from surfnorm.orientation import facing_sign
+    from surfnorm.kernels.orientation import facing_sign
 
     P = (0.3, -0.2, 1.0)
     assert facing_sign(0.1, 0.2, 0.9, *P) == -1.0 and facing_sign(-0.1, -0.2, -0.9, *P) == 1.0
@@ -130,7 +130,7 @@ def integer_frames(draw):
 
 
 def near_band(n, cam):
-    """Where a normal lies within a factor 2 of the orientation rule's band edges (surfnorm.orientation)."""
+    """Where a normal lies within a factor 2 of the orientation rule's band edges (surfnorm.kernels.orientation)."""
     from surfnorm._choices import ORIENTATION_TIE as t
 
     h, w = n.shape[:2]
@@ -351,7 +351,7 @@ def far_from(square, reach):
 
 # adaptive_fit (and auto, which runs it on sensor depth) measure the frame's noise against depth, a statistic of the
 # whole frame, and size every window from it; a hole removes samples from it, and can so move a normal anywhere
-# (documented in surfnorm.adaptive_fit). That is a different promise from the scale-invariant mode's, which is
+# (documented in surfnorm.kernels.adaptive_fit). That is a different promise from the scale-invariant mode's, which is
 # about the unit of depth; the scene here is clean, so auto runs d2nt_v3 and stays in the test.
 LOCAL_METHODS = [m for m in METHODS if m != "adaptive_fit"]
 

@@ -10,8 +10,8 @@ import surfnorm
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.metrics import mean_angular_error
 from surfnorm.reference import official_figures
-from surfnorm import sda
-from surfnorm.sda import MAX_ITERATIONS, sda_gradients
+from surfnorm.kernels import sda
+from surfnorm.kernels.sda import MAX_ITERATIONS, sda_gradients
 from surfnorm.units import TIE_TOLERANCE
 
 from . import naive_sda, naive_three_filters

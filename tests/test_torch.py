@@ -121,7 +121,7 @@ class TestParity:
 
     def test_constants_match_the_numpy_kernels(self):
         # the torch modules copy them so as not to import Numba
-        from surfnorm import plane_fit, sda
+        from surfnorm.kernels import plane_fit, sda
         from surfnorm.torch import _plane_fit, _sda
 
         assert _sda.SDA_PENALTY == sda.SDA_PENALTY and _sda.MAX_ITERATIONS == sda.MAX_ITERATIONS
@@ -145,7 +145,7 @@ class TestSDA:
     """SDA-SNE's dynamic programming: every frame of a batch stops on its own, as the NumPy kernel's loop."""
 
     def test_frames_of_a_batch_stop_on_their_own(self):
-        from surfnorm.sda import sda_gradients
+        from surfnorm.kernels.sda import sda_gradients
 
         planar = np.full((30, 40), 2.0, dtype=np.float32)  # nothing moves: the first pass stops it
         rough, mask = scene_with_holes(30, 40)
@@ -199,7 +199,7 @@ class TestThreeFilters:
         ray = np.stack(((u - cx) / cam.fx, (v - cy) / cam.fy, np.ones(u.shape)), axis=-1)
         ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
         # Such normals, and every normal within ORIENTATION_TIE of edge-on, now get a fixed sign from the rule of
-        # surfnorm.orientation, which the naive reference (n . P < 0 only) does not apply.
+        # surfnorm.kernels.orientation, which the naive reference (n . P < 0 only) does not apply.
         from surfnorm._choices import ORIENTATION_TIE
 
         cos = np.abs(np.einsum("hwc,hwc->hw", ref, ray))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import surfnorm
-from surfnorm.translate import d2nt_normal
+from surfnorm.kernels.translate import d2nt_normal
 
 from . import surfaces
 

@@ -48,7 +48,7 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relativ
     if not refined:
         # A recipe ending with MNR (d2nt_v3) refines inside its own run, fused: no full-size temporary.
         return method.run(z, valid, cam, out, **options)
-    from .mnr import mnr
+    from .kernels.mnr import mnr
 
     mnr_dlf = options["mnr_dlf"]
     run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
@@ -103,7 +103,7 @@ def _map(func, n: int, workers: int) -> None:
 
 def _valid(z, mask, bands=whole):
     # One Numba pass (compiled on first use; imported here so that ``import surfnorm`` compiles nothing).
-    from .gradients import valid_map
+    from .kernels.gradients import valid_map
 
     if bands is whole:
         return valid_map(z, mask)
@@ -135,7 +135,7 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
         A name from :func:`surfnorm.methods`, optionally followed by ``+mnr``.
         The default, ``"auto"``, runs ``d2nt_v3`` on clean depth (rendered) and
         ``adaptive_fit`` on sensor depth (quantised, noisy, sparse), chosen
-        from the depth's own noise floor; see :mod:`surfnorm.auto`.
+        from the depth's own noise floor; see :mod:`surfnorm.kernels.auto`.
     mask : ndarray of bool, shape of ``depth``, optional
         False where depth must not be used (in addition to invalid values).
         A NumPy masked array's masked pixels (in ``depth`` or in ``mask``)
@@ -241,7 +241,7 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
 
     Each pixel takes the normal of the smoothest pixel (smallest |Laplacian of
     depth| under ``dlf``) among its 4-neighbours and itself; see
-    :mod:`surfnorm.mnr`.
+    :mod:`surfnorm.kernels.mnr`.
 
     Parameters
     ----------
@@ -257,7 +257,7 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     fill : float
         Value for pixels without a valid normal.
     """
-    from .mnr import mnr
+    from .kernels.mnr import mnr
 
     depth, unmasked = split_masked(depth)
     z = as_depth(depth, batch=False)

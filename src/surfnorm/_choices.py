@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-#: How a finite difference treats the image border (see :func:`surfnorm.gradients.stencil`).
+#: How a finite difference treats the image border (see :func:`surfnorm.kernels.gradients.stencil`).
 BORDERS = ("one-sided", "reflect")
 
 #: The four discrete Laplace filters of Table II, by name.
@@ -16,7 +16,7 @@ SDA_BASES = ("cp2tv", "3f2n")
 #: scenes take longest, because extending a run wins ties against keeping).
 SDA_MAX_ITERATIONS = 1000
 
-#: Orientation of a normal (see :mod:`surfnorm.orientation`): a normal within this relative margin of being
+#: Orientation of a normal (see :mod:`surfnorm.kernels.orientation`): a normal within this relative margin of being
 #: perpendicular to the viewing ray (|n . P| <= ORIENTATION_TIE |n| |P|) is edge-on, and its sign is decided by
 #: a fixed rule instead of by rounding. (The kernels that use it are compiled with its value and cached: after
 #: changing it, delete the Numba cache files in src/surfnorm/__pycache__.)

@@ -18,7 +18,7 @@ from .methods import BORDER_OPTIONS, DAG_OPTIONS, Method, Option, register
 def _kernel(module: str, name: str):
     """``surfnorm.<module>.<name>``, imported on its first call."""
     def run(*args, **kwargs):
-        return getattr(importlib.import_module(f"surfnorm.{module}"), name)(*args, **kwargs)
+        return getattr(importlib.import_module(f"surfnorm.kernels.{module}"), name)(*args, **kwargs)
 
     run.__name__ = run.__qualname__ = name
     return run

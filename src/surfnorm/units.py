@@ -34,7 +34,7 @@ millimetres it picks one at every bump.
 
     PlaneSVD, whose fit normalises [n; d] with the offset d in depth units,
     fits each window in units of its pixel's depth / REFERENCE_DEPTH
-    (:func:`surfnorm.plane_fit.relative_moments`), for the same reasons.
+    (:func:`surfnorm.kernels.plane_fit.relative_moments`), for the same reasons.
 
     (Before, each frame was rescaled to a median depth of 100: relative to
     the frame's median, which a hole anywhere moves, and so one 10x10 hole
@@ -65,7 +65,7 @@ is rounded to float32.
 Ties
 ----
 Relative thresholds alone are not enough for methods that *compare*
-depth-derived values exactly. SDA-SNE (:mod:`surfnorm.sda`) takes the sign of 1D
+depth-derived values exactly. SDA-SNE (:mod:`surfnorm.kernels.sda`) takes the sign of 1D
 Laplacians (its continuity term) and the cheapest of several candidate
 energies, the first on ties. Integer millimetres give exact ties (a zero
 Laplacian on a ramp, two equal energies); the same depth in metres is

@@ -1,8 +1,8 @@
-"""AreaWeighted and AngleWeighted on tensors (the twins of ``surfnorm.averaging``).
+"""AreaWeighted and AngleWeighted on tensors (the twins of ``surfnorm.kernels.averaging``).
 
 Eq. 2 of D2NT: the normals of the 8 triangles (p, q_j, q_j+1) around p,
 over the ring right, up-right, up, up-left, left, down-left, down,
-down-right (:data:`surfnorm.averaging.RING`), weighted by the triangle's
+down-right (:data:`surfnorm.kernels.averaging.RING`), weighted by the triangle's
 area or its angle at p, summed in ring order and scaled to unit length.
 Offsets r_j = q_j - p are 0 for an invalid (or outside) q_j, so the two
 triangles that use it vanish. Float64 inside, as the NumPy backend's point
@@ -17,7 +17,7 @@ import torch.nn.functional as F
 
 from ._ops import Grid, pixel_offsets
 
-#: (dv, du) of the ring, as surfnorm.averaging.RING.
+#: (dv, du) of the ring, as surfnorm.kernels.averaging.RING.
 RING = ((0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1))
 
 

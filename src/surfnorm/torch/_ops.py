@@ -50,7 +50,7 @@ def kernel_tau(tau: float) -> float:
 
 
 def facing_sign(n_x, n_y, n_z, p_x, p_y, p_z):
-    """+1 or -1 per pixel: the factor that turns n to face the camera from P (surfnorm.orientation's rule).
+    """+1 or -1 per pixel: the factor that turns n to face the camera from P (surfnorm.kernels.orientation's rule).
 
     Where |n . P| <= t |n| |P| (t = ORIENTATION_TIE, edge-on) the first of n_z, n_y, n_x whose magnitude
     exceeds t |n| is made negative, so that rounding never decides the sign.
@@ -285,7 +285,7 @@ def cp2tv(g: Grid, cam, *, border: str, fill: float):
     return unit(n_x, n_y, n_z, g.valid & ok_u & ok_v, fill)
 
 
-# (dv, du, axis of the 1D DLF) of MNR's candidate neighbours, in tie-break order (as surfnorm.mnr.mnr_pixel)
+# (dv, du, axis of the 1D DLF) of MNR's candidate neighbours, in tie-break order (as surfnorm.kernels.mnr.mnr_pixel)
 _MNR_NEIGHBOURS = ((0, -1, 0), (0, 1, 0), (-1, 0, 1), (1, 0, 1))
 
 
@@ -324,7 +324,7 @@ _EIGHT = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
     """3F2N (Fan et al., Three-Filters-to-Normal, RA-L 2021, eq. 7-11) with a mean or median third filter.
 
-    As ``surfnorm.three_filters`` (and the SDA-SNE authors' demo):
+    As ``surfnorm.kernels.three_filters`` (and the SDA-SNE authors' demo):
 
     1. D = 1 / z; n_x = f_x dD/du, n_y = f_y dD/dv (the two gradient filters)
        by central differences, one-sided beside a gap;
@@ -336,7 +336,7 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
        where n_x = n_y = 0 exactly, n_z = -1;
     4. normalise, and turn each normal so that n . P < 0 (the raw 3F2N
        normal points away from the camera: n . P = +1 on a plane), an
-       edge-on one by the fixed rule of surfnorm.orientation.
+       edge-on one by the fixed rule of surfnorm.kernels.orientation.
 
     ``border="reflect"`` is OpenCV's BORDER_REFLECT_101, as the authors' code:
     the gradient across the image border is 0 and the mirrored neighbour
@@ -357,7 +357,7 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
     n_x, n_y = fx * d_u, fy * d_v
     u_c, v_c = pixel_offsets(z, (fx, fy, cx, cy))
     # f_x dX = (u_p - c_x) Z_p - (u_q - c_x) Z_q, so the focal lengths cancel from eq. 10: the
-    # candidates use the maps (u - c_x) Z and (v - c_y) Z, as surfnorm.three_filters does
+    # candidates use the maps (u - c_x) Z and (v - c_y) Z, as surfnorm.kernels.three_filters does
     zx, zy = u_c * z, v_c * z
     # those maps, depth and validity, padded by reflect-101 (the authors' filter2D) or as unusable (B x 4 x H+2 x W+2)
     P = torch.stack((zx, zy, z, g.valid.to(z.dtype)), dim=1)
@@ -389,7 +389,7 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
     zero = torch.zeros_like(n_x)
     n_x, n_y = torch.where(none_left, zero, n_x), torch.where(none_left, zero, n_y)
     n_z = torch.where((n_x == 0) & (n_y == 0), -torch.ones_like(n_z), torch.where(none_left, zero, n_z))
-    # face the camera (surfnorm.orientation), P = Z ((u - c_x) / f_x, (v - c_y) / f_y, 1) times f_x f_y / Z,
+    # face the camera (surfnorm.kernels.orientation), P = Z ((u - c_x) / f_x, (v - c_y) / f_y, 1) times f_x f_y / Z,
     # as the NumPy backend
     sign = facing_sign(n_x, n_y, n_z, u_c * fy, v_c * fx, fx * fy)
     n = unit(sign * n_x, sign * n_y, sign * n_z, g.valid & ok_u & ok_v, fill)

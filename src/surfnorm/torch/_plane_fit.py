@@ -1,4 +1,4 @@
-"""PlaneSVD, PlanePCA and VectorSVD on tensors (the twins of ``surfnorm.plane_fit``).
+"""PlaneSVD, PlanePCA and VectorSVD on tensors (the twins of ``surfnorm.kernels.plane_fit``).
 
 Per pixel p, the moments of the offsets r = q - p of the valid points q of
 the window (p included) are summed over shifted views of the float64 point
@@ -33,7 +33,7 @@ import torch
 from ._averaging import point_cloud, ring_offsets
 from ._ops import Grid, facing_sign
 
-# As surfnorm.plane_fit (not imported: that module loads Numba).
+# As surfnorm.kernels.plane_fit (not imported: that module loads Numba).
 _NEWTON_STEPS = 64
 _NEWTON_TOL = 1e-14
 
@@ -198,7 +198,7 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
         s_00, s_01, s_02, s_11, s_12, s_22 = S
         n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
     ok = ok & active
-    sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)  # surfnorm.orientation's rule
+    sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)  # surfnorm.kernels.orientation's rule
     n = torch.stack((sign * n_x, sign * n_y, sign * n_z), dim=1)
     return torch.where(ok.unsqueeze(1), n, torch.full_like(n, fill)).to(g.z.dtype)
 

@@ -1,4 +1,4 @@
-"""SDA-SNE on tensors (the twin of ``surfnorm.sda``).
+"""SDA-SNE on tensors (the twin of ``surfnorm.kernels.sda``).
 
 The dynamic programming of SDA-SNE is a Jacobi iteration: each pass builds
 every pixel's nine candidates (extend the backward or forward run, keep, copy
@@ -34,7 +34,7 @@ from .._choices import SDA_MAX_ITERATIONS as MAX_ITERATIONS
 from ._ops import Grid, pixel_offsets, unit
 from ._sne import camera_facing, candidates, neighbour_maps
 
-#: B, the weight of the state penalty (``surfnorm.sda.SDA_PENALTY``, not imported: that module loads Numba).
+#: B, the weight of the state penalty (``surfnorm.kernels.sda.SDA_PENALTY``, not imported: that module loads Numba).
 SDA_PENALTY = 1e10
 
 _P = 2  # padding of the state: every read of a pass stays inside
@@ -240,7 +240,7 @@ def _median_nz(z, valid, g_u, g_v, cam, reflect):
 
 
 def sda_sne(g: Grid, cam, *, iterations, base: str, border: str, fill: float):
-    """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), as ``surfnorm.sda.sda_sne``."""
+    """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), as ``surfnorm.kernels.sda.sda_sne``."""
     out_dtype = g.z.dtype
     z = g.z.double()
     fx, fy, cx, cy = (c.double() for c in cam)

@@ -1,4 +1,4 @@
-"""SNE-RoadSeg's estimator on tensors (the twin of ``surfnorm.three_filters.sne_roadseg``).
+"""SNE-RoadSeg's estimator on tensors (the twin of ``surfnorm.kernels.three_filters.sne_roadseg``).
 
 3F2N's gradients of inverse depth and its 8 neighbour candidates n_z,q; each
 candidate (n_x, n_y, n_z,q) is normalised and the unit vectors are summed to
@@ -19,7 +19,7 @@ import torch.nn.functional as F
 
 from ._ops import Grid, facing_sign, fd_gradient, pixel_offsets, unit
 
-# The 8 neighbours (dv, du), in the order of surfnorm.three_filters._NEIGHBOURS (the sum of S follows it).
+# The 8 neighbours (dv, du), in the order of surfnorm.kernels.three_filters._NEIGHBOURS (the sum of S follows it).
 NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 
@@ -37,7 +37,7 @@ def atan_of_ratio(num, den):
 
 
 def camera_facing(n_x, n_y, n_z, u_c, v_c, fx, fy):
-    """Turn n to face the camera by surfnorm.orientation's rule, as ``surfnorm.three_filters.camera_facing``
+    """Turn n to face the camera by surfnorm.kernels.orientation's rule, as ``surfnorm.kernels.three_filters.camera_facing``
     (P enters as its positive multiple P f_x f_y / Z)."""
     sign = facing_sign(n_x, n_y, n_z, u_c * fy, v_c * fx, fx * fy)
     return sign * n_x, sign * n_y, sign * n_z
@@ -66,7 +66,7 @@ def candidates(z, P, zx, zy, d_u, d_v):
 
 
 def sne_roadseg(g: Grid, cam, *, border: str, fill: float):
-    """SNE-RoadSeg (Fan et al., ECCV 2020, Sec. 3.1) as ``surfnorm.three_filters._sne_kernel``."""
+    """SNE-RoadSeg (Fan et al., ECCV 2020, Sec. 3.1) as ``surfnorm.kernels.three_filters._sne_kernel``."""
     out_dtype = g.z.dtype
     z = g.z.double()
     fx, fy, cx, cy = (c.double() for c in cam)

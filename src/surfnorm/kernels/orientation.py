@@ -34,8 +34,8 @@ rule turns only edge-on normals around (measured with
 
 from __future__ import annotations
 
-from ._choices import ORIENTATION_TIE
-from ._config import pixel
+from .._choices import ORIENTATION_TIE
+from .._config import pixel
 
 __all__ = ["ORIENTATION_TIE", "facing_sign"]
 

@@ -70,7 +70,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._config import njit, pixel, select
+from .._config import njit, pixel, select
 
 __all__ = ["adaptive_fit", "noise_profile", "NoiseProfile", "radius_table", "ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW"]
 

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._bands import whole
-from ._config import njit, pixel, row
+from .._bands import whole
+from .._config import njit, pixel, row
 from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment
 
 __all__ = ["mnr"]
@@ -68,7 +68,7 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
     candidate replaces the best so far only if smoother by more than ``tol``
     (0: strictly smoother; see :func:`mnr_row`). Every candidate is read (at
     clamped columns) before the choice, which then only selects among values
-    (see :func:`surfnorm.gradients.clamp`).
+    (see :func:`surfnorm.kernels.gradients.clamp`).
     """
     W = out_row.shape[0]
     x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)

@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from ._bands import whole
-from ._config import njit, pixel, row
+from .._bands import whole
+from .._config import njit, pixel, row
 from .gradients import (clamp, copy_row, dlf_code, fast_row, fd_gradient, kernel_tau, laplacian_row, segment, softmin_pair,
                         softmin_ratio, softmin_weights_row, stencil, usable)
 from .mnr import mnr_row, self_smoothness_row
@@ -35,7 +35,7 @@ __all__ = ["d2nt", "d2nt_v3", "cp2tv"]
 def write_unit(out, v, u, n_x, n_y, n_z, fill):
     """Store n / |n| at (v, u), or the fill value when n has no direction; returns whether stored.
 
-    Written with selects, not branches (see :func:`surfnorm.gradients.clamp`).
+    Written with selects, not branches (see :func:`surfnorm.kernels.gradients.clamp`).
     """
     norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
     ok = (norm > 0) & (norm < np.inf)
@@ -172,7 +172,7 @@ def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, 
 @row
 def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
     """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness
-    (``rel``: see :func:`surfnorm.gradients.softmin_weights_row`)."""
+    (``rel``: see :func:`surfnorm.kernels.gradients.softmin_weights_row`)."""
     n_runs = fast_row(valid, r, col, runs_r)
     laplacian_row(z, valid, r, runs_r, n_runs, dlf, np.int64(1), s)
     softmin_weights_row(s, z[r], tau, rel, p_v_r)
@@ -325,7 +325,7 @@ def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True,
     """D2NT with finite-difference (``gradient="fd"``) or DAG (``"dag"``) gradients, into ``out`` (H, W, 3).
 
     ``relative`` > 0 (the scale-invariant mode): DAG's tau is relative to each pixel's depth, tau z / relative
-    (see :func:`surfnorm.gradients.softmin_weights_row`); 0: tau in depth units (paper-faithful).
+    (see :func:`surfnorm.kernels.gradients.softmin_weights_row`); 0: tau in depth units (paper-faithful).
     ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`).
     """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
@@ -342,7 +342,7 @@ def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="al
             relative=0.0, bands=whole):
     """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3).
 
-    ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.mnr.mnr_row`);
+    ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.kernels.mnr.mnr_row`);
     ``relative``: DAG's tau relative to each pixel's depth in that mode (see :func:`d2nt`).
     ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`).
     """

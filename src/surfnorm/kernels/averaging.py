@@ -33,8 +33,8 @@ import math
 
 import numpy as np
 
-from ._bands import whole
-from ._config import njit, pixel, select
+from .._bands import whole
+from .._config import njit, pixel, select
 from .plane_fit import point_cloud
 
 __all__ = ["area_weighted", "angle_weighted", "RING"]

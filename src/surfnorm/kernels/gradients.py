@@ -36,8 +36,8 @@ from decimal import Decimal, getcontext
 
 import numpy as np
 
-from ._choices import BORDERS, DLF_NAMES
-from ._config import as_float64, njit, pixel, row
+from .._choices import BORDERS, DLF_NAMES
+from .._config import as_float64, njit, pixel, row
 
 __all__ = ["DLF_NAMES", "BORDERS", "dlf_code", "fd_gradients", "dag_gradients", "valid_map", "softmin_ratio",
            "kernel_tau"]

@@ -36,7 +36,7 @@ The eigenvector is the null vector of (A - lambda I): the largest cross
 product of two of its rows. Arithmetic is float64 (the point offsets q - p are
 small differences of large coordinates); the output is float32.
 
-Normals face the camera (n . p_i < 0, :mod:`surfnorm.orientation`). Invalid
+Normals face the camera (n . p_i < 0, :mod:`surfnorm.kernels.orientation`). Invalid
 neighbours are left out (their depth is never read: the point cloud holds 0
 there, weighted 0); a pixel gets the fill value when it is invalid itself,
 when fewer than 3 points (p_i included) are valid in its window, or when they
@@ -57,8 +57,8 @@ import math
 
 import numpy as np
 
-from ._bands import whole
-from ._config import njit, pixel
+from .._bands import whole
+from .._config import njit, pixel
 from .orientation import facing_sign
 
 __all__ = ["plane_svd", "plane_pca", "vector_svd", "point_cloud"]
@@ -219,7 +219,7 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
 
 @pixel
 def write_facing(out, v, u, n_x, n_y, n_z, ok, p_x, p_y, p_z, fill):
-    """Store the unit normal at (v, u), turned to face the camera (:mod:`surfnorm.orientation`), or the fill value."""
+    """Store the unit normal at (v, u), turned to face the camera (:mod:`surfnorm.kernels.orientation`), or the fill value."""
     if ok:
         sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)
         out[v, u, 0] = sign * n_x

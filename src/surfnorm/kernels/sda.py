@@ -38,7 +38,7 @@ form the demo uses, which is D2NT's eq. 9:
 n = (f_x G_u, f_y G_v, -(Z + (u - c_x) G_u + (v - c_y) G_v)), facing the
 camera. The demo also pairs SDA with 3F2N (``base="3f2n"``): the dynamic
 programming then runs on the inverse depth 1/Z, and its gradients go into
-3F2N's median filter (see :mod:`surfnorm.three_filters`).
+3F2N's median filter (see :mod:`surfnorm.kernels.three_filters`).
 
 Everything is float64, as in the authors' code. Image border: the Laplacian
 mirrors the missing neighbour (OpenCV BORDER_REFLECT_101, as the authors'
@@ -66,9 +66,9 @@ import numba
 import numba.extending
 import numpy as np
 
-from ._choices import SDA_BASES, SDA_MAX_ITERATIONS
-from ._bands import whole
-from ._config import njit, pixel, select
+from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
+from .._bands import whole
+from .._config import njit, pixel, select
 from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, third_nz, write_unit
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
@@ -439,7 +439,7 @@ def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1):
 
     ``s`` (depth, zero where invalid), gradients and energies are padded by _P; a gradient with
     infinite energy does not exist. Branch-free, into a flat view of each row of ``out`` (C-contiguous),
-    so that the loop vectorises (see :func:`surfnorm.translate.store_unit_flat`). Rows v0 .. v1 - 1.
+    so that the loop vectorises (see :func:`surfnorm.kernels.translate.store_unit_flat`). Rows v0 .. v1 - 1.
     """
     H, W = out.shape[0], out.shape[1]
     for v in range(v0, v1):

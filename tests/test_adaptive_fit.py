@@ -171,8 +171,8 @@ def test_auto_tau_is_checked():
 
 def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     """Between CLEAN_FLOOR and NOISY_FLOOR auto is the normalised weighted mean of both estimators' normals."""
-    from surfnorm.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
-    from surfnorm.adaptive_fit import NoiseProfile
+    from surfnorm.kernels.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
+    from surfnorm.kernels.adaptive_fit import NoiseProfile
 
     one = np.ones(1)
     assert adaptive_weight(NoiseProfile(one, one, CLEAN_FLOOR)) == 0.0
@@ -193,7 +193,7 @@ def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
             break
     else:
         pytest.fail("no noise level put the floor inside the band")
-    from surfnorm.adaptive_fit import noise_profile
+
 
     t = adaptive_weight(noise_profile(z, z > 0, float(K[0, 0])))
     a = surfnorm.estimate(z, K, method="d2nt_v3", fill=np.nan)
@@ -206,7 +206,7 @@ def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
 def test_window_ties_go_the_same_way_in_every_unit():
     """Integer-millimetre steps make mirror-image windows tie, and planes fitted exactly leave residuals of rounding;
     rounding in float32 metres must not decide them. On the shipped frames read with 1 mm steps (0.1 to 4 m), 8 of
-    137,963 pixels moved by more than 1e-4 (some by 20 degrees) before ties had a margin (surfnorm.adaptive_fit.TIE);
+    137,963 pixels moved by more than 1e-4 (some by 20 degrees) before ties had a margin (surfnorm.kernels.adaptive_fit.TIE);
     benchmarks/unit_holes.py has the 12-frame table."""
     differing = total = 0
     for name in find_frames(sample_root()):

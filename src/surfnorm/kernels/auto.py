@@ -5,7 +5,7 @@ between neighbouring pixels' points) is where small stencils and
 discontinuity awareness win: D2NT with DAG and MNR (``d2nt_v3``) is the most
 accurate there. Sensor depth (quantised, noisy, sparse) is where wide support
 wins: the adaptive plane fit of inverse depth (``adaptive_fit``). The choice
-is the depth's noise floor (:class:`surfnorm.adaptive_fit.NoiseProfile`): the
+is the depth's noise floor (:class:`surfnorm.kernels.adaptive_fit.NoiseProfile`): the
 median second difference of inverse depth, in units of the point spacing.
 Rendered frames measure 0.00-0.08, real PrimeSense, Kinect v1, RealSense D435
 and LiDAR frames 0.3-4.

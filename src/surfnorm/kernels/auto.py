@@ -17,6 +17,15 @@ between the units of one depth map (millimetres against metres move the floor
 by about 1e-4 of itself), between a frame with and without a hole, and between
 consecutive frames of a video. Blended, the output moves continuously with the
 floor, and both estimators run only for frames inside the band.
+
+A limit: the floor is measured at the pixel scale. Depth whose error is smooth
+over several pixels (a stereo matcher's aggregation, a sensor's spatial
+post-filter) reads as clean there, so ``auto`` runs ``d2nt_v3``, which follows
+the smooth error. On 3F2N frames with Gaussian-correlated noise (correlation
+sigma 2 px, one point spacing RMS) the floor reads 0.09-0.10; ``d2nt_v3`` then
+measures 15-26 degrees and ``adaptive_fit`` 7-15. Fine clean geometry (the
+foliage of 3F2N's tree) looks the same at two pixels, so the floor cannot
+tell them apart: for such depth name ``method="adaptive_fit"``.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ configurations are interleaved round by round (the machine may be shared and
 its load changes); the table gives the median files per second and the median
 ratio to the single process of the same round. The Dask rows cover every
 shard size asked for (``--shard-sizes``; ``default`` is what
-``surfnorm.distributed.default_shard_size`` picks for the run).
+``surfnorm.batch.cluster.default_shard_size`` picks for the run).
 
 Writes a Markdown table to stdout and JSON (figures, versions, commit, load)
 to ``bench-output/bench_convert.json``.
@@ -78,7 +78,7 @@ CAMERA = dict(fx=525.0, fy=525.0, cx=319.5, cy=239.5)
 
 def one_run(config: str, inputs: list[Path], out: Path, common: dict) -> dict:
     """Set up, then time one convert call; runs in its own process."""
-    from surfnorm.convert import convert
+    from surfnorm.batch import convert
 
     warm = out.with_name(out.name + "-warm")
     shutil.rmtree(warm, ignore_errors=True)
@@ -139,7 +139,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from surfnorm.camera import Intrinsics
-    from surfnorm.distributed import default_shard_size
+    from surfnorm.batch.cluster import default_shard_size
 
     common = dict(method=args.method, fmt=args.fmt, depth_scale=1000.0, intrinsics=Intrinsics(**CAMERA))
     inputs = make_inputs(args.workdir / "depth", args.files)

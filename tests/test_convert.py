@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 import surfnorm
 from surfnorm import Intrinsics
 from surfnorm.cli import app
-from surfnorm.convert import ConvertSettings, ConvertTask, FileResult, convert, convert_file, plan_tasks
+from surfnorm.batch import ConvertSettings, ConvertTask, FileResult, convert, convert_file, plan_tasks
 from surfnorm.errors import InputError
 from surfnorm.io import read_depth, read_normals
 
@@ -126,7 +126,7 @@ def test_outputs_inside_the_input_folder_are_not_inputs(tmp_path):
 
 
 def test_unlistable_input_folder_and_unwritable_output(tmp_path, monkeypatch):
-    mod = sys.modules["surfnorm.convert"]  # (surfnorm.convert is the function)
+    mod = sys.modules["surfnorm.batch.tasks"]
 
     depth_png(tmp_path / "a.png", 0)
     real = os.access
@@ -231,7 +231,7 @@ def test_dask_client_is_handed_the_tasks(tmp_path, monkeypatch):
         for t in tasks[:2]:  # the fake cluster loses the last task
             on_result(convert_file(t, settings))
 
-    monkeypatch.setitem(sys.modules, "surfnorm.distributed", types.SimpleNamespace(run_on_dask=run_on_dask))
+    monkeypatch.setitem(sys.modules, "surfnorm.batch.cluster", types.SimpleNamespace(run_on_dask=run_on_dask))
     seen = []
     client = types.SimpleNamespace(submit=lambda *a, **k: None, nthreads=lambda: {})  # what convert checks a client has
     summary = convert(srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client=client, progress=seen.append,

@@ -1,8 +1,8 @@
-"""surfnorm.distributed: convert on a Dask cluster (issue 8).
+"""surfnorm.batch.cluster: convert on a Dask cluster (issue 8).
 
 One LocalCluster of 2 single-threaded worker processes serves the module. The
 tests that need a worker to misbehave (die mid-write, wait for the client)
-install a worker plugin that wraps ``surfnorm.convert.convert_file`` in the
+install a worker plugin that wraps ``surfnorm.batch.tasks.convert_file`` in the
 worker processes only; the client's own process and the code under test are
 not patched.
 """
@@ -21,7 +21,7 @@ import pytest
 
 import surfnorm
 from surfnorm.camera import Intrinsics
-from surfnorm.convert import ConvertSettings, convert, plan_tasks
+from surfnorm.batch import ConvertSettings, convert, plan_tasks
 from surfnorm.errors import InputError, MissingDependencyError
 
 try:
@@ -71,7 +71,7 @@ def expected_names(inputs) -> list[str]:
 # --- worker-side misbehaviour, installed with a WorkerPlugin ---------------------------------------
 
 class PatchConvertFile(distributed.WorkerPlugin if distributed is not None else object):
-    """Worker plugin: wrap ``surfnorm.convert.convert_file`` in each worker process with ``wrapper(real, task, settings)``."""
+    """Worker plugin: wrap ``surfnorm.batch.tasks.convert_file`` in each worker process with ``wrapper(real, task, settings)``."""
 
     name = "surfnorm-test-patch"
 
@@ -83,7 +83,7 @@ class PatchConvertFile(distributed.WorkerPlugin if distributed is not None else 
         import functools
         import importlib
 
-        convert = importlib.import_module("surfnorm.convert")
+        convert = importlib.import_module("surfnorm.batch.tasks")
 
         real = getattr(convert.convert_file, "__wrapped_real__", convert.convert_file)
         patched = functools.partial(self.wrapper, real, **self.params)
@@ -93,7 +93,7 @@ class PatchConvertFile(distributed.WorkerPlugin if distributed is not None else 
     def teardown(self, worker):
         import importlib
 
-        convert = importlib.import_module("surfnorm.convert")
+        convert = importlib.import_module("surfnorm.batch.tasks")
 
         convert.convert_file = getattr(convert.convert_file, "__wrapped_real__", convert.convert_file)
 
@@ -295,7 +295,7 @@ def test_exception_escaping_convert_file_is_that_files_error(client, inputs, loc
 # --- shard size, temporaries, errors ---------------------------------------------------------------
 
 def test_default_shard_size():
-    from surfnorm.distributed import MAX_SHARD, MIN_SHARD, default_shard_size
+    from surfnorm.batch.cluster import MAX_SHARD, MIN_SHARD, default_shard_size
 
     assert default_shard_size(100, 2) == 13  # ceil(100 / (4 shards x 2 threads))
     assert default_shard_size(10, 2) == MIN_SHARD
@@ -305,14 +305,14 @@ def test_default_shard_size():
 
 @pytest.mark.parametrize("bad", [0, -3, 2.5, True, "8"])
 def test_bad_shard_size(bad):
-    from surfnorm.distributed import run_on_dask
+    from surfnorm.batch.cluster import run_on_dask
 
     with pytest.raises(InputError, match=r"shard_size: expected a positive whole number, got"):
         run_on_dask([], ConvertSettings(), client=None, on_result=print, shard_size=bad)
 
 
 def test_missing_dask_says_how_to_install(monkeypatch, inputs, tmp_path):
-    from surfnorm.distributed import cluster_client, run_on_dask
+    from surfnorm.batch.cluster import cluster_client, run_on_dask
 
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
     hint = r'pip install "surfnorm\[dask\]"'
@@ -329,7 +329,7 @@ def test_missing_dask_says_how_to_install(monkeypatch, inputs, tmp_path):
 
 
 def test_import_surfnorm_does_not_import_dask():
-    code = "import sys, surfnorm, surfnorm.convert; print(sorted(m for m in ('dask', 'distributed') if m in sys.modules))"
+    code = "import sys, surfnorm, surfnorm.batch; print(sorted(m for m in ('dask', 'distributed') if m in sys.modules))"
     env = dict(os.environ, PYTHONPATH=str(Path(surfnorm.__file__).parents[1]))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
     assert out.stdout.strip() == "[]"
@@ -337,7 +337,7 @@ def test_import_surfnorm_does_not_import_dask():
 
 @needs_dask
 def test_cluster_client_refuses_both_or_neither():
-    from surfnorm.distributed import cluster_client
+    from surfnorm.batch.cluster import cluster_client
 
     with pytest.raises(InputError, match="expected exactly one of address= and local_workers="):
         with cluster_client():
@@ -352,7 +352,7 @@ def test_cluster_client_refuses_both_or_neither():
 
 @needs_dask
 def test_cluster_client_unreachable_address():
-    from surfnorm.distributed import cluster_client
+    from surfnorm.batch.cluster import cluster_client
 
     with pytest.raises(ConnectionError, match=r"cluster address 'tcp://127.0.0.1:9': no Dask scheduler answered there"):
         with cluster_client("tcp://127.0.0.1:9", timeout=1.0):

@@ -6,7 +6,7 @@ import pytest
 
 import surfnorm
 from surfnorm import DataFileError, InputError, Intrinsics
-from surfnorm.convert import plan_tasks
+from surfnorm.batch import plan_tasks
 from surfnorm.io.depth import read_depth, read_mask
 from surfnorm.io.intrinsics import read_intrinsics
 from surfnorm.io.normals import read_normals

@@ -349,7 +349,7 @@ def test_cli_raw_options_misused_exit_2(tmp_path):
 
 
 def test_convert_folder_of_nyu_pgm_and_exr(tmp_path):
-    from surfnorm.convert import convert
+    from surfnorm.batch import convert
 
     src = tmp_path / "raw"
     src.mkdir()

@@ -25,7 +25,7 @@ import pytest
 
 import surfnorm
 from surfnorm import Intrinsics
-from surfnorm.convert import convert
+from surfnorm.batch import convert
 
 SRC = str(Path(surfnorm.__file__).resolve().parent.parent)
 CAM = Intrinsics(300.0, 300.0, 159.5, 119.5)

@@ -17,7 +17,7 @@ from __future__ import annotations
 from . import metrics
 from ._api import estimate, refine
 from .camera import Intrinsics
-from .convert import convert  # the function; the module stays importable as ``from surfnorm.convert import ...``
+from .batch import convert
 from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
 from .methods import methods
 

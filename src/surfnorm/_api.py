@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import os
-import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ._bands import on_threads, whole
+from ._bands import map_threads, on_threads, whole
 from ._validate import (as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, split_masked,
                         valid_pixels)
 from .camera import Intrinsics
@@ -69,36 +67,6 @@ def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np
     if "tau" in options:
         options = dict(options, tau=options["tau"] * 2.0 ** k)
     return scaled_frame(src, k), options
-
-
-# Thread pools for stacks of frames, kept between calls: starting two threads and stopping them costs about
-# 0.5 ms (measured), 5 % of a batch of 16 d2nt_basic frames on 2 threads. Only pools of up to one thread per
-# core are kept. A forked child forgets them: its copies have no threads behind them.
-_pools: dict[int, ThreadPoolExecutor] = {}
-_pools_lock = threading.Lock()
-
-
-def _forget_pools() -> None:
-    global _pools_lock
-    _pools.clear()
-    _pools_lock = threading.Lock()  # another thread may have held it at the fork
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_pools)
-
-
-def _map(func, n: int, workers: int) -> None:
-    """``func(i)`` for i in range(n) on ``workers`` threads; the first exception is raised here."""
-    if workers > (os.cpu_count() or 1):
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            list(pool.map(func, range(n)))
-        return
-    with _pools_lock:
-        if workers not in _pools:
-            _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="surfnorm")
-        pool = _pools[workers]
-    list(pool.map(func, range(n)))
 
 
 def _valid(z, mask, bands=whole):
@@ -232,7 +200,7 @@ def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int 
         for i in range(z.shape[0]):
             one(i)
     else:
-        _map(one, z.shape[0], min(workers, z.shape[0]))
+        map_threads(one, z.shape[0], min(workers, z.shape[0]))
     return out
 
 

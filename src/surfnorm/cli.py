@@ -282,7 +282,7 @@ def convert(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from .convert import convert as convert_, plan_tasks
+    from .batch import convert as convert_, plan_tasks
 
     _check_format(fmt)
     if jobs < 1:
@@ -302,7 +302,7 @@ def convert(
         cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
         columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         if on_dask:
-            from .distributed import cluster_client
+            from .batch.cluster import cluster_client
         dask_client = cluster_client(cluster, local_workers=local_cluster) if on_dask else nullcontext()
         with dask_client as client, Progress(*columns, console=err_console, transient=True) as bar:
             task = bar.add_task("convert", total=None)

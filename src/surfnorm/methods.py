@@ -1,9 +1,16 @@
-"""The registry of estimators: name -> recipe, category, paper reference, options.
+"""The registry of estimators: name -> kernel, recipe, category, paper reference, options.
 
 A method name is a recipe. ``d2nt_v3`` is DAG gradients -> D2NT translation
 -> MNR; any registered name followed by ``+mnr`` runs MNR after it (Table IV:
 ``3f2n_median+mnr``, ``cp2tv+mnr``). The CLI and the benchmark read their
 choices from here, so a new estimator appears everywhere once registered.
+
+Every entry below names the kernel that computes it: the function written
+before its ``register`` call imports it (``from .kernels.<module> import
+<function>``) on the method's first run, so that ``import surfnorm`` loads no
+Numba, and a first ``estimate(..., method="d2nt_v3")`` loads only the D2NT
+kernels. ``Method.kernel`` says the same for :func:`methods` to report
+(tests/test_methods.py checks that each run calls the kernel it names).
 """
 
 from __future__ import annotations
@@ -11,9 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from ._validate import check_bool, check_choice, check_fill, check_positive
+from ._choices import BORDERS, DLF_NAMES, SDA_BASES, SDA_MAX_ITERATIONS
+from ._validate import check_bool, check_choice, check_fill, check_iterations, check_positive, check_window
 from .errors import InputError
-from ._choices import BORDERS, DLF_NAMES
 
 __all__ = ["Option", "Method", "MethodInfo", "register", "resolve", "methods", "CATEGORIES", "MNR_SUFFIX", "DEFAULT_METHOD"]
 
@@ -59,7 +66,8 @@ class Method:
 
     ``run(z, valid, cam, out, **options)`` fills ``out`` (H, W, 3) float32 from
     validated depth ``z`` (H, W) float32, ``valid`` (H, W) bool and
-    :class:`~surfnorm.camera.Intrinsics` ``cam``.
+    :class:`~surfnorm.camera.Intrinsics` ``cam``; it calls the function that
+    ``kernel`` names (``"surfnorm.kernels.<module>.<function>"``).
     """
 
     name: str
@@ -79,17 +87,20 @@ class Method:
     # in row bands, every band reading the rows around it that it needs (its halo) from the whole frame, so
     # the result is the same to the bit (see surfnorm._bands). False: one frame runs on one thread.
     bands: bool = False
+    kernel: str = ""  # where the kernel lives: "surfnorm.kernels.<module>.<function>"
 
 
 @dataclass(frozen=True)
 class MethodInfo:
-    """What :func:`surfnorm.methods` reports about a method."""
+    """What :func:`surfnorm.methods` reports about a method; ``kernel`` is where its kernel lives
+    (``"surfnorm.kernels.<module>.<function>"``)."""
 
     name: str
     category: str
     reference: str
     summary: str
     options: dict
+    kernel: str = ""
 
 
 _REGISTRY: dict[str, Method] = {}
@@ -104,21 +115,14 @@ def register(method: Method) -> Method:
     return method
 
 
-def _ensure_loaded():
-    # Importing the estimator modules registers them; done lazily so that
-    # ``import surfnorm`` stays cheap.
-    from . import estimators  # noqa: F401
-
-
 def methods() -> dict[str, MethodInfo]:
     """The registered estimators by name, in registration order.
 
     Any name may also be followed by ``+mnr`` to refine its output with MNR.
     """
-    _ensure_loaded()
     return {
         m.name: MethodInfo(m.name, m.category, m.reference, m.summary,
-                           {k: o.default for k, o in option_specs(m, False).items()})
+                           {k: o.default for k, o in option_specs(m, False).items()}, m.kernel)
         for m in _REGISTRY.values()
     }
 
@@ -132,7 +136,6 @@ def option_specs(method: Method, refined: bool) -> dict[str, Option]:
 
 def resolve(name, options: dict) -> tuple[Method, bool, dict]:
     """Look a method name up and check its options. Returns (method, refine_after, clean options)."""
-    _ensure_loaded()
     if not isinstance(name, str):
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
     base, refined = (name[: -len(MNR_SUFFIX)], True) if name.endswith(MNR_SUFFIX) else (name, False)
@@ -145,3 +148,215 @@ def resolve(name, options: dict) -> tuple[Method, bool, dict]:
         raise InputError(f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, got unknown option(s) {', '.join(unknown)}")
     clean = {k: spec.check(k, options[k]) if k in options else spec.default for k, spec in specs.items()}
     return method, refined, clean
+
+
+# --- The estimators ------------------------------------------------------------------------------
+# Each run below imports its kernel where it is called (see the module docstring) and passes the
+# method's checked options on to it; ``kernel=`` names the same function.
+
+D2NT_PAPER = "Feng et al., D2NT: A High-Performing Depth-to-Normal Translator, ICRA 2023"
+
+
+def _run_d2nt_basic(z, valid, cam, out, **options):
+    from .kernels.translate import d2nt
+
+    return d2nt(z, valid, cam, out, gradient="fd", **options)
+
+
+def _run_d2nt_v2(z, valid, cam, out, **options):
+    from .kernels.translate import d2nt
+
+    return d2nt(z, valid, cam, out, gradient="dag", **options)
+
+
+def _run_d2nt_v3(z, valid, cam, out, **options):
+    from .kernels.translate import d2nt_v3
+
+    return d2nt_v3(z, valid, cam, out, **options)
+
+
+def _run_cp2tv(z, valid, cam, out, **options):
+    from .kernels.translate import cp2tv
+
+    return cp2tv(z, valid, cam, out, **options)
+
+
+register(Method("d2nt_basic", "depth-to-normal", D2NT_PAPER + ", eq. 9",
+                "D2NT translation with finite-difference gradients", _run_d2nt_basic, BORDER_OPTIONS, bands=True,
+                kernel="surfnorm.kernels.translate.d2nt"))
+register(Method("d2nt_v2", "depth-to-normal", D2NT_PAPER + ", eq. 9-14",
+                "D2NT with discontinuity-aware gradient (DAG) filter", _run_d2nt_v2, DAG_OPTIONS, relative=True,
+                bands=True, kernel="surfnorm.kernels.translate.d2nt"))
+register(Method("d2nt_v3", "depth-to-normal", D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
+                "D2NT with DAG filter and MRF-based normal refinement (MNR)", _run_d2nt_v3, DAG_OPTIONS, mnr=True,
+                ties=True, relative=True, bands=True, kernel="surfnorm.kernels.translate.d2nt_v3"))
+register(Method("cp2tv", "depth-to-normal",
+                "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
+                "cross product of two finite-difference tangent vectors", _run_cp2tv, BORDER_OPTIONS, bands=True,
+                kernel="surfnorm.kernels.translate.cp2tv"))
+
+# --- 3F2N and SNE-RoadSeg ------------------------------------------------------------------------
+
+THREE_F2N_PAPER = "Fan et al., Three-Filters-to-Normal: An Accurate and Ultrafast Surface Normal Estimator, RA-L 2021"
+
+
+def _run_3f2n_mean(z, valid, cam, out, **options):
+    from .kernels.three_filters import three_filters
+
+    return three_filters(z, valid, cam, out, third="mean", **options)
+
+
+def _run_3f2n_median(z, valid, cam, out, **options):
+    from .kernels.three_filters import three_filters
+
+    return three_filters(z, valid, cam, out, third="median", **options)
+
+
+def _run_sne_roadseg(z, valid, cam, out, **options):
+    from .kernels.three_filters import sne_roadseg
+
+    return sne_roadseg(z, valid, cam, out, **options)
+
+
+register(Method("3f2n_mean", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
+                "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours", _run_3f2n_mean,
+                BORDER_OPTIONS, bands=True, kernel="surfnorm.kernels.three_filters.three_filters"))
+register(Method("3f2n_median", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
+                "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours", _run_3f2n_median,
+                BORDER_OPTIONS, bands=True, kernel="surfnorm.kernels.three_filters.three_filters"))
+register(Method("sne_roadseg", "depth-to-normal",
+                "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
+                "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
+                "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
+                _run_sne_roadseg, BORDER_OPTIONS, bands=True, kernel="surfnorm.kernels.three_filters.sne_roadseg"))
+
+# --- SDA-SNE -------------------------------------------------------------------------------------
+
+SDA_OPTIONS = {
+    "iterations": Option(3, check_iterations,
+                         "passes of the dynamic programming (authors' demo: 3); None runs until no pixel changes, "
+                         f"at most {SDA_MAX_ITERATIONS} passes"),
+    "base": Option("cp2tv", lambda name, value: check_choice(name, value, SDA_BASES),
+                   "how gradients become normals: cp2tv (on depth, the paper's SDA-SNE) or 3f2n "
+                   "(SDA on inverse depth, then 3F2N's median filter, as the authors' demo offers)"),
+    **BORDER_OPTIONS,
+}
+
+
+def _run_sda_sne(z, valid, cam, out, **options):
+    from .kernels.sda import sda_sne
+
+    return sda_sne(z, valid, cam, out, **options)
+
+
+register(Method("sda_sne", "energy minimisation",
+                "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
+                "Dynamic Programming, 3DV 2022",
+                "depth gradients chosen by multi-directional dynamic programming, then CP2TV", _run_sda_sne,
+                SDA_OPTIONS, ties=True, equivariant=False, bands=True, kernel="surfnorm.kernels.sda.sda_sne"))
+
+# --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
+
+WINDOW_OPTIONS = {
+    "window": Option(3, check_window, "side of the square pixel neighbourhood whose points are fitted (odd, >= 3)"),
+}
+
+
+def _run_plane_svd(z, valid, cam, out, **options):
+    from .kernels.plane_fit import plane_svd
+
+    return plane_svd(z, valid, cam, out, **options)
+
+
+def _run_plane_pca(z, valid, cam, out, **options):
+    from .kernels.plane_fit import plane_pca
+
+    return plane_pca(z, valid, cam, out, **options)
+
+
+def _run_vector_svd(z, valid, cam, out, **options):
+    from .kernels.plane_fit import vector_svd
+
+    return vector_svd(z, valid, cam, out, **options)
+
+
+def _run_area_weighted(z, valid, cam, out, **options):
+    from .kernels.averaging import area_weighted
+
+    return area_weighted(z, valid, cam, out, **options)
+
+
+def _run_angle_weighted(z, valid, cam, out, **options):
+    from .kernels.averaging import angle_weighted
+
+    return angle_weighted(z, valid, cam, out, **options)
+
+
+register(Method("plane_svd", "energy minimisation",
+                "Wang et al., Comparison of local plane fitting methods for range data, CVPR 2001 "
+                "(as formulated by Klasing et al., ICRA 2009); D2NT Table I",
+                "least-squares plane with offset: smallest right singular vector of [Q+, 1]",
+                _run_plane_svd, WINDOW_OPTIONS, relative=True, equivariant=False, bands=True,
+                kernel="surfnorm.kernels.plane_fit.plane_svd"))
+register(Method("plane_pca", "energy minimisation",
+                "Klasing et al., Realtime segmentation of range data using continuous nearest neighbors, ICRA 2009; "
+                "D2NT Table I",
+                "smallest eigenvector of the covariance of the window's points about their centroid",
+                _run_plane_pca, WINDOW_OPTIONS, bands=True, kernel="surfnorm.kernels.plane_fit.plane_pca"))
+register(Method("vector_svd", "energy minimisation",
+                "Jordan and Mordohai, A quantitative evaluation of surface normal estimation in point clouds, "
+                "IROS 2014; D2NT Table I",
+                "smallest right singular vector of the matrix of the vectors q - p",
+                _run_vector_svd, WINDOW_OPTIONS, bands=True, kernel="surfnorm.kernels.plane_fit.vector_svd"))
+register(Method("area_weighted", "averaging",
+                "Klasing et al., Comparison of surface normal estimation methods for range sensing applications, "
+                "ICRA 2009; D2NT eq. 2 and Table I",
+                "mean of the 8 triangle normals around the pixel, weighted by triangle area",
+                _run_area_weighted, bands=True, kernel="surfnorm.kernels.averaging.area_weighted"))
+register(Method("angle_weighted", "averaging",
+                "Jin et al., A comparison of algorithms for vertex normal computation, The Visual Computer 2005; "
+                "D2NT eq. 2 and Table I",
+                "mean of the 8 triangle normals around the pixel, weighted by their angle at the pixel",
+                _run_angle_weighted, bands=True, kernel="surfnorm.kernels.averaging.angle_weighted"))
+
+# --- Sensor depth (ours) -------------------------------------------------------------------------
+
+SURFNORM = "surfnorm (ours, not in the D2NT paper)"
+
+
+def _check_window_or_none(name, value):
+    return None if value is None else check_window(name, value)
+
+
+ADAPTIVE_OPTIONS = {
+    "window": Option(None, _check_window_or_none,
+                     "side of the fitted window (odd, >= 3); None: chosen per pixel from the frame's noise and "
+                     "the pixel's depth"),
+    "max_window": Option(31, check_window, "largest window side (odd, >= 3), also for sparse depth"),
+}
+
+
+def _run_adaptive_fit(z, valid, cam, out, **options):
+    from .kernels.adaptive_fit import adaptive_fit
+
+    return adaptive_fit(z, valid, cam, out, **options)
+
+
+def _run_auto(z, valid, cam, out, **options):
+    from .kernels.auto import auto
+
+    return auto(z, valid, cam, out, **options)
+
+
+register(Method("adaptive_fit", "energy minimisation",
+                SURFNORM + ": least-squares plane of inverse depth over a window sized from the frame's noise, "
+                "integral images, edge-aware quadrant windows",
+                "plane fit of inverse depth, support sized from the depth's own noise; for sensor depth",
+                _run_adaptive_fit, ADAPTIVE_OPTIONS, kernel="surfnorm.kernels.adaptive_fit.adaptive_fit"))
+register(Method("auto", "automatic",
+                SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's "
+                "noise floor",
+                "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
+                _run_auto, {"tau": Option(1.0, DAG_OPTIONS["tau"].check, "softness tau of d2nt_v3's softmin (eq. 13), "
+                                          "where auto picks d2nt_v3")},
+                ties=True, relative=True, bands=True, kernel="surfnorm.kernels.auto.auto"))

@@ -40,9 +40,8 @@ KERNEL_CHOICES = {"window": [5], "base": ["3f2n"]}
 
 def variants(name: str) -> list[dict]:
     """The keyword arguments of ``estimate`` that together compile every kernel of method ``name``."""
-    from .methods import _REGISTRY, _ensure_loaded
+    from .methods import _REGISTRY
 
-    _ensure_loaded()
     method = _REGISTRY[name]
     out = [{"method": name}, {"method": name, "mask": True}, {"method": name + "+mnr"}]
     if method.ties:

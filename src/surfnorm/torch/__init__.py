@@ -79,7 +79,7 @@ __all__ = ["estimate", "DepthToNormal", "methods"]
 # those of the NumPy backend's method (surfnorm.methods: same names, defaults and checks; ``mnr_dlf`` is
 # taken off and applied here, as MNR runs after the kernel). Whether a recipe ends with MNR (d2nt_v3) is
 # read from the NumPy registry too, so the two backends cannot disagree on a method's options.
-# Adding a method (once surfnorm.estimators registers it): write its kernel as
+# Adding a method (once surfnorm.methods registers it): write its kernel as
 # ``run(g: _ops.Grid, cam, *, <its options>, fill) -> (B, 3, H, W)`` in a module of this package (g.z is
 # depth with invalid pixels set to 1, g.valid the validity, cam = (fx, fy, cx, cy) each (B, 1, 1)) and add
 # ``_register("name", module.run)`` below; tests/test_torch.py then compares it with the NumPy backend.

@@ -8,7 +8,7 @@ cluster is asked for, and ``import surfnorm`` never imports it.
 How the work is cut
 -------------------
 The files are cut into shards of ``shard_size`` consecutive tasks; each shard
-is one Dask task that calls :func:`surfnorm.convert.convert_file` on its files
+is one Dask task that calls :func:`surfnorm.batch.tasks.convert_file` on its files
 in turn, on whichever worker the scheduler picks. Results come back shard by
 shard as shards finish (``as_completed``), and every file's result goes to the
 same ``on_result`` callback as on the local path, so the progress bar moves
@@ -36,7 +36,7 @@ Why a dead worker loses nothing
 * A process killed between creating its temporary file and the rename leaves
   that temporary file behind (its cleanup never runs). When all shards are
   done, the temporary files beside the planned outputs are removed, as
-  :func:`surfnorm.convert.convert` does before a run.
+  :func:`surfnorm.batch.run.convert` does before a run.
 
 Inputs are read and outputs written by the workers, and the client plans the
 tasks (lists input folders, creates the output folder, sweeps temporaries):
@@ -46,14 +46,15 @@ runs ``convert`` (a shared filesystem, e.g. from a cluster's login node).
 
 from __future__ import annotations
 
-import importlib
 import math
 import uuid
 from collections import deque
 from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence
 
-from .errors import InputError, MissingDependencyError
+from ..errors import InputError, MissingDependencyError
+from . import tasks as tasks_module
+from .tasks import FileResult, remove_stale_temporaries
 
 __all__ = ["run_on_dask", "default_shard_size", "cluster_client", "INSTALL_HINT"]
 
@@ -101,10 +102,8 @@ def default_shard_size(n_tasks: int, n_threads: int) -> int:
 
 def _convert_shard(tasks, settings):
     """One Dask task: convert ``tasks`` in order."""
-    # the module, looked up at call time (the attribute ``surfnorm.convert`` is the function)
-    convert = importlib.import_module("surfnorm.convert")
-    convert._frame_threads = 1  # the cluster's threads already run shards side by side
-    return [convert.convert_file(task, settings) for task in tasks]
+    tasks_module.one_thread_per_frame()  # the cluster's threads already run shards side by side
+    return [tasks_module.convert_file(task, settings) for task in tasks]
 
 
 def _shards(tasks: Sequence, size: int) -> list[list]:
@@ -117,7 +116,7 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
     Parameters
     ----------
     tasks : sequence of ConvertTask
-        From :func:`surfnorm.convert.plan_tasks`; the paths must be visible to
+        From :func:`surfnorm.batch.tasks.plan_tasks`; the paths must be visible to
         every worker.
     settings : ConvertSettings
         Sent to the workers with every shard.
@@ -137,8 +136,7 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
         ``convert_file``, is an ``"error"`` result saying so.
     """
     distributed = _require_distributed()
-    from ._validate import check_positive_int
-    from .convert import FileResult, _remove_stale_temporaries
+    from .._validate import check_positive_int
 
     tasks = list(tasks)
     if shard_size is None:
@@ -205,7 +203,7 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
             pending.add(suspect)
     # A worker killed between creating a temporary file and renaming it left that file behind; the
     # outputs are complete now, so what remains beside them is debris of dead attempts.
-    _remove_stale_temporaries(tasks)
+    remove_stale_temporaries(tasks)
     return results
 
 
@@ -218,7 +216,7 @@ def cluster_client(address: str | None = None, *, local_workers: int | None = No
     processes on this machine (closed again on exit). Exactly one of the two
     must be given.
     """
-    from ._validate import check_positive_int
+    from .._validate import check_positive_int
 
     distributed = _require_distributed()
     if (address is None) == (local_workers is None):

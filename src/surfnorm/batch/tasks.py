@@ -1,0 +1,301 @@
+"""The tasks of a batch conversion: planning them, and converting one file.
+
+* :func:`plan_tasks` turns a folder, a glob pattern or a list of files into
+  :class:`ConvertTask` (input, output) pairs with deterministic output names;
+* :func:`convert_file` does one task: read, :func:`surfnorm.estimate`, write
+  atomically. It is a pure top-level function of picklable arguments, skips an
+  output that exists, and never raises for a bad input file: it returns a
+  :class:`FileResult` whose status is ``"error"`` and whose message names it;
+* :func:`remove_stale_temporaries` removes what a killed run left behind.
+
+:mod:`surfnorm.batch.run` runs the tasks in a process pool, :mod:`surfnorm.batch.cluster` on Dask.
+"""
+
+from __future__ import annotations
+
+import glob as globlib
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from ..camera import Intrinsics
+from ..errors import InputError, SurfnormError
+from ..methods import DEFAULT_METHOD
+
+__all__ = ["ConvertTask", "ConvertSettings", "FileResult", "ConvertSummary", "plan_tasks", "convert_file",
+           "remove_stale_temporaries", "one_thread_per_frame", "STATUSES"]
+
+STATUSES = ("written", "skipped", "error")
+
+
+@dataclass(frozen=True)
+class ConvertTask:
+    """One depth file and the normal file it becomes."""
+
+    input: Path
+    output: Path
+
+
+@dataclass(frozen=True)
+class ConvertSettings:
+    """Everything :func:`convert_file` needs besides the task; picklable (plain values only).
+
+    ``intrinsics`` None means: read the 3F2N ``params.txt`` of each file (beside it,
+    or in its object folder: ``<object>/depth/<frame>.bin`` -> ``<object>/params.txt``;
+    see :func:`surfnorm.io.threef2n.params_for`).
+    """
+
+    method: str = DEFAULT_METHOD
+    options: dict = field(default_factory=dict)
+    fmt: str = "npy"
+    depth_scale: float | None = None
+    intrinsics: Intrinsics | None = None
+    scale_invariant: bool = False
+    overwrite: bool = False
+    kinect_disparity: bool = False
+    byte_order: str | None = None
+
+
+@dataclass(frozen=True)
+class FileResult:
+    """What happened to one file: status is "written", "skipped" (output existed) or "error"."""
+
+    input: Path
+    output: Path
+    status: str
+    message: str = ""
+
+
+@dataclass
+class ConvertSummary:
+    """The results of a run, in task order."""
+
+    results: list[FileResult]
+
+    def count(self, status: str) -> int:
+        return sum(r.status == status for r in self.results)
+
+    @property
+    def written(self) -> int:
+        return self.count("written")
+
+    @property
+    def skipped(self) -> int:
+        return self.count("skipped")
+
+    @property
+    def errors(self) -> list[FileResult]:
+        return [r for r in self.results if r.status == "error"]
+
+    @property
+    def ok(self) -> bool:
+        """True when no file failed."""
+        return not self.errors
+
+
+# ---------------------------------------------------------------------------- planning
+
+def _output_stem(path: Path) -> str:
+    name = path.name
+    return name[: -len(".bin.gz")] if name.lower().endswith(".bin.gz") else path.stem
+
+
+def _is_depth_file(path: Path) -> bool:
+    from ..io.depth import DEPTH_SUFFIXES, depth_suffix
+
+    return path.is_file() and depth_suffix(path) in DEPTH_SUFFIXES and not path.name.startswith(".")
+
+
+def _walk(root: Path) -> list[Path]:
+    """Depth files under ``root``, recursively, sorted; unreadable folders are errors, not silently skipped."""
+    found = []
+
+    def onerror(exc: OSError):
+        raise InputError(f"inputs: cannot list the folder {exc.filename} ({exc.strerror or exc})")
+
+    for dirpath, dirnames, filenames in os.walk(root, onerror=onerror):
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+        found += [Path(dirpath) / f for f in filenames if _is_depth_file(Path(dirpath) / f)]
+    return sorted(found)
+
+
+def _glob_root(pattern: str) -> Path:
+    parts = Path(pattern).parts
+    static = []
+    for part in parts:
+        if globlib.has_magic(part):
+            break
+        static.append(part)
+    return Path(*static) if static else Path(".")
+
+
+def _sources(inputs) -> list[tuple[Path, Path]]:
+    """(file, the folder its output name is relative to) for every input file."""
+    if isinstance(inputs, (str, os.PathLike)):
+        text = os.fspath(inputs)
+        path = Path(text)
+        if path.is_dir():
+            if not os.access(path, os.R_OK | os.X_OK):
+                raise InputError(f"inputs: cannot list the folder {path} (Permission denied)")
+            return [(f, path) for f in _walk(path)]
+        if path.exists():
+            return [(path, path.parent)]
+        if globlib.has_magic(text):
+            root = _glob_root(text)
+            files = sorted(Path(p) for p in globlib.glob(text, recursive=True))
+            return [(f, root) for f in files if _is_depth_file(f)]
+        raise InputError(f"inputs: expected a depth file, a folder or a glob pattern, got {text!r}, which does not exist")
+    try:
+        items = list(inputs)
+    except TypeError as exc:
+        raise InputError(f"inputs: expected a path, a glob pattern or a list of files, got {type(inputs).__name__}") from exc
+    out = []
+    for item in items:
+        if not isinstance(item, (str, os.PathLike)):
+            raise InputError(f"inputs: expected paths in the list, got {type(item).__name__} {item!r}")
+        out.append((Path(item), Path(item).parent))
+    return out
+
+
+def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
+    """Pair every input depth file with its output file, in a deterministic order.
+
+    Parameters
+    ----------
+    inputs : str, Path or list of paths
+        A folder (every depth file under it, recursively, sub-folders kept in
+        the output), a glob pattern (``"scans/*/depth/*.png"``; the part before
+        the first wildcard is the root whose sub-folders are kept) or a list of
+        files (outputs side by side in ``output_dir``). A listed file that does
+        not exist becomes a task too, and fails by name when run.
+    output_dir : str or Path
+        Folder of the outputs, ``<relative folder>/<stem>.npy`` or ``.png``
+        (``000001.bin.gz`` -> ``000001.npy``).
+    fmt : {"npy", "png16", "png8"}
+
+    Raises
+    ------
+    InputError
+        No depth file found, a folder that cannot be listed, two inputs that
+        would write the same output, or an output that would replace its input.
+    """
+    from .._validate import check_choice
+    from ..io.normals import FORMAT_SUFFIX, NORMAL_FORMATS
+
+    check_choice("fmt", fmt, NORMAL_FORMATS)
+    output_dir = Path(output_dir)
+    out_root = output_dir.resolve()
+    sources = _sources(inputs)
+    if isinstance(inputs, (str, os.PathLike)) and not Path(inputs).is_file():
+        roots = {r.resolve() for _, r in sources} or {Path(os.fspath(inputs)).resolve()}
+        if out_root in roots:
+            raise InputError(f"output_dir: expected a folder other than the input folder {os.fspath(inputs)}, got {output_dir}; "
+                             "its outputs would be read as inputs by the next run")
+        # outputs of an earlier run inside the input folder (e.g. convert data data/normals) are not inputs
+        sources = [(f, r) for f, r in sources if out_root not in f.resolve().parents]
+    if not sources:
+        raise InputError(f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}")
+    tasks, seen = [], {}
+    for file, root in sources:
+        try:
+            rel = file.parent.relative_to(root)
+        except ValueError:
+            rel = Path()
+        out = output_dir / rel / (_output_stem(file) + FORMAT_SUFFIX[fmt])
+        if out in seen:
+            raise InputError(f"inputs: {seen[out]} and {file} would both be written to {out}; "
+                             "convert them into different output folders")
+        if out.resolve() == file.resolve():
+            raise InputError(f"output_dir: writing {out} would replace its input; choose another output folder")
+        seen[out] = file
+        tasks.append(ConvertTask(file, out))
+    return tasks
+
+
+# ---------------------------------------------------------------------------- one file
+
+# Threads per frame (see surfnorm.estimate): all cores in the calling process; 1 in a worker of a pool
+# (processes here, or Dask), which already runs frames side by side.
+_frame_threads: int | None = None
+
+
+def one_thread_per_frame() -> None:
+    """In a worker of a pool (processes, or Dask): run each frame on one thread, since the pool already runs
+    frames side by side."""
+    global _frame_threads
+    _frame_threads = 1
+
+
+def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
+    from .._api import estimate
+    from ..io.depth import depth_suffix, read_depth
+    from ..io.normals import write_normals
+    from ..io.threef2n import params_for, read_params
+
+    cam = settings.intrinsics
+    if cam is None:
+        params = params_for(task.input)
+        if params is None:
+            raise InputError(f"intrinsics: none given and no 3F2N params.txt beside {task.input} or in the folder above it")
+        cam = read_params(params)
+    byte_order = settings.byte_order if depth_suffix(task.input) == ".pgm" else None  # other files in the folder
+    depth = read_depth(task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity,
+                       byte_order=byte_order)
+    normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant,
+                       threads=_frame_threads, **settings.options)
+    task.output.parent.mkdir(parents=True, exist_ok=True)
+    write_normals(task.output, normals, fmt=settings.fmt)
+    with np.errstate(invalid="ignore"):
+        any_valid = bool((np.isfinite(depth) & (depth > 0)).any())
+    return "" if any_valid else "no valid depth: every pixel holds the fill value"
+
+
+def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
+    """Convert one depth file; never raises for a bad input (status "error", message naming the file).
+
+    The output is skipped when it exists (unless ``settings.overwrite``),
+    written atomically otherwise; the same input and settings give the same bytes.
+    """
+    try:
+        if task.output.exists() and not settings.overwrite:
+            if task.output.is_dir():
+                return FileResult(task.input, task.output, "error", f"{task.input}: output {task.output} exists and is a folder")
+            return FileResult(task.input, task.output, "skipped", "output exists")
+        return FileResult(task.input, task.output, "written", _convert(task, settings))
+    except (SurfnormError, ValueError) as exc:
+        message = str(exc)
+        if str(task.input) not in message:
+            message = f"{task.input}: {message}"
+        return FileResult(task.input, task.output, "error", message)
+    except OSError as exc:
+        where = exc.filename if exc.filename else task.output
+        return FileResult(task.input, task.output, "error", f"{task.input}: cannot write {where} ({exc.strerror or exc})")
+    except Exception as exc:  # noqa: BLE001 - a bad file must not stop the other thousand
+        return FileResult(task.input, task.output, "error", f"{task.input}: unexpected {type(exc).__name__}: {exc}")
+
+
+# ---------------------------------------------------------------------------- many files
+
+#: The name atomic_write gives its temporary file: ".<name>.<random>.tmp<suffix>".
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp(\.[A-Za-z0-9]+)?$")
+
+
+def remove_stale_temporaries(tasks: Iterable[ConvertTask]) -> int:
+    """Remove the temporary files an interrupted run left beside the planned outputs; returns how many."""
+    removed = 0
+    by_dir: dict[Path, set[str]] = {}
+    for t in tasks:
+        by_dir.setdefault(t.output.parent, set()).add(t.output.name)
+    for folder, names in by_dir.items():
+        if not folder.is_dir():
+            continue
+        for entry in folder.iterdir():
+            match = _TEMPORARY.match(entry.name)
+            if match and match["name"] in names and entry.is_file():
+                entry.unlink(missing_ok=True)
+                removed += 1
+    return removed

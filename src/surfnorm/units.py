@@ -95,8 +95,27 @@ differ between the units, 13.7 % with exact comparisons, 0.003 % with 7e-7,
 0.001 % with 1e-6, 0.0002 % with 1.5e-6, 0.17 % with 3e-6 and 0.09 % with
 1e-5: those frames' depths reach 475 units, where one "millimetre" step is
 2.1e-6 of the depth (no 16-bit sensor has such steps), so a larger tolerance
-straddles it. Quantising the rescaled depth instead would straddle grid
-boundaries everywhere, not only at steps near the tolerance.
+straddles it. Quantising the rescaled depth to a fixed grid instead would
+straddle grid boundaries everywhere, not only at steps near the tolerance
+(snapping to the frame's own step, below, does not: its depths lie on the
+grid's points, not near its boundaries). The tolerance still serves depth
+that is not on a grid.
+
+Quantised depth
+---------------
+Sensor depth comes in steps (1 mm, 0.1 mm, 1/256 m); the same frame in
+another unit is those steps times a constant, rounded to float32. Methods
+that divide by depth differences (3F2N, SNE-RoadSeg) see that rounding: at
+400 m, float32 metres hold a 1 mm step only to 3 % of itself, and their
+normals then differ from the millimetre frame's on 2-6 % of the pixels (and
+flip on a few), whatever the tolerance. So this mode first looks for the
+frame's step (:func:`quantisation_step`): from the smallest gap between
+depths, a step of 1, 2 or 5 times a power of ten or a power of two; if every valid depth lies within 5 % of a step of a multiple
+of it, the depth is replaced by that multiple's index (an integer, exact in
+float32 below 2^24 steps). Depth in metres and the same depth in
+millimetres then become the same integers, and so the same normals to the
+bit. Depth that is not on a grid (rendered, filtered, disparity of a
+stereo matcher) is left as it is.
 
 No decision depends on the frame as a whole: the power of two of "Range" comes
 from the frame's median but, being exact, changes no normal of the methods
@@ -123,7 +142,7 @@ import math
 
 import numpy as np
 
-__all__ = ["REFERENCE_DEPTH", "TIE_TOLERANCE", "relative_depth", "range_exponent", "power_of_two_exponent"]
+__all__ = ["REFERENCE_DEPTH", "TIE_TOLERANCE", "STEP_TOLERANCE", "quantisation_step", "relative_depth", "range_exponent", "power_of_two_exponent"]
 
 #: The depth at which tau is in depth units in the scale-invariant mode (tau relative to depth: tau z / 100).
 REFERENCE_DEPTH = 100.0
@@ -165,8 +184,72 @@ def scaled_frame(src: np.ndarray, k: int) -> np.ndarray:
         return np.ascontiguousarray(np.ldexp(np.asarray(src, dtype=np.float64), k), dtype=np.float32)
 
 
+#: A frame's depths count as quantised when each lies within this share of a step of a multiple of it.
+STEP_TOLERANCE = 0.05
+
+#: Depths sorted by :func:`quantisation_step` to find a frame's smallest gap.
+_STEP_SAMPLES = 16_384
+
+#: Steps :func:`quantisation_step` considers: 1, 2 or 5 times a power of ten, and powers of two.
+_STEP_MANTISSAS = (1.0, 2.0, 5.0)
+
+
+def _nice_steps(g: float) -> list[float]:
+    """Steps of the form 1, 2 or 5 times 10^k, or 2^k, within 5 % of g / k for k = 1..8 (the smallest gap
+    seen may be a few steps), largest first and, for each k, nearest first."""
+    steps: list[float] = []
+    for k in range(1, 9):
+        h = g / k
+        e = math.floor(math.log10(h))
+        candidates = {m * 10.0 ** j for j in (e - 1, e, e + 1) for m in _STEP_MANTISSAS}
+        candidates.add(2.0 ** round(math.log2(h)))
+        near = sorted((q for q in candidates if abs(math.log(h / q)) < 0.05), key=lambda q: abs(math.log(h / q)))
+        steps += [q for q in near if q not in steps]
+    return steps
+
+
+def quantisation_step(z64: np.ndarray, valid: np.ndarray) -> float | None:
+    """The step that every valid depth of the frame ``z64`` (float64) is a multiple of, or None.
+
+    The smallest positive gap g between valid horizontal neighbours (on every 4th row) and between the sorted distinct values
+    of a sample of the frame is a few steps at most on sensor depth. Candidates: the steps of
+    :func:`_nice_steps` near g / k (float32 rounding can make a gap a power of two near a decimal step).
+    The first accepted: every valid depth lies within ``STEP_TOLERANCE`` of a step of a multiple of it
+    (for depth off a grid, each value does so by chance with probability 0.1), and the largest multiple is
+    below 2^24 (exact in float32).
+    """
+    z = z64[valid]
+    if z.size < 2:
+        return None
+    rows, ok = z64[::4], valid[::4]  # neighbours on every 4th row: enough to meet a one-step gap
+    both = ok[:, 1:] & ok[:, :-1]
+    sample = np.unique(z[:: max(1, z.size // _STEP_SAMPLES)])
+    gaps = np.concatenate([np.abs(rows[:, 1:] - rows[:, :-1])[both], np.diff(sample)])
+    gaps = gaps[gaps > 0]
+    if gaps.size == 0:
+        return None
+    g = float(gaps.min())
+    if not (g > 0.0 and math.isfinite(g)):
+        return None
+    def on_grid(values, q):
+        n = values * (1.0 / q)
+        if not n.max() < 2.0 ** 24:
+            return False
+        n -= np.rint(n)
+        return np.abs(n).max() <= STEP_TOLERANCE
+
+    for q in _nice_steps(g):
+        if on_grid(sample, q) and on_grid(z, q):  # the sample first: most candidates fail on it
+            return q
+    return None
+
+
 def _relative_frame(src: np.ndarray, valid: np.ndarray, disparity: bool) -> np.ndarray:
     z64 = np.asarray(src, dtype=np.float64)
+    if valid.any():
+        q = quantisation_step(z64, valid)
+        if q is not None:  # on a grid: its integers, the same in every unit (see "Quantised depth")
+            z64 = np.where(valid, np.rint(z64 / q), z64)
     if disparity:
         z64 = np.where(valid, 1.0 / np.where(valid, z64, 1.0), 0.0)
     if not valid.any():

@@ -15,7 +15,7 @@ import pytest
 
 import surfnorm
 from surfnorm._validate import valid_pixels
-from surfnorm.kernels.gradients import valid_map
+from surfnorm._validate import valid_map
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.metrics import mean_angular_error
 
@@ -119,7 +119,7 @@ def test_refine_equals_naive_mnr_on_any_normals():
 def test_mnr_near_tie_tolerance_equals_naive():
     """The scale-invariant mode's MNR rule (a candidate must be smoother by more than tie_tol * z): kernel = reference."""
     from surfnorm.kernels.mnr import mnr
-    from surfnorm.kernels.translate import d2nt_v3
+    from surfnorm.kernels.d2nt_v3 import d2nt_v3
 
     rng = np.random.default_rng(7)
     v, u = np.mgrid[0:41, 0:53]

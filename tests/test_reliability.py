@@ -102,7 +102,7 @@ def test_the_reported_3f2n_tie_is_oriented_alike_in_every_unit_and_backend():
 
 
 def test_facing_sign_rule():
-    from surfnorm.kernels.orientation import facing_sign
+    from surfnorm.kernels._rows import facing_sign
 
     P = (0.3, -0.2, 1.0)
     assert facing_sign(0.1, 0.2, 0.9, *P) == -1.0 and facing_sign(-0.1, -0.2, -0.9, *P) == 1.0
@@ -130,7 +130,7 @@ def integer_frames(draw):
 
 
 def near_band(n, cam):
-    """Where a normal lies within a factor 2 of the orientation rule's band edges (surfnorm.kernels.orientation)."""
+    """Where a normal lies within a factor 2 of the orientation rule's band edges (surfnorm.kernels._rows.facing_sign)."""
     from surfnorm._choices import ORIENTATION_TIE as t
 
     h, w = n.shape[:2]

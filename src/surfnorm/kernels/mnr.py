@@ -1,7 +1,7 @@
-"""MRF-based normal refinement (MNR), Sec. III-C of Feng et al., ICRA 2023 (eq. 15-20).
+"""MRF-based normal refinement (MNR), Sec. III-C of Feng et al., ICRA 2023 (eq. 16-20).
 
-The MRF energy (eq. 17-19) weighs a data term against a smoothness term by
-the local smoothness s_p (eq. 11). Sec. IV-A simplifies it for real time, and
+The MRF energy E (eq. 18) sums a data term Phi (eq. 19) and a smoothness
+term Psi (eq. 20), which the local smoothness s_p (eq. 11) weighs. Sec. IV-A simplifies it for real time, and
 the authors' code implements that simplification as one rule: each pixel
 takes the normal of the pixel among {left, right, up, down, itself} whose
 depth is smoothest (smallest |nabla^2 z|). Where p itself is smoothest the
@@ -22,9 +22,11 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, row
-from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment
+from ._rows import box_row, copy_row, fast_row, segment
+from .gradients import dlf_code, laplacian_row
 
-__all__ = ["mnr"]
+__all__ = ["mnr", "mnr_row", "self_smoothness_row"]
+
 
 @pixel
 def self_smoothness_row(s_h, s_v, one_d, s_self):
@@ -68,7 +70,7 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
     candidate replaces the best so far only if smoother by more than ``tol``
     (0: strictly smoother; see :func:`mnr_row`). Every candidate is read (at
     clamped columns) before the choice, which then only selects among values
-    (see :func:`surfnorm.kernels.gradients.clamp`).
+    (see :func:`surfnorm.kernels._rows.clamp`).
     """
     W = out_row.shape[0]
     x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)

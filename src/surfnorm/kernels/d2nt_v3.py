@@ -5,7 +5,8 @@ The recipe is DAG gradients (eq. 10-14, :mod:`.gradients`) -> D2NT's eq. 9
 whole-frame stages it would write the unrefined normals to a full-size
 temporary and read it back. Here the unrefined normals of a row are estimated
 just before the row below them is refined, and live only in a rolling buffer
-of three rows. Same arithmetic, same bits as the three stages (tests/test_d2nt.py).
+of three rows. The same arithmetic as the three stages; tests/test_translate.py checks it against the
+naive reference of the three (tests/naive_d2nt.py).
 """
 
 from __future__ import annotations
@@ -25,7 +26,48 @@ __all__ = ["d2nt_v3"]
 @row
 def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs, n_runs,
                     p_v, sm_v, s, p_h, ok_row, raw, has):
-    """d2nt_v3, step 1 for row q: row data of row q + 1, then the unrefined normals of row q (slots: see the kernel)."""
+    """d2nt_v3, step 1 for row q: the row data of row q + 1, then the unrefined normals of row q.
+
+    Rows live in rolling slots: row data (fast runs, softmin weights, MNR smoothness) of row r in slot r % 4,
+    unrefined normals of row r in slot r % 3 (see :func:`_d2nt_v3_kernel`).
+
+    Parameters
+    ----------
+    z, valid : ndarray, shape (H, W)
+        Validated depth (float32) and its validity (bool).
+    q : int
+        The row to estimate.
+    f_x, f_y : float32
+        Focal lengths.
+    u_c : ndarray of float32, shape (W,)
+        u - c_x of every column.
+    c_y : float32
+        Principal point's row.
+    dlf, tau, rel, ratio
+        The DAG filter's DLF index, softness, relative mode and truncation ratio (see :func:`.translate.dag_row`).
+    mnr_dlf : int
+        Index of MNR's DLF.
+    fill : float32
+        Value written where there is no normal.
+    fill_counts : bool
+        Whether a pixel holding ``fill`` counts as having a normal for MNR (``fill`` finite and non-zero).
+    col : ndarray of bool, shape (W,)
+        Scratch.
+    runs, n_runs : ndarray of int64 (4, W // 2 + 1, 2), ndarray of int64 (4,)
+        Slots of the rows' fast runs and their counts.
+    p_v : ndarray of float32, shape (4, W)
+        Slots of the rows' softmin weights with the vertical (or 3x3) smoothness.
+    sm_v : ndarray of float32, shape (4, W)
+        Slots of the rows' MNR smoothness (vertical, or 3x3).
+    s, p_h : ndarray of float32, shape (W,)
+        Scratch: smoothness, and row q's weights with the horizontal smoothness.
+    ok_row : ndarray of bool, shape (W,)
+        Scratch: which pixels of row q got a normal.
+    raw : ndarray of float32, shape (3, W, 3)
+        Slots of the unrefined normals.
+    has : ndarray of bool, shape (3, W)
+        Slots of whether each unrefined normal exists (for MNR).
+    """
     H, W = z.shape
     if q + 1 < H:
         j = (q + 1) % 4
@@ -48,7 +90,29 @@ def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_d
 @row
 def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice,
                   out_row):
-    """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row."""
+    """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row.
+
+    Parameters
+    ----------
+    z, valid : ndarray, shape (H, W)
+        Validated depth (float32) and its validity (bool).
+    v : int
+        The row to refine.
+    mnr_dlf : int
+        Index of MNR's DLF (0: the 1D filters, horizontal for left/right, vertical for up/down).
+    tie_tol : float32
+        MNR's relative near-tie tolerance (0: exact).
+    fill : float32
+        Value written where there is no normal.
+    runs, n_runs, sm_v, raw, has
+        The slots that :func:`v3_estimate_row` fills.
+    sm_h, s_self : ndarray of float32, shape (W,)
+        Scratch: row v's smoothness scoring left/right, and the score of p itself.
+    col, mruns, choice : ndarray
+        Scratch of :func:`surfnorm.kernels.mnr.mnr_row`.
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    """
     H = z.shape[0]
     j = v % 4
     if mnr_dlf == 0:

@@ -192,11 +192,25 @@ def dag_gradient(z, valid, v, u, dv, du, p_b, p_f, ratio):
 
 @row
 def laplacian_row(z, valid, r, runs, n_runs, dlf, axis, s):
-    """s[u] = smoothness |nabla^2 z| (eq. 11) of every valid pixel of row r (0 where invalid).
+    """s[u] = smoothness s_p = |nabla^2 z_p| (eq. 11) of every valid pixel of row r (0 where invalid).
 
-    Branch-free inside the fast runs of row r (all neighbours valid, so no
-    mirroring), the per-pixel rule :func:`smoothness` elsewhere; the same sums
-    in the same order.
+    Branch-free inside the fast runs of row r (all neighbours valid, so no mirroring), the per-pixel rule
+    :func:`smoothness` elsewhere; the same sums in the same order.
+
+    Parameters
+    ----------
+    z, valid : ndarray, shape (H, W)
+        Validated depth (float32) and its validity (bool).
+    r : int
+        The row.
+    runs, n_runs : ndarray of int64 (W // 2 + 1, 2), int
+        The fast runs of row r (:func:`surfnorm.kernels._rows.fast_row`).
+    dlf : int
+        Index of the DLF in ``DLF_NAMES``: 1D [1, -2, 1], or the 3x3 alpha, beta, gamma.
+    axis : int
+        For the 1D DLF: 0 horizontal, 1 vertical (ignored by the 3x3 filters).
+    s : ndarray of float32, shape (W,)
+        Receives the smoothness.
     """
     H, W = z.shape
     up, mid, dn = z[max(r - 1, 0)], z[r], z[min(r + 1, H - 1)]

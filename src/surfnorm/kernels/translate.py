@@ -50,7 +50,34 @@ def d2nt_fd_pixel(z, valid, v, u, f_x, f_y, u_c, v_c, reflect, fill, out_row):
 
 @row
 def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_row):
-    """Row v of D2NT with finite-difference gradients: per pixel gradients -> eq. 9 -> unit length."""
+    """Row v of D2NT with finite-difference gradients (``d2nt_basic``): gradients -> eq. 9 -> unit length.
+
+    Where the 3x3 neighbourhood is valid, central differences in a branch-free loop; elsewhere the per-pixel
+    rule :func:`d2nt_fd_pixel` (one-sided differences at gaps, mirrored with ``reflect``). Same arithmetic in both.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    v : int
+        The row.
+    f_x, f_y : float32
+        Focal lengths (pixels).
+    u_c : ndarray of float32, shape (W,)
+        u - c_x of every column (:func:`surfnorm.kernels._rows.centred_columns`).
+    v_c : float32
+        v - c_y.
+    reflect : bool
+        ``border="reflect"``: a neighbour outside the image is mirrored (OpenCV BORDER_REFLECT_101).
+    fill : float32
+        Value written into all three components where there is no normal.
+    col, runs : ndarray
+        Scratch for :func:`surfnorm.kernels._rows.fast_row`: bool (W,), int64 (W // 2 + 1, 2).
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    """
     H, W = z.shape
     n_runs = fast_row(valid, v, col, runs)
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
@@ -97,8 +124,37 @@ def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, 
 
 @row
 def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
-    """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness
-    (``rel``: see :func:`surfnorm.kernels.gradients.softmin_weights_row`)."""
+    """Row data of row r for the DAG filter: its fast runs, and the softmin weights of its pixels.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    r : int
+        The row.
+    dlf : int
+        Index of the DLF in ``DLF_NAMES`` (eq. 11): the smoothness is the vertical 1D one or the 3x3 one.
+    tau : float
+        Softness of the softmin (eq. 13), as :func:`surfnorm.kernels.gradients.kernel_tau` gives it.
+    rel : float
+        0: tau in depth units; > 0: tau relative to each pixel's depth
+        (:func:`surfnorm.kernels.gradients.softmin_weights_row`).
+    col : ndarray of bool, shape (W,)
+        Scratch.
+    runs_r : ndarray of int64, shape (W // 2 + 1, 2)
+        Receives the fast runs of row r.
+    s : ndarray of float32, shape (W,)
+        Scratch: the smoothness s_p = |nabla^2 z_p| (eq. 11).
+    p_v_r : ndarray of float32, shape (W,)
+        Receives p = exp(-s / tau), the unnormalised softmin weight of each pixel (eq. 13).
+
+    Returns
+    -------
+    int
+        The number of fast runs of row r.
+    """
     n_runs = fast_row(valid, r, col, runs_r)
     laplacian_row(z, valid, r, runs_r, n_runs, dlf, np.int64(1), s)
     softmin_weights_row(s, z[r], tau, rel, p_v_r)
@@ -107,10 +163,41 @@ def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
 
 @row
 def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row, ok_row):
-    """Unit D2NT normals of row v with DAG gradients; ok_row[u] says whether (v, u) got one.
+    """Unit D2NT normals of row v with DAG gradients (eq. 9-14); ok_row[u] says whether (v, u) got one.
 
-    p_h: softmin weights exp(-s/tau) of row v with the horizontal smoothness;
-    p_up, p_dn: those of rows v - 1 and v + 1 with the vertical smoothness.
+    Each gradient is lambda_b Delta_b z + lambda_f Delta_f z (eq. 10) with (lambda_b, lambda_f) the (truncated)
+    softmin of the two neighbours' weights (eq. 12-14, :func:`surfnorm.kernels.gradients.softmin_pair`): in a
+    branch-free loop where the 3x3 neighbourhood is valid, by the per-pixel rule
+    :func:`surfnorm.kernels.gradients.dag_gradient` (one-sided at gaps) elsewhere.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    v : int
+        The row.
+    runs, n_runs : ndarray of int64 (W // 2 + 1, 2), int
+        The fast runs of row v (:func:`prepare_dag_row`).
+    p_h : ndarray of float32, shape (W,)
+        Softmin weights exp(-s / tau) of row v, with the horizontal smoothness (they weigh left and right).
+    p_up, p_dn : ndarray of float32, shape (W,)
+        Those of rows v - 1 and v + 1, with the vertical smoothness (they weigh up and down).
+    f_x, f_y : float32
+        Focal lengths (pixels).
+    u_c : ndarray of float32, shape (W,)
+        u - c_x of every column (:func:`surfnorm.kernels._rows.centred_columns`).
+    v_c : float32
+        v - c_y.
+    ratio : float32
+        e^(1/tau): the truncation of eq. 14 (inf: none; :func:`surfnorm.kernels.gradients.softmin_ratio`).
+    fill : float32
+        Value written into all three components where there is no normal.
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    ok_row : ndarray of bool, shape (W,)
+        Receives whether each pixel got a normal.
     """
     H, W = z.shape
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
@@ -215,7 +302,31 @@ def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
 
 @row
 def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out_row):
-    """Row v of CP2TV; ``u_c`` holds u - c_x in float64, as back_project computes it (3D points are float64)."""
+    """Row v of CP2TV: n = t_v x t_u of the finite-difference tangent vectors of the back-projected points.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    v : int
+        The row.
+    f_x, f_y : float32
+        Focal lengths (pixels).
+    c_x, c_y : float32
+        Principal point (pixels, 0-based).
+    u_c : ndarray of float64, shape (W,)
+        u - c_x in float64, as :func:`back_project` computes it (the 3D points are float64).
+    reflect : bool
+        ``border="reflect"`` (OpenCV BORDER_REFLECT_101 at the image border).
+    fill : float32
+        Value written into all three components where there is no normal.
+    col, runs : ndarray
+        Scratch for :func:`surfnorm.kernels._rows.fast_row`: bool (W,), int64 (W // 2 + 1, 2).
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    """
     H, W = z.shape
     f_x64, f_y64 = np.float64(f_x), np.float64(f_y)
     two = np.float32(2.0)

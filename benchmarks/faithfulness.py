@@ -2,7 +2,7 @@
 
     python benchmarks/faithfulness.py [DATASET_DIR] [--border reflect|one-sided]
 
-DATASET_DIR defaults to ../shared/data/3f2n-sample (12 frames); the authors'
+DATASET_DIR defaults to tests/data/3f2n-sample (the 12 frames, compressed in the repository); the authors'
 figures come from the package data (official-3f2n-sample.json).
 """
 
@@ -22,7 +22,7 @@ from surfnorm.reference import OFFICIAL_KEYS, official_figures
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("dataset", nargs="?", default=str(Path(__file__).resolve().parents[2] / "shared/data/3f2n-sample"))
+    parser.add_argument("dataset", nargs="?", default=str(Path(__file__).resolve().parents[1] / "tests/data/3f2n-sample"))
     parser.add_argument("--border", default="reflect", choices=["reflect", "one-sided"])
     args = parser.parse_args()
     registered = surfnorm.methods()

@@ -22,7 +22,7 @@ from surfnorm._choices import ORIENTATION_TIE
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.metrics import mean_angular_error
 
-BESIDE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "3f2n-sample"
+BESIDE = Path(__file__).resolve().parents[1] / "tests" / "data" / "3f2n-sample"
 METHODS = ["3f2n_mean", "3f2n_median", "sne_roadseg", "sda_sne", "plane_svd", "plane_pca", "vector_svd"]
 
 

@@ -4,7 +4,7 @@
 
 The old ``sda.py`` (default: 6a2f4c0, before the speed work) is taken with ``git show`` into a
 temporary directory and imported beside the current one; both run the same stages on the 12 frames
-of the 3F2N sample (``../shared``, all pixels valid, the defaults: 3 iterations, CP2TV), alternately,
+of the 3F2N sample (tests/data/3f2n-sample, all pixels valid, the defaults: 3 iterations, CP2TV), alternately,
 after a warm-up. Prints medians in ms per stage and of the whole ``sda_sne`` call, and of
 ``surfnorm.estimate(z, K, method="sda_sne")``. ``--cpu`` times with the thread's CPU clock, steadier
 than the wall clock on a shared machine. Also checks that both give the same bits.
@@ -25,11 +25,11 @@ import numpy as np  # noqa: E402
 
 import surfnorm  # noqa: E402
 from surfnorm.kernels import sda as new  # noqa: E402
-from surfnorm.kernels.gradients import valid_map  # noqa: E402
+from surfnorm._validate import valid_map  # noqa: E402
 from surfnorm.io.threef2n import find_frames, read_frame  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT.parent / "shared" / "data" / "3f2n-sample"
+SAMPLE = ROOT / "tests" / "data" / "3f2n-sample"
 STAGES = ["alloc", "laplacians", "init", "step 1", "step 2", "step 3", "cp2tv"]
 
 
@@ -78,7 +78,7 @@ def stages(mod, z, valid, cam, clock):
         cur = 1 - cur
         t.append(clock())
     out = np.empty(z.shape + (3,), np.float32)
-    mod._cp2tv_kernel(s, *sets[cur][:4], cam.fx, cam.fy, cam.cx, cam.cy, np.float32(0), out, *rows)
+    (getattr(mod, "_gradients_to_normals_kernel", None) or mod._cp2tv_kernel)(s, *sets[cur][:4], cam.fx, cam.fy, cam.cx, cam.cy, np.float32(0), out, *rows)
     t.append(clock())
     return np.diff(t) * 1e3
 

@@ -6,7 +6,7 @@
         --sensors kinect_v1,d435 [--levels Hard] [--frames 2] [--json out.json] [--seed 0]
     PYTHONPATH=src python benchmarks/sensor_sim.py --list                # method, peer and sensor names
 
-ROOT (positional, optional): a folder in the 3F2N layout; default ../shared/data/3f2n-sample beside
+ROOT (positional, optional): a folder in the 3F2N layout; default tests/data/3f2n-sample in
 the repository when present (12 frames), else the 3 frames shipped in the package.
 
 --methods takes registered names (any with +mnr), options as name:option=value[:option=value], and
@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-SHARED_SAMPLE = REPO.parent / "shared" / "data" / "3f2n-sample"
+SHARED_SAMPLE = REPO / "tests" / "data" / "3f2n-sample"
 
 
 def main(argv=None) -> int:

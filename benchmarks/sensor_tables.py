@@ -3,7 +3,7 @@
     PYTHONPATH=src python benchmarks/sensor_tables.py [ROOT] [--methods a,b,...] [--json out.json]
     PYTHONPATH=src python benchmarks/sensor_tables.py --methods d2nt_v2,d2nt_v3 --sweep 1,10,100,1000,10000
 
-ROOT defaults to the 12-frame sample at /work/shared/data/3f2n-sample (falls back to
+ROOT defaults to the 12-frame sample in tests/data/3f2n-sample (falls back to
 the 3 frames shipped in the package). e_A per level = mean over the level's frames
 of the per-frame e_A (3F2N protocol: folded angles, over the foreground pixels that
 have an estimate); "band" = foreground pixels within 2 pixels (chessboard) of the
@@ -24,7 +24,7 @@ import surfnorm
 from surfnorm import metrics
 from surfnorm.io.threef2n import LEVELS, find_frames, read_frame, sample_root
 
-DEFAULT_ROOT = Path("/work/shared/data/3f2n-sample")
+DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "tests" / "data" / "3f2n-sample"
 
 
 def band_of(mask: np.ndarray, width: int = 2) -> np.ndarray:

@@ -2,7 +2,7 @@
 
     python benchmarks/unit_holes.py [DATA] [--methods a,b] [--seed 0]
 
-DATA is a folder in the 3F2N layout (default: the 12-frame sample beside the repository, ../shared/data/3f2n-sample,
+DATA is a folder in the 3F2N layout (default: the 12-frame sample in the repository, tests/data/3f2n-sample,
 else the 3 frames shipped in the package). The frames' depth unit is read as centimetres (``--factors 10``: 0.1 to
 4 m, a depth sensor's range) and as metres (``1000``: up to 400 m): mm = rint(factor z) (integer millimetres, as a
 sensor gives them) against metres = float32(mm / 1000), both with ``scale_invariant=True`` and the frame's object
@@ -25,7 +25,7 @@ import numpy as np
 import surfnorm
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 
-BESIDE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "3f2n-sample"
+BESIDE = Path(__file__).resolve().parents[1] / "tests" / "data" / "3f2n-sample"
 
 
 def random_holes(shape, rng):

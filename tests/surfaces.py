@@ -77,3 +77,31 @@ def angle_deg(a, b):
     a = a / np.linalg.norm(a, axis=-1, keepdims=True)
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
     return np.degrees(np.arccos(np.clip(np.einsum("...c,...c->...", a, b), -1, 1)))
+
+
+def holey_depth(seed, h=41, w=53):
+    """A tilted plane with a step, noise, a spike, and holes of every kind (NaN, 0, < 0, inf), some in runs."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:h, 0:w]
+    z = 2.0 + 0.01 * u + 0.02 * v + 0.3 * (u > w // 2) + 0.003 * rng.standard_normal((h, w))
+    z[h // 3, w // 3] += 1.0
+    holes = rng.random((h, w))
+    z[holes < 0.04] = np.nan
+    z[(holes >= 0.04) & (holes < 0.07)] = 0.0
+    z[(holes >= 0.07) & (holes < 0.08)] = -1.0
+    z[(holes >= 0.08) & (holes < 0.085)] = np.inf
+    z[5:9, 10:30] = np.nan  # a large hole
+    z[:, 0] = np.where(rng.random(h) < 0.5, 0.0, z[:, 0])  # gaps on the image border
+    return z.astype(np.float32)
+
+
+def scene(h=48, w=64):
+    """A sphere before a tilted wall, float32: smooth parts, a depth step, curvature."""
+    cam = camera(w, h)
+    z, _, hit = sphere(cam, h, w, centre=(0.0, 0.0, 1.5), radius=0.4)
+    wall, _, _ = plane(cam, h, w, (0.2, -0.1, -0.97), 2.5)
+    return np.where(hit, z, wall).astype(np.float32)
+
+
+def has_normal(n):
+    return ~np.isnan(n[..., 0])

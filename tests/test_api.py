@@ -1,10 +1,13 @@
 """The front door: shapes, dtypes, conventions and every input error message."""
 
+from __future__ import annotations
+
 import numpy as np
 import pytest
 
 import surfnorm
 from surfnorm import InputError
+from .surfaces import camera, scene
 
 K = np.array([[100.0, 0, 15.5], [0, 100.0, 11.5], [0, 0, 1]])
 
@@ -232,3 +235,39 @@ def test_methods_registry():
         assert m.category in ("energy minimisation", "averaging", "depth-to-normal", "automatic")
         assert m.reference and "fill" in m.options
     assert info["d2nt_v3"].options["dlf"] == "1d" and info["d2nt_v3"].options["mnr_dlf"] == "alpha"
+
+
+# --- masked arrays -------------------------------------------------------------------------------------------------
+
+SCENE_K = camera(64, 48)
+
+
+
+@pytest.mark.parametrize("method", ["d2nt_v3", "3f2n_median", "plane_pca", "sda_sne", "angle_weighted+mnr"])
+def test_masked_arrays_mask_pixels(method):
+    z = scene()
+    rng = np.random.default_rng(0)
+    hidden = rng.random(z.shape) < 0.1
+    garbage = np.where(hidden, rng.uniform(0.1, 50, z.shape), z).astype(np.float32)
+    expected = surfnorm.estimate(z, SCENE_K, method=method, mask=~hidden)
+    np.testing.assert_array_equal(surfnorm.estimate(np.ma.masked_array(garbage, hidden), SCENE_K, method=method), expected)
+    # the mask argument as a masked array: masked entries are unusable; both masks combine
+    other = rng.random(z.shape) < 0.05
+    m = np.ma.masked_array(np.ones(z.shape, bool), other)
+    np.testing.assert_array_equal(surfnorm.estimate(np.ma.masked_array(garbage, hidden), SCENE_K, method=method, mask=m),
+                                  surfnorm.estimate(z, SCENE_K, method=method, mask=~hidden & ~other))
+    stack = surfnorm.estimate(np.ma.masked_array(np.stack([garbage, garbage]), np.stack([hidden, hidden])), SCENE_K,
+                              method=method)
+    np.testing.assert_array_equal(stack[1], expected)
+
+
+def test_refine_honours_masked_arrays():
+    z = scene()
+    hidden = np.zeros(z.shape, bool)
+    hidden[10:20, 10:20] = True
+    raw = surfnorm.estimate(z, SCENE_K, method="cp2tv")
+    expected = surfnorm.refine(raw, z, mask=~hidden)
+    np.testing.assert_array_equal(surfnorm.refine(raw, np.ma.masked_array(np.where(hidden, 9.0, z), hidden)), expected)
+    masked_normals = np.ma.masked_array(raw, np.repeat(hidden[..., None], 3, -1))
+    got = surfnorm.refine(masked_normals, z)
+    np.testing.assert_array_equal(got, surfnorm.refine(np.where(hidden[..., None], np.nan, raw), z))

@@ -38,10 +38,14 @@ def test_usage_errors_exit_2_with_one_line(tmp_path):
         assert "Traceback" not in result.output
 
 
-def test_methods_lists_registry():
+def test_methods_lists_registry(monkeypatch):
+    import surfnorm.cli
+
+    monkeypatch.setattr(surfnorm.cli.console, "width", 400)  # one line per method
     result = runner.invoke(app, ["methods"])
     assert result.exit_code == 0
     assert "d2nt_v3" in result.output and "depth-to-normal" in result.output
+    assert "surfnorm.kernels.d2nt_v3.d2nt_v3" in result.output and "surfnorm.kernels.sda.sda_sne" in result.output
 
 
 def test_demo_table_and_pictures(tmp_path):

@@ -12,6 +12,8 @@ from surfnorm.errors import InputError
 from . import surfaces
 from .naive_plane_fit import plane_fit as naive_plane_fit
 from .naive_plane_fit import points
+from hypothesis import HealthCheck, given, settings, strategies as st
+from .surfaces import camera
 
 METHODS = ("plane_svd", "plane_pca", "vector_svd")
 H, W = 24, 32
@@ -212,3 +214,51 @@ def test_plane_svd_eigenvalue_is_smallest_of_the_4x4():
         got = plane_svd_lambda(float(len(pts)), *c, S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2])
         lam = np.linalg.eigvalsh(A.T @ A)
         assert abs(got - lam[0]) <= 1e-10 * lam[3]
+
+
+# --- degenerate windows --------------------------------------------------------------------------------------------
+
+PLANE_FITS = ("plane_svd", "plane_pca", "vector_svd")
+
+
+
+@pytest.mark.parametrize("method", PLANE_FITS)
+def test_plane_fit_of_one_image_row_gets_the_fill_value(method):
+    z = np.zeros((3, 3), np.float32)
+    z[1] = [2.0, 2.1, 2.3]  # was (0, -1, 0) for plane_pca: the plane of the row's rays, edge-on
+    n = surfnorm.estimate(z, [[500, 0, 1], [0, 500, 1], [0, 0, 1]], method=method, fill=np.nan)
+    assert np.isnan(n).all()
+
+
+@st.composite
+def line_windows(draw):
+    """A frame whose valid pixels lie on one image line (row, column or diagonal), random depths."""
+    h, w = draw(st.integers(3, 12)), draw(st.integers(3, 12))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    z = np.zeros((h, w), np.float32)
+    kind = draw(st.sampled_from(["row", "column", "diagonal", "anti-diagonal"]))
+    k = min(h, w)
+    idx = {"row": (np.full(w, draw(st.integers(0, h - 1))), np.arange(w)),
+           "column": (np.arange(h), np.full(h, draw(st.integers(0, w - 1)))),
+           "diagonal": (np.arange(k), np.arange(k)),
+           "anti-diagonal": (np.arange(k), k - 1 - np.arange(k))}[kind]
+    z[idx] = rng.uniform(0.5, 5.0, len(idx[0]))
+    return z, draw(st.sampled_from([3, 5]))
+
+
+@settings(max_examples=80, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(frame=line_windows())
+def test_plane_fits_fill_windows_whose_pixels_lie_on_one_line(frame):
+    z, window = frame
+    cam = camera(z.shape[1], z.shape[0])
+    for method in PLANE_FITS:
+        assert np.isnan(surfnorm.estimate(z, cam, method=method, window=window, fill=np.nan)).all(), method
+
+
+@pytest.mark.parametrize("method", PLANE_FITS)
+def test_plane_fit_with_one_pixel_off_the_line_fits(method):
+    z = np.zeros((5, 5), np.float32)
+    z[2] = 2.0
+    z[1, 2] = 2.0  # now the window around (2, 2) spans a plane: the fronto-parallel wall
+    n = surfnorm.estimate(z, camera(5, 5), method=method, fill=np.nan)
+    np.testing.assert_allclose(n[2, 2], [0, 0, -1], atol=1e-6)

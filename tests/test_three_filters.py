@@ -1,5 +1,7 @@
 """3F2N (mean, median) and SNE-RoadSeg's estimator: naive agreement, closed-form surfaces, faithfulness."""
 
+from __future__ import annotations
+
 from collections import defaultdict
 
 import numpy as np
@@ -13,6 +15,8 @@ from surfnorm.reference import official_figures
 from . import naive_three_filters as naive
 from . import surfaces
 from .conftest import SHARED_REFERENCE
+from hypothesis import HealthCheck, given, settings, strategies as st
+from .surfaces import has_normal
 
 METHODS = ["3f2n_mean", "3f2n_median", "sne_roadseg"]
 AUTHORS = {"border": "reflect"}  # the authors' code: OpenCV BORDER_REFLECT_101 at the image border
@@ -204,3 +208,117 @@ def test_faithful_on_all_twelve_frames(shared_sample):
     assert len(ours) == 6
     for key in ours:
         assert abs(np.mean(ours[key]) - np.mean(theirs[key])) < 1e-3, key
+
+
+# --- one orientation rule (surfnorm.kernels._rows.facing_sign) -----------------------------------------------------
+
+
+
+TIE_DEPTH = np.array([[3125, 3151, 3150, 3132, 3131], [3123, 3124, 3132, 3123, 3123], [3123, 3123, 3132, 3123, 3123],
+                      [3123] * 5, [3123] * 5], np.float32)
+
+
+TIE_K = np.array([[518.8579, 0, -55.41755], [0, 519.46961, 209.73617], [0, 0, 1]])
+
+
+def test_the_reported_3f2n_tie_is_oriented_alike_in_every_unit_and_backend():
+    torch = pytest.importorskip("torch")
+    from surfnorm import torch as surfnorm_torch
+
+    metres = TIE_DEPTH / 1000
+    n_m = surfnorm.estimate(metres, TIE_K, method="3f2n_median")[2, 2]
+    n_mm = surfnorm.estimate(TIE_DEPTH, TIE_K, method="3f2n_median")[2, 2]
+    np.testing.assert_allclose(n_m, n_mm, atol=1e-5)  # was a 180-degree flip
+    # the normal there is edge-on: the fixed rule, not rounding, decides (n_z < 0, else n_y < 0, else n_x < 0)
+    P = np.array([(2 - TIE_K[0, 2]) / TIE_K[0, 0], (2 - TIE_K[1, 2]) / TIE_K[1, 1], 1.0])
+    assert abs(n_mm @ P) < 1e-3 * np.linalg.norm(P)
+    for z in (metres, TIE_DEPTH):
+        t = surfnorm_torch.estimate(torch.from_numpy(z), torch.tensor(TIE_K), method="3f2n_median")[0, :, 2, 2]
+        np.testing.assert_allclose(t.numpy(), n_mm, atol=1e-5)  # was the opposite sign
+
+
+def test_facing_sign_rule():
+    from surfnorm.kernels._rows import facing_sign
+
+    P = (0.3, -0.2, 1.0)
+    assert facing_sign(0.1, 0.2, 0.9, *P) == -1.0 and facing_sign(-0.1, -0.2, -0.9, *P) == 1.0
+    # exactly edge-on: n_z decides, then n_y, then n_x; any positive multiple of n or P alike
+    n = np.cross(P, (0.0, 1.0, 0.0))  # perpendicular to P, n_z != 0
+    for s in (1.0, -1.0, 1e-30, -1e30):
+        m = s * n
+        assert facing_sign(*m, *P) * m[2] < 0
+        assert facing_sign(*m, *(1e20 * np.array(P))) * m[2] < 0
+    assert facing_sign(0.0, 0.5, 0.0, 1.0, 0.0, 0.0) == -1.0  # n_z = 0: n_y made negative
+    assert facing_sign(0.0, 0.0, -2.0, 1.0, 0.0, 0.0) == 1.0
+
+
+@st.composite
+def integer_frames(draw):
+    """Small millimetre frames with the integer ties that sensors give (flat runs, 1 mm steps)."""
+    h, w = draw(st.integers(3, 9)), draw(st.integers(3, 9))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    base = draw(st.integers(400, 6000))
+    z = base + rng.integers(-2, 3, (h, w)) * draw(st.sampled_from([0, 1, 2])) + rng.integers(-1, 2) * np.arange(w)
+    z = z + 30 * (rng.random((h, w)) < 0.15)
+    cam = np.array([[draw(st.floats(200, 900)), 0, draw(st.floats(-60, w + 60))],
+                    [0, draw(st.floats(200, 900)), draw(st.floats(-60, h + 60))], [0, 0, 1]])
+    return z.astype(np.float32), cam
+
+
+def near_band(n, cam):
+    """Where a normal lies within a factor 2 of the orientation rule's band edges (surfnorm.kernels._rows.facing_sign)."""
+    from surfnorm._choices import ORIENTATION_TIE as t
+
+    h, w = n.shape[:2]
+    v, u = np.mgrid[0:h, 0:w]
+    ray = np.stack([(u - cam[0][2]) / cam[0][0], (v - cam[1][2]) / cam[1][1], np.ones((h, w))], -1)
+    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+    near = np.zeros((h, w), bool)
+    for x in (np.abs(np.einsum("hwc,hwc->hw", n, ray)), np.abs(n[..., 2]), np.abs(n[..., 1])):
+        near |= (x > t / 2) & (x < 2 * t)
+    return near
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(frame=integer_frames())
+def test_3f2n_orientation_does_not_depend_on_the_unit(frame):
+    """(3f2n_mean is left out: its mean of candidates, which divide by 1 mm steps, moves a nearly edge-on normal
+    by more than the rule's band when the same depth comes as float32 metres, on some of these tiny frames with
+    random intrinsics; on the sample frames at a sensor's range it flips none, see benchmarks/unit_holes.py.)"""
+    z, cam = frame
+    for method in ("3f2n_median", "sne_roadseg"):
+        a = surfnorm.estimate(z, cam, method=method, fill=np.nan)
+        b = surfnorm.estimate((z.astype(np.float64) / 1000).astype(np.float32), cam, method=method, fill=np.nan)
+        # A normal at the edge of the rule's band can go either way, as at any sign rule's boundary: where 3F2N's
+        # median picks another candidate in the other unit, the normal itself moves by about 1e-3 (seen: n_z
+        # -1.1e-3 in mm, +0.9e-3 in m). Those pixels are left out; every other one must keep its sign.
+        keep = has_normal(a) & has_normal(b) & ~near_band(a, cam) & ~near_band(b, cam)
+        dots = np.einsum("hwc,hwc->hw", a, b)[keep]
+        assert (dots > 0).all(), (method, dots.min())  # no 180-degree flip
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(frame=integer_frames())
+def test_3f2n_orientation_is_the_same_in_both_backends(frame):
+    torch = pytest.importorskip("torch")
+    from surfnorm import torch as surfnorm_torch
+
+    z, cam = frame
+    for method in ("3f2n_median", "3f2n_mean"):
+        a = surfnorm.estimate(z, cam, method=method, fill=np.nan)
+        t = surfnorm_torch.estimate(torch.from_numpy(z), torch.tensor(cam), method=method, fill=float("nan"))
+        b = t[0].permute(1, 2, 0).numpy()
+        dots = np.einsum("hwc,hwc->hw", a, b)[has_normal(a) & has_normal(b)]
+        assert (dots > 0).all(), (method, dots.min())
+
+
+def test_3f2n_on_the_shipped_frames_keeps_its_orientation_but_at_ties():
+    """The rule changes the sign only of edge-on normals, which the folded e_A does not see."""
+    for name in find_frames(sample_root()):
+        f = read_frame(sample_root(), name)
+        n = surfnorm.estimate(f.depth, f.K, method="3f2n_median", fill=np.nan)
+        ok = has_normal(n)
+        v, u = np.nonzero(ok)
+        P = np.stack([(u - f.K.cx) / f.K.fx, (v - f.K.cy) / f.K.fy, np.ones(u.size)], -1)
+        cos = np.einsum("nc,nc->n", n[ok].astype(np.float64), P) / np.linalg.norm(P, axis=-1)
+        assert (cos[np.abs(cos) > 1e-3] < 0).all()  # every normal that is not edge-on faces the camera

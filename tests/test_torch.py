@@ -199,7 +199,7 @@ class TestThreeFilters:
         ray = np.stack(((u - cx) / cam.fx, (v - cy) / cam.fy, np.ones(u.shape)), axis=-1)
         ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
         # Such normals, and every normal within ORIENTATION_TIE of edge-on, now get a fixed sign from the rule of
-        # surfnorm.kernels.orientation, which the naive reference (n . P < 0 only) does not apply.
+        # surfnorm.kernels._rows.facing_sign, which the naive reference (n . P < 0 only) does not apply.
         from surfnorm._choices import ORIENTATION_TIE
 
         cos = np.abs(np.einsum("hwc,hwc->hw", ref, ray))

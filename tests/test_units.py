@@ -14,7 +14,9 @@ import surfnorm.units
 from surfnorm.methods import resolve
 from surfnorm.units import REFERENCE_DEPTH
 from tests.surfaces import angle_deg, camera, sphere
-from tests.test_validity import assert_same_or_mnr_candidate, mnr_recipe, raw_normals
+from tests.test_methods import assert_same_or_mnr_candidate, mnr_recipe, raw_normals
+from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+from tests.surfaces import has_normal, scene
 
 METHODS = list(surfnorm.methods())
 K = camera(64, 48)
@@ -223,3 +225,144 @@ def test_millimetres_and_far_float32_metres_give_the_same_bits(method):
     a = surfnorm.estimate(mm, K, method=method, scale_invariant=True, fill=np.nan)
     b = surfnorm.estimate(metres, K, method=method, scale_invariant=True, fill=np.nan)
     np.testing.assert_array_equal(a, b)
+
+
+# --- extreme magnitudes, and a scale-invariant mode whose decisions are local --------------------------------------
+
+ALL_METHODS = list(surfnorm.methods())
+SCENE_K = camera(64, 48)
+
+
+
+def equivariant(method):
+    from surfnorm.methods import resolve
+
+    return resolve(method, {})[0].equivariant
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+@pytest.mark.parametrize("exponent", [66, -86, -126])  # 7e19, 1.3e-26, 1.2e-38 times the scene's depth
+def test_extreme_depth_gives_the_normals_of_ordinary_depth(method, exponent):
+    z = scene()
+    far = np.ldexp(z.astype(np.float64), exponent)  # float64: a power of two, exact
+    n = surfnorm.estimate(far, SCENE_K, method=method, fill=np.nan)
+    tau = {"tau": 2.0 ** -exponent} if "tau" in surfnorm.methods()[method].options else {}
+    expected = surfnorm.estimate(z, SCENE_K, method=method, fill=np.nan, **tau)  # the same scene, tau in its unit
+    if equivariant(method):
+        np.testing.assert_array_equal(n, expected)  # a power of two, so the same bits
+    else:  # PlaneSVD and SDA-SNE compute in float64 without rescaling; their normals depend on the unit
+        np.testing.assert_array_equal(has_normal(n), has_normal(expected))
+        np.testing.assert_allclose(np.linalg.norm(n[has_normal(n)], axis=-1), 1.0, atol=1e-5)
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+@pytest.mark.parametrize("scale", [1e19, 1e-25, 1e-38])
+def test_extreme_float32_depth_is_never_silently_empty(method, scale):
+    z = (scene().astype(np.float64) * scale).astype(np.float32)
+    n = surfnorm.estimate(z, SCENE_K, method=method, fill=np.nan)
+    ok = has_normal(n)
+    assert ok.mean() > 0.9, ok.mean()  # was 0 for the D2NT family; 3F2N gave [0, 0, nan] at 1e-38
+    np.testing.assert_allclose(np.linalg.norm(n[ok], axis=-1), 1.0, atol=1e-5)
+
+
+@pytest.mark.parametrize("K_bad, pattern", [
+    ([[1e300, 0, 3.5], [0, 500, 3.5], [0, 0, 1]], r"K: expected focal lengths K\[0,0\] and K\[1,1\] between"),
+    ([[500, 0, 3.5], [0, 1e-9, 3.5], [0, 0, 1]], r"K: expected focal lengths K\[0,0\] and K\[1,1\] between"),
+    ([[500, 0, 1e300], [0, 500, 3.5], [0, 0, 1]], r"K: expected a principal point K\[0,2\], K\[1,2\] within"),
+])
+def test_extreme_intrinsics_are_refused(K_bad, pattern):
+    with pytest.raises(InputError, match=pattern):
+        surfnorm.estimate(np.full((8, 8), 2.0), K_bad)
+
+
+def test_extreme_intrinsics_object_is_refused():
+    from surfnorm.camera import Intrinsics
+
+    with pytest.raises(InputError, match=r"intrinsics.fx: expected a focal length between 0.001 and 1e\+08 pixels"):
+        Intrinsics(1e300, 500.0, 3.5, 3.5)
+    with pytest.raises(InputError, match=r"intrinsics.cy: expected a principal point within 1e\+06 pixels"):
+        Intrinsics(500.0, 500.0, 3.5, -2e6)
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+@pytest.mark.parametrize("focal", [1e-3, 1e8])
+def test_focal_lengths_at_the_limits_give_normals(method, focal):
+    cam = [[focal, 0, 3.5], [0, focal, 3.5], [0, 0, 1]]
+    n = surfnorm.estimate(np.full((8, 8), 2.0), cam, method=method, fill=np.nan)
+    np.testing.assert_allclose(n[2:-2, 2:-2], np.broadcast_to(np.float32([0, 0, -1]), (4, 4, 3)), atol=1e-5)
+
+
+@pytest.mark.parametrize("fill", [1e40, -1e39, 1e-50, -1e-46])
+def test_a_fill_that_float32_can_not_hold_is_refused(fill):
+    with pytest.raises(InputError, match=r"fill: expected a value that the float32 output can hold"):
+        surfnorm.estimate(np.full((8, 8), 2.0), SCENE_K, fill=fill)
+
+
+@pytest.mark.parametrize("fill", [np.nan, np.inf, -np.inf, 3.4e38, 1e-45, -7.0])
+def test_every_fill_float32_can_hold_is_written_as_given(fill):
+    z = np.zeros((8, 8), np.float32)
+    n = surfnorm.estimate(z, SCENE_K, fill=fill)
+    np.testing.assert_array_equal(n, np.full((8, 8, 3), np.float32(fill)))
+
+
+def far_from(square, reach):
+    import cv2
+
+    return cv2.dilate(square.astype(np.uint8), np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)) == 0
+
+
+# adaptive_fit (and auto, which runs it on sensor depth) measure the frame's noise against depth, a statistic of the
+# whole frame, and size every window from it; a hole removes samples from it, and can so move a normal anywhere
+# (documented in surfnorm.kernels.adaptive_fit). That is a different promise from the scale-invariant mode's, which is
+# about the unit of depth; the scene here is clean, so auto runs d2nt_v3 and stays in the test.
+LOCAL_METHODS = [m for m in ALL_METHODS if m != "adaptive_fit"]
+
+
+@pytest.mark.parametrize("method", LOCAL_METHODS + ["3f2n_median+mnr"])
+def test_a_hole_changes_no_normal_far_from_it_in_the_scale_invariant_mode(method):
+    # a single 10x10 NaN hole changed 1,904 3f2n_median pixels at least 10 px away (some by 180 degrees), sda_sne 6,907
+    f = read_frame(sample_root(), "Medium/Trex/000001")
+    mm = np.rint(f.depth.astype(np.float64) * 1000).astype(np.float32)
+    square = np.zeros(mm.shape, bool)
+    ys, xs = np.nonzero(f.mask)
+    v, u = int(np.median(ys)), int(np.median(xs))  # in the object
+    square[v:v + 10, u:u + 10] = True
+    # (with the object's mask: the hole then moved the frame median that the mode used to rescale by)
+    a = surfnorm.estimate(mm, f.K, method=method, mask=f.mask, scale_invariant=True, fill=np.nan)
+    b = surfnorm.estimate(np.where(square, np.nan, mm), f.K, method=method, mask=f.mask, scale_invariant=True,
+                          fill=np.nan)
+    far = far_from(square, 10)
+    changed = (has_normal(a) | has_normal(b)) & (np.abs(np.nan_to_num(b - a, nan=2.0)).max(-1) > 1e-4)
+    assert not (changed & far).any(), int((changed & far).sum())
+
+
+@pytest.mark.parametrize("method", ALL_METHODS + ["cp2tv+mnr"])
+def test_metres_and_millimetres_agree_with_holes(method):
+    """Acceptance 5 on the shipped frames (benchmarks/unit_holes.py has the 12-frame table): under 0.1 % of the
+    pixels differ by more than 1e-4, and no normal is flipped, with and without random holes.
+
+    The frames' depth units are read as centimetres (0.1 to 4 m, a depth sensor's range, 1 mm steps). Read as
+    metres (up to 400 m at 1 mm), float32 metres round a 1 mm step by up to 2 % and 3F2N's candidates, which
+    divide by such steps, differ by more than 1e-4 on up to 8 % of the pixels (see benchmarks/unit_holes.py)."""
+    rng = np.random.default_rng(0)
+    differing, total = 0, 0
+    for name in find_frames(sample_root()):
+        f = read_frame(sample_root(), name)
+        mm = np.rint(f.depth.astype(np.float64) * 10).astype(np.float32)
+        holes = rng.random(mm.shape) < 0.01
+        for _ in range(12):
+            s = int(rng.integers(4, 17))
+            v, u = int(rng.integers(0, mm.shape[0] - s)), int(rng.integers(0, mm.shape[1] - s))
+            holes[v:v + s, u:u + s] = True
+        for hole in (None, holes):
+            a_in, b_in = mm, (mm.astype(np.float64) / 1000).astype(np.float32)
+            if hole is not None:
+                a_in, b_in = np.where(hole, np.nan, a_in), np.where(hole, np.nan, b_in)
+            a = surfnorm.estimate(a_in, f.K, method=method, mask=f.mask, scale_invariant=True, fill=np.nan)
+            b = surfnorm.estimate(b_in, f.K, method=method, mask=f.mask, scale_invariant=True, fill=np.nan)
+            have = has_normal(a) | has_normal(b)
+            differing += int((have & (np.abs(np.nan_to_num(b - a, nan=2.0)).max(-1) > 1e-4)).sum())
+            total += int(have.sum())
+            both = has_normal(a) & has_normal(b)
+            assert (np.einsum("hwc,hwc->hw", a, b)[both] > 0).all(), (name, hole is not None)
+    assert differing < 1e-3 * total, (differing, total)

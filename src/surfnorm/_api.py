@@ -8,7 +8,7 @@ import numpy as np
 
 from ._bands import map_threads, on_threads, whole
 from ._validate import (as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, split_masked,
-                        valid_pixels)
+                        valid_map, valid_pixels)
 from .camera import Intrinsics
 from .errors import InputError
 from ._choices import DLF_NAMES
@@ -70,9 +70,7 @@ def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np
 
 
 def _valid(z, mask, bands=whole):
-    # One Numba pass (compiled on first use; imported here so that ``import surfnorm`` compiles nothing).
-    from .kernels.gradients import valid_map
-
+    # One Numba pass (compiled on first use, so that ``import surfnorm`` compiles nothing).
     if bands is whole:
         return valid_map(z, mask)
     out = np.empty(z.shape, dtype=np.bool_)

@@ -16,7 +16,7 @@ SDA_BASES = ("cp2tv", "3f2n")
 #: scenes take longest, because extending a run wins ties against keeping).
 SDA_MAX_ITERATIONS = 1000
 
-#: Orientation of a normal (see :mod:`surfnorm.kernels.orientation`): a normal within this relative margin of being
+#: Orientation of a normal (see :func:`surfnorm.kernels._rows.facing_sign`): a normal within this relative margin of being
 #: perpendicular to the viewing ray (|n . P| <= ORIENTATION_TIE |n| |P|) is edge-on, and its sign is decided by
 #: a fixed rule instead of by rounding. (The kernels that use it are compiled with its value and cached: after
 #: changing it, delete the Numba cache files in src/surfnorm/__pycache__.)

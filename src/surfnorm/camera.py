@@ -55,7 +55,8 @@ class Intrinsics:
 
     @classmethod
     def from_matrix(cls, K, *, name: str = "K") -> "Intrinsics":
-        """Read fx, fy, cx, cy from a 3x3 matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``."""
+        """Read fx, fy, cx, cy from a 3x3 matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (a skew K[0, 1] other than
+        0, or a last row other than [0, 0, 1], is an InputError: the estimators assume a pinhole without skew)."""
         if isinstance(K, Intrinsics):
             return K
         try:

@@ -180,12 +180,13 @@ def estimate(
 
 @app.command("methods")
 def list_methods():
-    """List the registered estimators with their category and paper."""
+    """List the registered estimators with their category, paper and kernel."""
     from .methods import methods
 
-    table = Table("method", "category", "reference", "options")
+    table = Table("method", "category", "reference", "options", "kernel")
     for info in methods().values():
-        table.add_row(info.name, info.category, info.reference, ", ".join(f"{k}={v!r}" for k, v in info.options.items()))
+        table.add_row(info.name, info.category, info.reference, ", ".join(f"{k}={v!r}" for k, v in info.options.items()),
+                      info.kernel)
     console.print(table)
     console.print("Any method name followed by +mnr refines its output with MNR.")
 

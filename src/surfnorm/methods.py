@@ -170,7 +170,7 @@ def _run_d2nt_v2(z, valid, cam, out, **options):
 
 
 def _run_d2nt_v3(z, valid, cam, out, **options):
-    from .kernels.translate import d2nt_v3
+    from .kernels.d2nt_v3 import d2nt_v3
 
     return d2nt_v3(z, valid, cam, out, **options)
 
@@ -189,7 +189,7 @@ register(Method("d2nt_v2", "depth-to-normal", D2NT_PAPER + ", eq. 9-14",
                 bands=True, kernel="surfnorm.kernels.translate.d2nt"))
 register(Method("d2nt_v3", "depth-to-normal", D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
                 "D2NT with DAG filter and MRF-based normal refinement (MNR)", _run_d2nt_v3, DAG_OPTIONS, mnr=True,
-                ties=True, relative=True, bands=True, kernel="surfnorm.kernels.translate.d2nt_v3"))
+                ties=True, relative=True, bands=True, kernel="surfnorm.kernels.d2nt_v3.d2nt_v3"))
 register(Method("cp2tv", "depth-to-normal",
                 "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
                 "cross product of two finite-difference tangent vectors", _run_cp2tv, BORDER_OPTIONS, bands=True,

@@ -144,9 +144,9 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     jobs : int
         Processes (1: in this process).
     client : dask.distributed.Client, optional
-        Run the tasks on this cluster with ``surfnorm.distributed.run_on_dask`` instead.
+        Run the tasks on this cluster with ``surfnorm.batch.cluster.run_on_dask`` instead.
     shard_size : int, optional
-        With ``client``: files per Dask task (see ``surfnorm.distributed.default_shard_size``).
+        With ``client``: files per Dask task (see ``surfnorm.batch.cluster.default_shard_size``).
     overwrite : bool
         Replace outputs that exist instead of skipping them.
     progress : callable, optional

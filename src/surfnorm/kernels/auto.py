@@ -87,7 +87,7 @@ def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, tau: float =
     (``adaptive_fit`` does not depend on the unit of depth); so are the row ``bands`` of one frame
     on several threads (``adaptive_fit`` runs on one).
     """
-    from .translate import d2nt_v3
+    from .d2nt_v3 import d2nt_v3
 
     profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
     t = adaptive_weight(profile)

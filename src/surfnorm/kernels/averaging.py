@@ -35,7 +35,7 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, select
-from .plane_fit import point_cloud
+from ._rows import point_cloud, unit_or_fill
 
 __all__ = ["area_weighted", "angle_weighted", "RING"]
 
@@ -105,14 +105,6 @@ def angle_term(a_x, a_y, a_z, b_x, b_y, b_z):
     return w * c_x, w * c_y, w * c_z
 
 
-@pixel
-def unit_or_fill(n_x, n_y, n_z, ok, fill):
-    """n / ||n||, or the fill value when p is invalid (not ok) or no triangle contributed (n = 0)."""
-    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-    keep = ok & (norm > 0.0) & math.isfinite(norm)
-    return select(keep, n_x / norm, fill), select(keep, n_y / norm, fill), select(keep, n_z / norm, fill)
-
-
 # Both kernels go row by row, and along a row pixel by pixel with the 8 triangles of the ring in
 # registers: each ring offset is computed once (it serves two triangles), the sum never goes through
 # memory, and the loop has no branches (invalid neighbours are weighted 0, selects instead of ifs),
@@ -179,7 +171,7 @@ def _make_row(term):
             n_x, n_y, n_z = n_x + t_x, n_y + t_y, n_z + t_z
             t_x, t_y, t_z = term(r7[0], r7[1], r7[2], r0[0], r0[1], r0[2])
             n_x, n_y, n_z = n_x + t_x, n_y + t_y, n_z + t_z
-            o[3 * u], o[3 * u + 1], o[3 * u + 2] = unit_or_fill(n_x, n_y, n_z, k_m[u + 1] != 0, fill)
+            o[3 * u], o[3 * u + 1], o[3 * u + 2], _ = unit_or_fill(n_x, n_y, n_z, k_m[u + 1] != 0, fill)
 
     return njit(noalias=True, _nrt=False)(averaging_row)
 

@@ -1,7 +1,7 @@
-"""MRF-based normal refinement (MNR), Sec. III-C of Feng et al., ICRA 2023 (eq. 15-20).
+"""MRF-based normal refinement (MNR), Sec. III-C of Feng et al., ICRA 2023 (eq. 16-20).
 
-The MRF energy (eq. 17-19) weighs a data term against a smoothness term by
-the local smoothness s_p (eq. 11). Sec. IV-A simplifies it for real time, and
+The MRF energy E (eq. 18) sums a data term Phi (eq. 19) and a smoothness
+term Psi (eq. 20), which the local smoothness s_p (eq. 11) weighs. Sec. IV-A simplifies it for real time, and
 the authors' code implements that simplification as one rule: each pixel
 takes the normal of the pixel among {left, right, up, down, itself} whose
 depth is smoothest (smallest |nabla^2 z|). Where p itself is smoothest the
@@ -22,9 +22,11 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, row
-from .gradients import box_row, copy_row, dlf_code, fast_row, laplacian_row, segment
+from ._rows import box_row, copy_row, fast_row, segment
+from .gradients import dlf_code, laplacian_row
 
-__all__ = ["mnr"]
+__all__ = ["mnr", "mnr_row", "self_smoothness_row"]
+
 
 @pixel
 def self_smoothness_row(s_h, s_v, one_d, s_self):
@@ -68,7 +70,7 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
     candidate replaces the best so far only if smoother by more than ``tol``
     (0: strictly smoother; see :func:`mnr_row`). Every candidate is read (at
     clamped columns) before the choice, which then only selects among values
-    (see :func:`surfnorm.kernels.gradients.clamp`).
+    (see :func:`surfnorm.kernels._rows.clamp`).
     """
     W = out_row.shape[0]
     x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)
@@ -88,17 +90,41 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
 @row
 def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, z_row, tie_tol, fill, col,
             runs, choice, out_row):
-    """MNR of row v: each pixel with a normal takes the normal of the smoothest of [left, right, up, down, self].
+    """MNR of row v (Sec. IV-A's rule): each pixel with a normal takes the normal of the smoothest of
+    [left, right, up, down, itself].
 
-    n_*: normals (W, 3) of rows v - 1, v, v + 1; has_*: whether they exist;
-    s_h: smoothness of row v scoring left/right; s_up, s_dn: of rows v -+ 1
-    scoring up/down; s_self: the score of p itself. Strict ``<`` in that order
-    keeps the first candidate on ties, as ``argmin`` in the authors' code.
-    With ``tie_tol`` > 0 (the scale-invariant mode) a candidate must be
-    smoother than the best so far by more than tie_tol * z_p (z_row: depth of
-    row v), so near-ties also keep the first (see :mod:`surfnorm.units`,
-    "Ties"); 0 subtracts nothing, bit for bit the exact rule.
-    ``col``, ``runs``, ``choice`` (3 W int32) are scratch.
+    Strict ``<`` in that order keeps the first candidate on ties, as ``argmin`` in the authors' code. With
+    ``tie_tol`` > 0 (the scale-invariant mode) a candidate must be smoother than the best so far by more than
+    tie_tol * z_p, so near-ties also keep the first (see :mod:`surfnorm.units`, "Ties"); 0 subtracts nothing,
+    bit for bit the exact rule. A branch-free loop where all four neighbours have normals, the per-pixel rule
+    :func:`mnr_pixel` elsewhere.
+
+    Parameters
+    ----------
+    v, H : int
+        The row, and the number of rows.
+    n_up, n_mid, n_dn : ndarray of float32, shape (W, 3)
+        Unrefined normals of rows v - 1, v, v + 1 (rows outside the image: any row, never chosen).
+    has_up, has_mid, has_dn : ndarray of bool, shape (W,)
+        Whether those pixels have a normal.
+    s_h : ndarray of float32, shape (W,)
+        Smoothness s_p (eq. 11) of row v that scores the left and right candidates.
+    s_up, s_dn : ndarray of float32, shape (W,)
+        Smoothness of rows v - 1 and v + 1 that scores the up and down candidates.
+    s_self : ndarray of float32, shape (W,)
+        The score of p itself (:func:`self_smoothness_row`).
+    z_row : ndarray of float32, shape (W,)
+        Depth of row v (for ``tie_tol``).
+    tie_tol : float32
+        Relative near-tie tolerance; 0 in the paper-faithful mode.
+    fill : float32
+        Value written where p has no normal.
+    col, runs : ndarray
+        Scratch: bool (W,), int64 (W // 2 + 1, 2).
+    choice : ndarray of int32, shape (3 W,)
+        Scratch: each pixel's choice, three times.
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the refined output (must not alias ``n_mid``).
     """
     W = out_row.shape[0]
     n_runs = box_row(has_up, has_mid, has_dn, v >= 1 and v < H - 1, col, runs)

@@ -36,7 +36,7 @@ The eigenvector is the null vector of (A - lambda I): the largest cross
 product of two of its rows. Arithmetic is float64 (the point offsets q - p are
 small differences of large coordinates); the output is float32.
 
-Normals face the camera (n . p_i < 0, :mod:`surfnorm.kernels.orientation`). Invalid
+Normals face the camera (n . p_i < 0, :func:`surfnorm.kernels._rows.facing_sign`). Invalid
 neighbours are left out (their depth is never read: the point cloud holds 0
 there, weighted 0); a pixel gets the fill value when it is invalid itself,
 when fewer than 3 points (p_i included) are valid in its window, or when they
@@ -59,50 +59,12 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel
-from .orientation import facing_sign
+from ._rows import facing_sign, point_cloud
 
-__all__ = ["plane_svd", "plane_pca", "vector_svd", "point_cloud"]
+__all__ = ["plane_svd", "plane_pca", "vector_svd"]
 
 _NEWTON_STEPS = 64
 _NEWTON_TOL = 1e-14
-
-
-@njit
-def _point_cloud_kernel(z, valid, f_x, f_y, c_x, c_y, pad, P, P_valid, v0, v1):
-    """P[:, v + pad, u + pad] = z K^-1 [u, v, 1]^T (eq. 3) in float64, in a border of ``pad`` invalid pixels.
-
-    Where depth is invalid (and in the border) P is 0 and P_valid False; z is not read there. Image rows
-    v0 .. v1 - 1 (the first band also writes the top border, the last the bottom one).
-    """
-    H, W = z.shape
-    r0 = v0 + pad if v0 > 0 else 0
-    r1 = v1 + pad if v1 < H else H + 2 * pad
-    P[:, r0:r1, :] = 0.0
-    P_valid[r0:r1, :] = False
-    for v in range(v0, v1):
-        y_ray = (v - c_y) / f_y
-        for u in range(W):
-            if valid[v, u]:
-                d = np.float64(z[v, u])
-                P[0, v + pad, u + pad] = d * ((u - c_x) / f_x)
-                P[1, v + pad, u + pad] = d * y_ray
-                P[2, v + pad, u + pad] = d
-                P_valid[v + pad, u + pad] = True
-
-
-def point_cloud(z, valid, cam, pad=0, bands=whole):
-    """The organised point cloud of validated depth ``z``: P (3, H + 2 pad, W + 2 pad), P_valid (H + 2 pad, W + 2 pad).
-
-    P holds x, y, z planes (contiguous rows, so that row loops vectorise) in float64; it is zero
-    where depth is invalid and in the border of ``pad`` pixels, which lets the kernels visit a
-    neighbourhood without bounds checks.
-    """
-    H, W = z.shape
-    P = np.empty((3, H + 2 * pad, W + 2 * pad), dtype=np.float64)
-    P_valid = np.empty((H + 2 * pad, W + 2 * pad), dtype=np.bool_)
-    f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
-    bands(lambda a, b: _point_cloud_kernel(z, valid, *f, pad, P, P_valid, a, b), H)
-    return P, P_valid
 
 
 @pixel
@@ -219,7 +181,7 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
 
 @pixel
 def write_facing(out, v, u, n_x, n_y, n_z, ok, p_x, p_y, p_z, fill):
-    """Store the unit normal at (v, u), turned to face the camera (:mod:`surfnorm.kernels.orientation`), or the fill value."""
+    """Store the unit normal at (v, u), turned to face the camera (:func:`surfnorm.kernels._rows.facing_sign`), or the fill value."""
     if ok:
         sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)
         out[v, u, 0] = sign * n_x

@@ -60,7 +60,6 @@ see :mod:`surfnorm.units` for the choice of the value.
 
 from __future__ import annotations
 
-import math
 
 import numba
 import numba.extending
@@ -69,7 +68,8 @@ import numpy as np
 from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from .._bands import whole
 from .._config import njit, pixel, select
-from .three_filters import camera_facing, fill_pixel, fronto_parallel_fallback, third_nz, write_unit
+from ._rows import camera_facing, fill_pixel, store_unit_flat, write_unit
+from .three_filters import fronto_parallel_fallback, third_nz
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
 
@@ -434,12 +434,14 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided", tie_tol=0.
 
 
 @njit(noalias=True)
-def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1):
-    """CP2TV as in the SDA-SNE demo (D2NT eq. 9): n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)).
+def _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1):
+    """The SDA-SNE demo's last step, which it calls CP2TV but computes as D2NT's eq. 9 (camera-facing sign):
+    n = (f_x G_u, f_y G_v, -(Z + v_c G_v + u_c G_u)). (:func:`surfnorm.kernels.translate.cp2tv`, the method
+    ``cp2tv``, is the cross product of tangent vectors.)
 
     ``s`` (depth, zero where invalid), gradients and energies are padded by _P; a gradient with
     infinite energy does not exist. Branch-free, into a flat view of each row of ``out`` (C-contiguous),
-    so that the loop vectorises (see :func:`surfnorm.kernels.translate.store_unit_flat`). Rows v0 .. v1 - 1.
+    so that the loop vectorises (see :func:`surfnorm.kernels._rows.store_unit_flat`). Rows v0 .. v1 - 1.
     """
     H, W = out.shape[0], out.shape[1]
     for v in range(v0, v1):
@@ -451,12 +453,8 @@ def _cp2tv_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1):
             n_x = f_x * gu
             n_y = f_y * gv
             n_z = -((s[v + _P, u + _P] + v_c * gv) + (u - c_x) * gu)
-            norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-            ok = (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF) & (norm > 0.0) & (norm < _INF)
-            u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
-            out_flat[3 * u] = select(ok, u_x, fill)
-            out_flat[3 * u + 1] = select(ok, u_y, fill)
-            out_flat[3 * u + 2] = select(ok, u_z, fill)
+            store_unit_flat(out_flat, u, n_x, n_y, n_z, (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF),
+                            fill)
 
 
 @njit
@@ -503,5 +501,5 @@ def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided
     else:
         (g_u, g_v, e_u, e_v, s), _ = _run_sda(lambda a, b: z[a:b].astype(np.float64), valid, iterations, border,
                                               tie_tol, bands)
-        bands(lambda a, b: _cp2tv_kernel(s, g_u, g_v, e_u, e_v, *f, fill32, out, a, b), z.shape[0])
+        bands(lambda a, b: _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, *f, fill32, out, a, b), z.shape[0])
     return out

@@ -34,7 +34,7 @@ the kernels use that form. Details of the authors' code that we follow:
 The raw 3F2N normal points away from the camera (n . P = +1 on a plane); we
 flip each normal so that n . P < 0, which changes no folded angular error;
 an edge-on normal (n . P = 0 up to rounding) is oriented by the fixed rule of
-:mod:`surfnorm.kernels.orientation`, not by the rounding.
+:func:`surfnorm.kernels._rows.facing_sign`, not by the rounding.
 
 Invalid depth is never read: an invalid neighbour gives no candidate, a
 gradient falls back to the one-sided difference beside a gap, and a pixel
@@ -66,9 +66,7 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel
-from .gradients import stencil, usable
-from .orientation import facing_sign
-from .translate import write_unit
+from ._rows import camera_facing, facing_sign, fill_pixel, stencil, usable, write_unit
 
 __all__ = ["three_filters", "sne_roadseg", "THIRD_FILTERS"]
 
@@ -127,16 +125,6 @@ def candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p):
 
 
 @pixel
-def camera_facing(n_x, n_y, n_z, u_c, v_c, f_x, f_y):
-    """(n_x, n_y, n_z) turned, if needed, to face the camera (:mod:`surfnorm.kernels.orientation`).
-
-    P = Z (u_c / f_x, v_c / f_y, 1) enters as its positive multiple P f_x f_y / Z.
-    """
-    s = facing_sign(n_x, n_y, n_z, u_c * f_y, v_c * f_x, f_x * f_y)
-    return s * n_x, s * n_y, s * n_z
-
-
-@pixel
 def fronto_parallel_fallback(n_x, n_y, n_z, count):
     """The authors' fallbacks: no candidate -> n_x = n_y = 0; then n_x = n_y = 0 -> n_z = -1."""
     if count == 0:
@@ -184,13 +172,6 @@ def third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf):
         else:
             med = (buf[half - 1] + buf[half]) / 2.0
     return med, count
-
-
-@pixel
-def fill_pixel(out, v, u, fill):
-    out[v, u, 0] = fill
-    out[v, u, 1] = fill
-    out[v, u, 2] = fill
 
 
 # ---- fast path: runs of pixels whose 3x3 neighbourhood is inside the image and valid --------------
@@ -306,7 +287,7 @@ def finish(n_x, n_y, n_z, count, u_c, v_c, f_x, f_y):
     n_x = n_x if count > 0 else 0.0
     n_y = n_y if count > 0 else 0.0
     n_z = -1.0 if (n_x == 0.0) & (n_y == 0.0) else n_z
-    # facing the camera (surfnorm.kernels.orientation), with P = Z (u_c / f_x, v_c / f_y, 1) multiplied by f_x f_y / Z > 0
+    # facing the camera (surfnorm.kernels._rows.facing_sign), with P = Z (u_c / f_x, v_c / f_y, 1) multiplied by f_x f_y / Z > 0
     scale = facing_sign(n_x, n_y, n_z, u_c * f_y, v_c * f_x, f_x * f_y) / math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
     return n_x * scale, n_y * scale, n_z * scale
 

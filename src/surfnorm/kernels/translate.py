@@ -18,48 +18,16 @@ differences they do not, which is why D2NT needs no 3D points.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, row
-from .gradients import (clamp, copy_row, dlf_code, fast_row, fd_gradient, kernel_tau, laplacian_row, segment, softmin_pair,
-                        softmin_ratio, softmin_weights_row, stencil, usable)
-from .mnr import mnr_row, self_smoothness_row
+from ._rows import centred_columns, fast_row, segment, stencil, store_unit, store_unit_flat
+from .gradients import (dag_gradient, dlf_code, fd_gradient, kernel_tau, laplacian_row, softmin_pair, softmin_ratio,
+                        softmin_weights_row)
 
-__all__ = ["d2nt", "d2nt_v3", "cp2tv"]
-
-
-@pixel
-def write_unit(out, v, u, n_x, n_y, n_z, fill):
-    """Store n / |n| at (v, u), or the fill value when n has no direction; returns whether stored.
-
-    Written with selects, not branches (see :func:`surfnorm.kernels.gradients.clamp`).
-    """
-    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-    ok = (norm > 0) & (norm < np.inf)
-    u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
-    out[v, u, 0] = u_x if ok else fill
-    out[v, u, 1] = u_y if ok else fill
-    out[v, u, 2] = u_z if ok else fill
-    return ok
-
-
-@pixel
-def store_unit_flat(out_flat, i, n_x, n_y, n_z, fill):
-    """:func:`store_pixel` into a flat run of pixels (x, y, z, x, y, z, ...).
-
-    LLVM cannot tell that out[u, 0], out[u, 1], out[u, 2] of a 2-D view do not
-    overlap (its strides are run-time values), so it vectorises only the flat form.
-    """
-    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-    ok = (norm > 0) & (norm < np.inf)
-    u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm  # divided outside the selects, which LLVM then keeps branch-free
-    out_flat[3 * i] = u_x if ok else fill
-    out_flat[3 * i + 1] = u_y if ok else fill
-    out_flat[3 * i + 2] = u_z if ok else fill
-    return ok
+__all__ = ["d2nt", "cp2tv", "d2nt_normal", "prepare_dag_row", "dag_row"]
 
 
 @pixel
@@ -68,28 +36,7 @@ def d2nt_normal(z, z_u, z_v, f_x, f_y, u_c, v_c):
     return f_x * z_u, f_y * z_v, -(z + u_c * z_u + v_c * z_v)
 
 
-@pixel
-def centred_columns(W, c_x):
-    """u - c_x for every column, as float32 (one array instead of one conversion per pixel)."""
-    u_c = np.empty(W, dtype=np.float32)
-    for u in range(W):
-        u_c[u] = np.float32(u - c_x)
-    return u_c
-
-
 # --- D2NT with finite differences (d2nt_basic) ------------------------------------------------
-
-
-@pixel
-def store_pixel(out_row, u, n_x, n_y, n_z, ok, fill):
-    """Store n / |n| at u of a row if ``ok`` and n has a direction, else the fill value; returns whether stored."""
-    norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-    ok = ok & (norm > 0) & (norm < np.inf)
-    u_x, u_y, u_z = n_x / norm, n_y / norm, n_z / norm
-    out_row[u, 0] = u_x if ok else fill
-    out_row[u, 1] = u_y if ok else fill
-    out_row[u, 2] = u_z if ok else fill
-    return ok
 
 
 @pixel
@@ -98,12 +45,39 @@ def d2nt_fd_pixel(z, valid, v, u, f_x, f_y, u_c, v_c, reflect, fill, out_row):
     z_u, ok_u = fd_gradient(z, valid, v, u, 0, 1, reflect)
     z_v, ok_v = fd_gradient(z, valid, v, u, 1, 0, reflect)
     n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, u_c, v_c)
-    store_pixel(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
+    store_unit(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
 
 
 @row
 def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_row):
-    """Row v of D2NT with finite-difference gradients: per pixel gradients -> eq. 9 -> unit length."""
+    """Row v of D2NT with finite-difference gradients (``d2nt_basic``): gradients -> eq. 9 -> unit length.
+
+    Where the 3x3 neighbourhood is valid, central differences in a branch-free loop; elsewhere the per-pixel
+    rule :func:`d2nt_fd_pixel` (one-sided differences at gaps, mirrored with ``reflect``). Same arithmetic in both.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    v : int
+        The row.
+    f_x, f_y : float32
+        Focal lengths (pixels).
+    u_c : ndarray of float32, shape (W,)
+        u - c_x of every column (:func:`surfnorm.kernels._rows.centred_columns`).
+    v_c : float32
+        v - c_y.
+    reflect : bool
+        ``border="reflect"``: a neighbour outside the image is mirrored (OpenCV BORDER_REFLECT_101).
+    fill : float32
+        Value written into all three components where there is no normal.
+    col, runs : ndarray
+        Scratch for :func:`surfnorm.kernels._rows.fast_row`: bool (W,), int64 (W // 2 + 1, 2).
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    """
     H, W = z.shape
     n_runs = fast_row(valid, v, col, runs)
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
@@ -121,7 +95,7 @@ def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_r
                 z_u = (right[i] - left[i]) / two
                 z_v = (below[i] - above[i]) / two
                 n_x, n_y, n_z = d2nt_normal(centre[i], z_u, z_v, f_x, f_y, u_cs[i], v_c)
-                store_unit_flat(run_out, i, n_x, n_y, n_z, fill)
+                store_unit_flat(run_out, i, n_x, n_y, n_z, True, fill)
         u = b
 
 
@@ -139,40 +113,48 @@ def _d2nt_fd_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
 
 
 @pixel
-def dag_pixel_gradient(z, valid, v, u, dv, du, p_b, p_f, ratio):
-    """DAG gradient along (dv, du) from the neighbours' softmin weights p_b, p_f (eq. 10, 12-14).
-
-    lambda_b Delta_b z + lambda_f Delta_f z; one-sided where only one
-    neighbour is usable. Returns (gradient, ok).
-    """
-    H, W = z.shape
-    v_b, u_b, v_f, u_f = clamp(v - dv, H), clamp(u - du, W), clamp(v + dv, H), clamp(u + du, W)
-    has_b = usable(valid, v - dv, u - du)
-    has_f = usable(valid, v + dv, u + du)
-    lambda_b, lambda_f = softmin_pair(p_b, p_f, ratio)
-    if not (has_b & has_f):
-        lambda_b = np.float32(1.0) if has_b else np.float32(0.0)
-        lambda_f = np.float32(1.0) if has_f else np.float32(0.0)
-    z_p, z_b, z_f = z[v, u], z[v_b, u_b], z[v_f, u_f]  # read unconditionally: see gradients.clamp
-    delta_b = (z_p - z_b) if has_b else np.float32(0.0)
-    delta_f = (z_f - z_p) if has_f else np.float32(0.0)
-    return lambda_b * delta_b + lambda_f * delta_f, has_b | has_f
-
-
-@pixel
 def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row):
     """D2NT with DAG gradients at one pixel, any neighbours missing; returns whether it got a normal."""
     W = z.shape[1]
-    z_u, ok_u = dag_pixel_gradient(z, valid, v, u, 0, 1, p_h[max(u - 1, 0)], p_h[min(u + 1, W - 1)], ratio)
-    z_v, ok_v = dag_pixel_gradient(z, valid, v, u, 1, 0, p_up[u], p_dn[u], ratio)
+    z_u, ok_u = dag_gradient(z, valid, v, u, 0, 1, p_h[max(u - 1, 0)], p_h[min(u + 1, W - 1)], ratio)
+    z_v, ok_v = dag_gradient(z, valid, v, u, 1, 0, p_up[u], p_dn[u], ratio)
     n_x, n_y, n_z = d2nt_normal(z[v, u], z_u, z_v, f_x, f_y, u_c, v_c)
-    return store_pixel(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
+    return store_unit(out_row, u, n_x, n_y, n_z, valid[v, u] & ok_u & ok_v, fill)
 
 
 @row
 def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
-    """For row r: its fast runs (returns their number), and p = exp(-s / tau) with the vertical (1D) or 3x3 smoothness
-    (``rel``: see :func:`surfnorm.kernels.gradients.softmin_weights_row`)."""
+    """Row data of row r for the DAG filter: its fast runs, and the softmin weights of its pixels.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    r : int
+        The row.
+    dlf : int
+        Index of the DLF in ``DLF_NAMES`` (eq. 11): the smoothness is the vertical 1D one or the 3x3 one.
+    tau : float
+        Softness of the softmin (eq. 13), as :func:`surfnorm.kernels.gradients.kernel_tau` gives it.
+    rel : float
+        0: tau in depth units; > 0: tau relative to each pixel's depth
+        (:func:`surfnorm.kernels.gradients.softmin_weights_row`).
+    col : ndarray of bool, shape (W,)
+        Scratch.
+    runs_r : ndarray of int64, shape (W // 2 + 1, 2)
+        Receives the fast runs of row r.
+    s : ndarray of float32, shape (W,)
+        Scratch: the smoothness s_p = |nabla^2 z_p| (eq. 11).
+    p_v_r : ndarray of float32, shape (W,)
+        Receives p = exp(-s / tau), the unnormalised softmin weight of each pixel (eq. 13).
+
+    Returns
+    -------
+    int
+        The number of fast runs of row r.
+    """
     n_runs = fast_row(valid, r, col, runs_r)
     laplacian_row(z, valid, r, runs_r, n_runs, dlf, np.int64(1), s)
     softmin_weights_row(s, z[r], tau, rel, p_v_r)
@@ -181,10 +163,41 @@ def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
 
 @row
 def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row, ok_row):
-    """Unit D2NT normals of row v with DAG gradients; ok_row[u] says whether (v, u) got one.
+    """Unit D2NT normals of row v with DAG gradients (eq. 9-14); ok_row[u] says whether (v, u) got one.
 
-    p_h: softmin weights exp(-s/tau) of row v with the horizontal smoothness;
-    p_up, p_dn: those of rows v - 1 and v + 1 with the vertical smoothness.
+    Each gradient is lambda_b Delta_b z + lambda_f Delta_f z (eq. 10) with (lambda_b, lambda_f) the (truncated)
+    softmin of the two neighbours' weights (eq. 12-14, :func:`surfnorm.kernels.gradients.softmin_pair`): in a
+    branch-free loop where the 3x3 neighbourhood is valid, by the per-pixel rule
+    :func:`surfnorm.kernels.gradients.dag_gradient` (one-sided at gaps) elsewhere.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    v : int
+        The row.
+    runs, n_runs : ndarray of int64 (W // 2 + 1, 2), int
+        The fast runs of row v (:func:`prepare_dag_row`).
+    p_h : ndarray of float32, shape (W,)
+        Softmin weights exp(-s / tau) of row v, with the horizontal smoothness (they weigh left and right).
+    p_up, p_dn : ndarray of float32, shape (W,)
+        Those of rows v - 1 and v + 1, with the vertical smoothness (they weigh up and down).
+    f_x, f_y : float32
+        Focal lengths (pixels).
+    u_c : ndarray of float32, shape (W,)
+        u - c_x of every column (:func:`surfnorm.kernels._rows.centred_columns`).
+    v_c : float32
+        v - c_y.
+    ratio : float32
+        e^(1/tau): the truncation of eq. 14 (inf: none; :func:`surfnorm.kernels.gradients.softmin_ratio`).
+    fill : float32
+        Value written into all three components where there is no normal.
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    ok_row : ndarray of bool, shape (W,)
+        Receives whether each pixel got a normal.
     """
     H, W = z.shape
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
@@ -205,7 +218,7 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
                 lambda_u, lambda_d = softmin_pair(p_a[i], p_b[i], ratio)
                 z_v = lambda_u * (z_p - above[i]) + lambda_d * (below[i] - z_p)
                 n_x, n_y, n_z = d2nt_normal(z_p, z_u, z_v, f_x, f_y, u_cs[i], v_c)
-                run_ok[i] = store_unit_flat(run_out, i, n_x, n_y, n_z, fill)
+                run_ok[i] = store_unit_flat(run_out, i, n_x, n_y, n_z, True, fill)
         u = b
 
 
@@ -241,85 +254,6 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
                 np.float32(v - c_y), ratio, fill, out[v], ok_row)
 
 
-@row
-def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs, n_runs,
-                    p_v, sm_v, s, p_h, ok_row, raw, has):
-    """d2nt_v3, step 1 for row q: row data of row q + 1, then the unrefined normals of row q (slots: see the kernel)."""
-    H, W = z.shape
-    if q + 1 < H:
-        j = (q + 1) % 4
-        n_runs[j] = prepare_dag_row(z, valid, q + 1, dlf, tau, rel, col, runs[j], s, p_v[j])
-        laplacian_row(z, valid, q + 1, runs[j], n_runs[j], mnr_dlf, np.int64(1), sm_v[j])
-    if q < H:
-        j = q % 4
-        if dlf == 0:
-            laplacian_row(z, valid, q, runs[j], n_runs[j], np.int64(0), np.int64(0), s)
-            softmin_weights_row(s, z[q], tau, rel, p_h)
-        else:
-            copy_row(p_v[j], p_h)
-        dag_row(z, valid, q, runs[j], n_runs[j], p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4], f_x, f_y, u_c,
-                np.float32(q - c_y), ratio, fill, raw[q % 3], ok_row)
-        has_q, valid_q = has[q % 3], valid[q]
-        for u in range(W):
-            has_q[u] = ok_row[u] | (valid_q[u] & fill_counts)
-
-
-@row
-def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice,
-                  out_row):
-    """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row."""
-    H = z.shape[0]
-    j = v % 4
-    if mnr_dlf == 0:
-        laplacian_row(z, valid, v, runs[j], n_runs[j], np.int64(0), np.int64(0), sm_h)
-    else:
-        copy_row(sm_v[j], sm_h)
-    self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
-    mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
-            has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, z[v], tie_tol, fill, col, mruns,
-            choice, out_row)
-
-
-@njit
-def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf, tie_tol, fill, out, v0, v1):
-    """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep over rows v0 .. v1 - 1 of out.
-
-    The unrefined normals live only in a rolling buffer of 3 rows: row v + 1
-    is estimated just before row v is refined (MNR looks one row up and down).
-    Row data (fast runs, softmin weights, MNR smoothness) use 4 slots, rows
-    v - 1 .. v + 2. Halo: refining row v0 needs the unrefined normals of row
-    v0 - 1, which need the weights of row v0 - 2 (3 rows of depth above the
-    band); a band starting at v0 > 0 primes rows q0 - 1 and q0 = v0 - 1.
-    """
-    H, W = z.shape
-    u_c = centred_columns(W, c_x)
-    col, ok_row = np.empty(W, np.bool_), np.empty(W, np.bool_)
-    runs, n_runs = np.empty((4, W // 2 + 1, 2), np.int64), np.zeros(4, np.int64)
-    mruns, choice = np.empty((W // 2 + 1, 2), np.int64), np.empty(3 * W, np.int32)
-    p_v, sm_v = np.empty((4, W), np.float32), np.empty((4, W), np.float32)
-    s, p_h, sm_h, s_self = (np.empty(W, np.float32), np.empty(W, np.float32), np.empty(W, np.float32),
-                            np.empty(W, np.float32))
-    raw, has = np.empty((3, W, 3), np.float32), np.empty((3, W), np.bool_)
-    # A pixel whose normal failed holds `fill`; MNR treats it as having a normal when fill is non-zero and finite
-    # (as when MNR runs on a finished map): fill_counts.
-    fill_sq = fill * fill + fill * fill + fill * fill
-    fill_counts = (fill_sq > 0) & (fill_sq < np.inf)
-    q0 = max(v0 - 1, 0)  # the first row estimated
-    if q0 > 0:
-        j = (q0 - 1) % 4
-        n_runs[j] = prepare_dag_row(z, valid, q0 - 1, dlf, tau, rel, col, runs[j], s, p_v[j])
-    j = q0 % 4
-    n_runs[j] = prepare_dag_row(z, valid, q0, dlf, tau, rel, col, runs[j], s, p_v[j])
-    laplacian_row(z, valid, q0, runs[j], n_runs[j], mnr_dlf, np.int64(1), sm_v[j])
-    for r in range(q0 - 1, v1):
-        # estimate row q = r + 1 (needs the weights of rows q - 1 .. q + 1), then refine row v = r
-        v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs,
-                        n_runs, p_v, sm_v, s, p_h, ok_row, raw, has)
-        if r >= v0:
-            v3_refine_row(z, valid, r, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns,
-                          choice, out[r])
-
-
 def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0,
          relative=0.0, bands=whole):
     """D2NT with finite-difference (``gradient="fd"``) or DAG (``"dag"``) gradients, into ``out`` (H, W, 3).
@@ -335,21 +269,6 @@ def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True,
     else:
         dag = (dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate), np.float32(fill))
         bands(lambda a, b: _d2nt_dag_kernel(z, valid, *f, *dag, out, a, b), z.shape[0])
-    return out
-
-
-def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0,
-            relative=0.0, bands=whole):
-    """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3).
-
-    ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.kernels.mnr.mnr_row`);
-    ``relative``: DAG's tau relative to each pixel's depth in that mode (see :func:`d2nt`).
-    ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`).
-    """
-    f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
-    args = (dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate), dlf_code(mnr_dlf),
-            np.float32(tie_tol), np.float32(fill))
-    bands(lambda a, b: _d2nt_v3_kernel(z, valid, *f, *args, out, a, b), z.shape[0])
     return out
 
 
@@ -378,12 +297,36 @@ def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
     ux, uy, uz, ok_u = tangent(z, valid, v, u, 0, 1, f_x, f_y, c_x, c_y, reflect)
     vx, vy, vz, ok_v = tangent(z, valid, v, u, 1, 0, f_x, f_y, c_x, c_y, reflect)
     # n = t_v x t_u
-    store_pixel(out_row, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, valid[v, u] & ok_u & ok_v, fill)
+    store_unit(out_row, u, vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux, valid[v, u] & ok_u & ok_v, fill)
 
 
 @row
 def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out_row):
-    """Row v of CP2TV; ``u_c`` holds u - c_x in float64, as back_project computes it (3D points are float64)."""
+    """Row v of CP2TV: n = t_v x t_u of the finite-difference tangent vectors of the back-projected points.
+
+    Parameters
+    ----------
+    z : ndarray of float32, shape (H, W)
+        Validated depth (never read where ``valid`` is False).
+    valid : ndarray of bool, shape (H, W)
+        Pixels whose depth may be used.
+    v : int
+        The row.
+    f_x, f_y : float32
+        Focal lengths (pixels).
+    c_x, c_y : float32
+        Principal point (pixels, 0-based).
+    u_c : ndarray of float64, shape (W,)
+        u - c_x in float64, as :func:`back_project` computes it (the 3D points are float64).
+    reflect : bool
+        ``border="reflect"`` (OpenCV BORDER_REFLECT_101 at the image border).
+    fill : float32
+        Value written into all three components where there is no normal.
+    col, runs : ndarray
+        Scratch for :func:`surfnorm.kernels._rows.fast_row`: bool (W,), int64 (W // 2 + 1, 2).
+    out_row : ndarray of float32, shape (W, 3)
+        Row v of the output.
+    """
     H, W = z.shape
     f_x64, f_y64 = np.float64(f_x), np.float64(f_y)
     two = np.float32(2.0)
@@ -408,7 +351,7 @@ def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, ou
                 t_vy = (z_d * v_dn / f_y64 - z_u * v_up / f_y64) / two
                 t_vz = (z_d - z_u) / two
                 store_unit_flat(run_out, i, t_vy * t_uz - t_vz * t_uy, t_vz * t_ux - t_vx * t_uz,
-                                t_vx * t_uy - t_vy * t_ux, fill)
+                                t_vx * t_uy - t_vy * t_ux, True, fill)
         u = b
 
 

@@ -50,7 +50,7 @@ def kernel_tau(tau: float) -> float:
 
 
 def facing_sign(n_x, n_y, n_z, p_x, p_y, p_z):
-    """+1 or -1 per pixel: the factor that turns n to face the camera from P (surfnorm.kernels.orientation's rule).
+    """+1 or -1 per pixel: the factor that turns n to face the camera from P (surfnorm.kernels._rows.facing_sign's rule).
 
     Where |n . P| <= t |n| |P| (t = ORIENTATION_TIE, edge-on) the first of n_z, n_y, n_x whose magnitude
     exceeds t |n| is made negative, so that rounding never decides the sign.
@@ -336,7 +336,7 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
        where n_x = n_y = 0 exactly, n_z = -1;
     4. normalise, and turn each normal so that n . P < 0 (the raw 3F2N
        normal points away from the camera: n . P = +1 on a plane), an
-       edge-on one by the fixed rule of surfnorm.kernels.orientation.
+       edge-on one by the fixed rule of surfnorm.kernels._rows.facing_sign.
 
     ``border="reflect"`` is OpenCV's BORDER_REFLECT_101, as the authors' code:
     the gradient across the image border is 0 and the mirrored neighbour
@@ -389,7 +389,7 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
     zero = torch.zeros_like(n_x)
     n_x, n_y = torch.where(none_left, zero, n_x), torch.where(none_left, zero, n_y)
     n_z = torch.where((n_x == 0) & (n_y == 0), -torch.ones_like(n_z), torch.where(none_left, zero, n_z))
-    # face the camera (surfnorm.kernels.orientation), P = Z ((u - c_x) / f_x, (v - c_y) / f_y, 1) times f_x f_y / Z,
+    # face the camera (surfnorm.kernels._rows.facing_sign), P = Z ((u - c_x) / f_x, (v - c_y) / f_y, 1) times f_x f_y / Z,
     # as the NumPy backend
     sign = facing_sign(n_x, n_y, n_z, u_c * fy, v_c * fx, fx * fy)
     n = unit(sign * n_x, sign * n_y, sign * n_z, g.valid & ok_u & ok_v, fill)

@@ -198,7 +198,7 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
         s_00, s_01, s_02, s_11, s_12, s_22 = S
         n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
     ok = ok & active
-    sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)  # surfnorm.kernels.orientation's rule
+    sign = facing_sign(n_x, n_y, n_z, p_x, p_y, p_z)  # surfnorm.kernels._rows.facing_sign's rule
     n = torch.stack((sign * n_x, sign * n_y, sign * n_z), dim=1)
     return torch.where(ok.unsqueeze(1), n, torch.full_like(n, fill)).to(g.z.dtype)
 

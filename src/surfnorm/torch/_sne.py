@@ -37,7 +37,7 @@ def atan_of_ratio(num, den):
 
 
 def camera_facing(n_x, n_y, n_z, u_c, v_c, fx, fy):
-    """Turn n to face the camera by surfnorm.kernels.orientation's rule, as ``surfnorm.kernels.three_filters.camera_facing``
+    """Turn n to face the camera by surfnorm.kernels._rows.facing_sign's rule, as ``surfnorm.kernels.three_filters.camera_facing``
     (P enters as its positive multiple P f_x f_y / Z)."""
     sign = facing_sign(n_x, n_y, n_z, u_c * fy, v_c * fx, fx * fy)
     return sign * n_x, sign * n_y, sign * n_z

@@ -1,3 +1,5 @@
+"""surfnorm.io.threef2n: the 3F2N dataset's layout, its depth and parameter files."""
+
 import gzip
 
 import numpy as np
@@ -23,10 +25,16 @@ def test_shipped_sample():
 
 
 def test_matches_uncompressed_original(shared_sample):
+    """The 12 compressed frames of tests/data decompress to the dataset's files (SHA-256 of each .bin as shipped),
+    and the package's shipped frame is the same depth."""
+    import hashlib
+
+    sums = dict(line.split()[::-1] for line in (shared_sample / "SHA256SUMS").read_text().splitlines())
+    assert len(sums) == 12 and len(find_frames(shared_sample)) == 12
+    for path, digest in sums.items():
+        assert hashlib.sha256(gzip.decompress((shared_sample / (path + ".gz")).read_bytes())).hexdigest() == digest, path
     f = read_frame(sample_root(), "Easy/android/000001")
-    raw = np.fromfile(shared_sample / "Easy/android/depth/000001.bin", dtype=np.float32).reshape(480, 640)
-    np.testing.assert_array_equal(f.depth, raw)
-    assert len(find_frames(shared_sample)) == 12
+    np.testing.assert_array_equal(f.depth, read_frame(shared_sample, "Easy/android/000001").depth)
 
 
 def test_bad_files(tmp_path):

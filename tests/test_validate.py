@@ -1,4 +1,4 @@
-"""Issue 14, acceptance 2 (the library part): every bad argument of the library's functions is an InputError
+"""surfnorm._validate and the checks of every public function: every bad argument of the library's functions is an InputError
 (a ValueError) whose message starts with the argument's name, says what was expected and what was received.
 
 One table per function; each row is one case. The counts are asserted at the end, so that a row lost in an
@@ -13,6 +13,8 @@ import pytest
 import surfnorm
 from surfnorm.camera import Intrinsics
 from surfnorm.errors import InputError
+from surfnorm._validate import valid_map, valid_pixels
+from .surfaces import holey_depth
 
 K = np.array([[60.0, 0, 7.5], [0, 60.0, 5.5], [0, 0, 1]])
 Z = np.full((12, 16), 2.0, np.float32)
@@ -207,3 +209,13 @@ def test_torch_estimate_refuses_bad_arguments_by_name(changes, name):
 
 def test_the_battery_counts():
     assert (len(ESTIMATE), len(REFINE), len(INTRINSICS), len(TORCH)) == (78, 9, 8, 13)  # 108 cases
+
+
+# --- validity: valid_map (one Numba pass) and valid_pixels (NumPy) agree -----------------------------------------
+
+def test_valid_map_equals_numpy_rule():
+    z = holey_depth(7)
+    z[0, :4] = [-0.0, np.float32(1e-45), -np.inf, np.float32(3e38)]
+    mask = np.random.default_rng(7).random(z.shape) < 0.8
+    np.testing.assert_array_equal(valid_map(z, None), valid_pixels(z, None))
+    np.testing.assert_array_equal(valid_map(z, mask), valid_pixels(z, mask))

@@ -1,4 +1,5 @@
-"""Issue 6, acceptance 2: hypothesis properties of invalid depth, mirroring and units, for every registered method.
+"""surfnorm.methods: the registry (each name reaches its kernel in one hop), and properties of every registered
+method (hypothesis): invalid depth, mirroring and units.
 
 * on random depth with random holes (0, NaN, +-inf, negative, user mask) every output pixel is
   either the fill value or a finite unit vector; every invalid pixel is the fill value; a pixel
@@ -20,6 +21,11 @@ Images are small (3..14 pixels a side) and example counts modest so the file run
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -28,6 +34,7 @@ from hypothesis import strategies as st
 import surfnorm
 from surfnorm import Intrinsics
 
+SRC = Path(__file__).resolve().parents[1] / "src"
 METHODS = list(surfnorm.methods()) + [m + "+mnr" for m in ("cp2tv",) if m in surfnorm.methods()]
 HOLE_VALUES = (0.0, np.nan, np.inf, -np.inf, -1.5)
 SETTINGS = dict(deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
@@ -192,3 +199,42 @@ def test_scale_invariant_mode_is_exact_for_powers_of_two(method, scene, power):
     n = surfnorm.estimate(z, cam, method=method, mask=mask, scale_invariant=True)
     m = surfnorm.estimate(z * np.float32(2.0**power), cam, method=method, mask=mask, scale_invariant=True)
     np.testing.assert_array_equal(m, n)
+
+
+# --- the registry: one hop from a name to its kernel ----------------------------------------------------------------
+
+def test_every_method_names_where_its_kernel_lives():
+    import importlib
+
+    for name, info in surfnorm.methods().items():
+        module, _, function = info.kernel.rpartition(".")
+        assert module.startswith("surfnorm.kernels."), (name, info.kernel)
+        assert callable(getattr(importlib.import_module(module), function)), (name, info.kernel)
+
+
+@pytest.mark.parametrize("name", list(surfnorm.methods()))
+def test_each_run_calls_the_kernel_it_names(name, monkeypatch):
+    """The run function of each entry calls exactly the function that ``kernel`` names (a spy replaces it)."""
+    import importlib
+
+    from surfnorm.methods import _REGISTRY
+
+    module, _, function = _REGISTRY[name].kernel.rpartition(".")
+    mod = importlib.import_module(module)
+    real, calls = getattr(mod, function), []
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(mod, function, spy)
+    v, u = np.mgrid[0:24, 0:32]
+    z = (2.0 + 0.01 * u + 0.005 * v).astype(np.float32)
+    surfnorm.estimate(z, [[40.0, 0, 15.5], [0, 40.0, 11.5], [0, 0, 1]], method=name, threads=1)
+    assert len(calls) == 1, f"{name}: {module}.{function} called {len(calls)} times"
+
+
+def test_the_registry_is_filled_without_importing_a_kernel():
+    code = ("import sys, surfnorm; names = list(surfnorm.methods()); "
+            "assert len(names) >= 14 and not any(m.startswith('surfnorm.kernels') for m in sys.modules), sorted(sys.modules)")
+    subprocess.run([sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(SRC)})

@@ -385,32 +385,36 @@ def window_sums(ring, slot, H, W, v, u, r, m):
 
 
 @njit(noalias=True, _nrt=False)
-def box_row(top, bottom, r, pick, cols, m_row):
-    """Window sums at radius r for the pixels of a row where ``pick``: m_row[c, u] = sums of moment c
-    over columns u - r .. u + r (clipped) between integral rows ``top`` and ``bottom``.
+def box_row(top, bottom, r, pick, src, dst):
+    """Window sums at radius r: dst[c, u] = sums of moment c over columns u - r .. u + r (clipped)
+    between integral rows ``top`` and ``bottom`` where ``pick``, src[c, u] elsewhere (src and dst
+    must be distinct arrays: a store that keeps the old value in place becomes a masked store,
+    microcoded and slow on some processors).
 
-    ``cols`` is scratch of W + 1 (the column sums bottom - top). Loops run from 0 over views so that
-    they vectorise (a negative-looking index costs Numba a wrap-around test per read).
+    Each sum is (bottom - top at the right edge) - (bottom - top at the left edge).
     """
-    W = m_row.shape[1]
+    W = dst.shape[1]
     k = 2 * r + 1
     for c in range(_N_MOMENTS):
         t = top[c]
         b = bottom[c]
-        for u in range(W + 1):
-            cols[u] = b[u] - t[u]
-        out = m_row[c]
+        s = src[c]
+        d = dst[c]
         for u in range(min(r, W)):  # left border: clipped windows
-            out[u] = select(pick[u], cols[min(u + r + 1, W)] - cols[0], out[u])
+            u1 = min(u + r + 1, W)
+            d[u] = select(pick[u], (b[u1] - t[u1]) - (b[0] - t[0]), s[u])
         n = W - k
         if n > 0:  # interior: u = r .. W - r - 2
-            hi = cols[k:]
-            o = out[r:]
+            bh = b[k:]
+            th = t[k:]
             p = pick[r:]
+            so = s[r:]
+            do = d[r:]
             for i in range(n):
-                o[i] = select(p[i], hi[i] - cols[i], o[i])
+                do[i] = select(p[i], (bh[i] - th[i]) - (b[i] - t[i]), so[i])
         for u in range(max(r, W - r - 1), W):  # right border
-            out[u] = select(pick[u], cols[W] - cols[max(u - r, 0)], out[u])
+            u0 = max(u - r, 0)
+            d[u] = select(pick[u], (b[W] - t[W]) - (b[u0] - t[u0]), s[u])
 
 
 @pixel
@@ -486,11 +490,11 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
     m = np.empty(_N_MOMENTS)
-    m_row = np.zeros((_N_MOMENTS, W))
+    m_a = np.zeros((_N_MOMENTS, W))
+    m_b = np.zeros((_N_MOMENTS, W))
     r_row = np.empty(W, np.int64)
     t_row = np.empty(W, np.int64)
     pick = np.empty(W, np.bool_)
-    cols = np.empty(W + 1)
     g_u = np.empty(W)
     g_v = np.empty(W)
     a = np.empty(W)
@@ -499,7 +503,8 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
     limit = np.empty(W)
     passed = np.empty(W, np.bool_)
     r_try = np.empty(W, np.int64)
-    m_try = np.zeros((_N_MOMENTS, W))
+    m_c = np.zeros((_N_MOMENTS, W))
+    m_d = np.zeros((_N_MOMENTS, W))
     g_u2 = np.empty(W)
     g_v2 = np.empty(W)
     a2 = np.empty(W)
@@ -521,6 +526,8 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
         # Each pixel's radius from its depth; then window sums radius by radius, growing the
         # radius where too few of the window's pixels are valid (sparse depth).
         present[:] = False
+        m_src = m_a
+        m_row = m_b
         for u in range(W):
             t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
             t_row[u] = t
@@ -532,7 +539,8 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 continue
             for u in range(W):
                 pick[u] = valid_row[u] & (r_row[u] == r)
-            box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, cols, m_row)
+            m_row, m_src = m_src, m_row
+            box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, m_src, m_row)
             if r == r_max:
                 continue
             for u in range(W):
@@ -566,11 +574,14 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                     passed[u] = False
             if not more:
                 break
+            m_try = m_c
+            m_old = m_d
             for r in range(1, r_max + 1):
                 if present[r]:
                     for u in range(W):
                         pick[u] = passed[u] & (r_try[u] == r)
-                    box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, cols, m_try)
+                    m_try, m_old = m_old, m_try
+                    box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, m_old, m_try)
             fit_row(m_try, r_try, y, g_u2, g_v2, a2, rss2, dof2)
             for u in range(W):
                 if passed[u] and dof2[u] > 0.0 and rss2[u] <= limit[u] * dof2[u]:

@@ -384,22 +384,31 @@ def window_sums(ring, slot, H, W, v, u, r, m):
         m[c] = ring[v1, c, u1] - ring[v0, c, u1] - ring[v1, c, u0] + ring[v0, c, u0]
 
 
+#: Channels of a window's moments: the count and the four sums with w, summed by :func:`box_row` for
+#: whole rows; the five coordinate sums (u', v', u'u', u'v', v'v') only where a window is not the full
+#: square (:func:`coordinate_sums`), since :func:`affine_fit` replaces them by their known values there.
+_BOXED = (0, 6, 7, 8, 9)
+_COORDS = (1, 2, 3, 4, 5)
+
+
 @njit(noalias=True, _nrt=False)
-def box_row(top, bottom, r, pick, src, dst):
-    """Window sums at radius r: dst[c, u] = sums of moment c over columns u - r .. u + r (clipped)
-    between integral rows ``top`` and ``bottom`` where ``pick``, src[c, u] elsewhere (src and dst
-    must be distinct arrays: a store that keeps the old value in place becomes a masked store,
-    microcoded and slow on some processors).
+def box_row(top, bottom, r, pick, first, src, dst):
+    """Window sums at radius r of the count and the w moments (``_BOXED``): dst[j, u] = sums of moment
+    _BOXED[j] over columns u - r .. u + r (clipped) between integral rows ``top`` and ``bottom`` where
+    ``pick``; elsewhere src[j, u], or anything when ``first``. ``src`` and ``dst`` are distinct arrays:
+    a store that keeps the old value in place compiles to a masked store, microcoded and slow on some
+    processors.
 
     Each sum is (bottom - top at the right edge) - (bottom - top at the left edge).
     """
     W = dst.shape[1]
     k = 2 * r + 1
-    for c in range(_N_MOMENTS):
+    for j in range(len(_BOXED)):
+        c = _BOXED[j]
         t = top[c]
         b = bottom[c]
-        s = src[c]
-        d = dst[c]
+        s = src[j]
+        d = dst[j]
         for u in range(min(r, W)):  # left border: clipped windows
             u1 = min(u + r + 1, W)
             d[u] = select(pick[u], (b[u1] - t[u1]) - (b[0] - t[0]), s[u])
@@ -407,14 +416,33 @@ def box_row(top, bottom, r, pick, src, dst):
         if n > 0:  # interior: u = r .. W - r - 2
             bh = b[k:]
             th = t[k:]
-            p = pick[r:]
-            so = s[r:]
             do = d[r:]
-            for i in range(n):
-                do[i] = select(p[i], (bh[i] - th[i]) - (b[i] - t[i]), so[i])
+            if first:
+                for i in range(n):
+                    do[i] = (bh[i] - th[i]) - (b[i] - t[i])
+            else:
+                p = pick[r:]
+                so = s[r:]
+                for i in range(n):
+                    do[i] = select(p[i], (bh[i] - th[i]) - (b[i] - t[i]), so[i])
         for u in range(max(r, W - r - 1), W):  # right border
             u0 = max(u - r, 0)
             d[u] = select(pick[u], (b[W] - t[W]) - (b[u0] - t[u0]), s[u])
+
+
+@njit(noalias=True, _nrt=False)
+def coordinate_sums(top, bottom, r, pick, counts, coords):
+    """The coordinate sums (``_COORDS``) at radius r into coords[j, u], for the pixels where ``pick``
+    whose window is not the full (2r + 1)^2 square (``counts``, from :func:`box_row`)."""
+    W = coords.shape[1]
+    full = (2 * r + 1) * (2 * r + 1)
+    for u in range(W):
+        if pick[u] and counts[u] != full:
+            u0 = max(u - r, 0)
+            u1 = min(u + r + 1, W)
+            for j in range(len(_COORDS)):
+                c = _COORDS[j]
+                coords[j, u] = (bottom[c, u1] - top[c, u1]) - (bottom[c, u0] - top[c, u0])
 
 
 @pixel
@@ -453,13 +481,15 @@ def affine_fit(n, s_u, s_v, s_uu, s_uv, s_vv, s_w, s_uw, s_vw, s_ww, r, x, y):
 
 
 @njit(noalias=True, _nrt=False)
-def fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof):
-    """:func:`affine_fit` for every pixel of row ``y``, from the row's window moments ``m_row`` (10, W)."""
-    W = m_row.shape[1]
+def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
+    """:func:`affine_fit` for every pixel of row ``y``, from the row's window moments (``m_box``: the
+    ``_BOXED`` ones, ``m_coords``: the ``_COORDS`` ones), radii ``r_row`` and centred abscissae ``x_row``
+    (floats, holding integers and half-integers exactly: int64 operands would not vectorise)."""
+    W = m_box.shape[1]
     for u in range(W):
         a[u], g_u[u], g_v[u], rss[u], dof[u] = affine_fit(
-            m_row[0, u], m_row[1, u], m_row[2, u], m_row[3, u], m_row[4, u], m_row[5, u], m_row[6, u], m_row[7, u],
-            m_row[8, u], m_row[9, u], r_row[u], u - 0.5 * W, y)
+            m_box[0, u], m_coords[0, u], m_coords[1, u], m_coords[2, u], m_coords[3, u], m_coords[4, u], m_box[1, u],
+            m_box[2, u], m_box[3, u], m_box[4, u], r_row[u], x_row[u], y)
 
 
 @njit(noalias=True, _nrt=False)
@@ -490,9 +520,15 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
     m = np.empty(_N_MOMENTS)
-    m_a = np.zeros((_N_MOMENTS, W))
-    m_b = np.zeros((_N_MOMENTS, W))
+    m_a = np.zeros((len(_BOXED), W))
+    m_b = np.zeros((len(_BOXED), W))
+    m_coords = np.zeros((len(_COORDS), W))
+    m_coords2 = np.zeros((len(_COORDS), W))
     r_row = np.empty(W, np.int64)
+    r_float = np.empty(W)
+    x_row = np.empty(W)
+    for u in range(W):
+        x_row[u] = u - 0.5 * W
     t_row = np.empty(W, np.int64)
     pick = np.empty(W, np.bool_)
     g_u = np.empty(W)
@@ -503,8 +539,8 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
     limit = np.empty(W)
     passed = np.empty(W, np.bool_)
     r_try = np.empty(W, np.int64)
-    m_c = np.zeros((_N_MOMENTS, W))
-    m_d = np.zeros((_N_MOMENTS, W))
+    m_c = np.zeros((len(_BOXED), W))
+    m_d = np.zeros((len(_BOXED), W))
     g_u2 = np.empty(W)
     g_v2 = np.empty(W)
     a2 = np.empty(W)
@@ -534,13 +570,18 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
             r_row[u] = r_table[t]
             if valid_row[u]:
                 present[r_table[t]] = True
+        first = True
         for r in range(1, r_max + 1):
             if not present[r]:
                 continue
             for u in range(W):
                 pick[u] = valid_row[u] & (r_row[u] == r)
             m_row, m_src = m_src, m_row
-            box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, m_src, m_row)
+            top = ring[slot[max(v - r, 0)]]
+            bottom = ring[slot[min(v + r + 1, H)]]
+            box_row(top, bottom, r, pick, first, m_src, m_row)
+            coordinate_sums(top, bottom, r, pick, m_row[0], m_coords)
+            first = False
             if r == r_max:
                 continue
             for u in range(W):
@@ -552,7 +593,9 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                                 or 2.0 * m_row[0, u] * (r * (r + 1)) < (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))):
                     r_row[u] = grow[r]
                     present[grow[r]] = True
-        fit_row(m_row, r_row, y, g_u, g_v, a, rss, dof)
+        for u in range(W):
+            r_float[u] = r_row[u]
+        fit_row(m_row, m_coords, r_float, x_row, y, g_u, g_v, a, rss, dof)
         # The noise test: a fit is consistent with the noise when its residual per degree of
         # freedom is at most (kappa sigma_w)^2, sigma_w = sigma_z / z^2 = rho / (z f) the noise of w.
         for u in range(W):
@@ -576,13 +619,20 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 break
             m_try = m_c
             m_old = m_d
+            first = True
             for r in range(1, r_max + 1):
                 if present[r]:
                     for u in range(W):
                         pick[u] = passed[u] & (r_try[u] == r)
                     m_try, m_old = m_old, m_try
-                    box_row(ring[slot[max(v - r, 0)]], ring[slot[min(v + r + 1, H)]], r, pick, m_old, m_try)
-            fit_row(m_try, r_try, y, g_u2, g_v2, a2, rss2, dof2)
+                    top = ring[slot[max(v - r, 0)]]
+                    bottom = ring[slot[min(v + r + 1, H)]]
+                    box_row(top, bottom, r, pick, first, m_old, m_try)
+                    coordinate_sums(top, bottom, r, pick, m_try[0], m_coords2)
+                    first = False
+            for u in range(W):
+                r_float[u] = r_try[u]
+            fit_row(m_try, m_coords2, r_float, x_row, y, g_u2, g_v2, a2, rss2, dof2)
             for u in range(W):
                 if passed[u] and dof2[u] > 0.0 and rss2[u] <= limit[u] * dof2[u]:
                     g_u[u] = g_u2[u]

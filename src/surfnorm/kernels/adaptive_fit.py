@@ -493,6 +493,22 @@ def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
 
 
 @njit(noalias=True, _nrt=False)
+def keep_row(passed, limit, g_u2, g_v2, a2, rss2, dof2, r2, g_u, g_v, a, rss, dof, r, g_u3, g_v3, a3, rss3, dof3, r3):
+    """The widened fit (g_u2 ...) where it was tried (``passed``) and still passes the noise test, the
+    current one (g_u ...) elsewhere, into g_u3 ... (distinct arrays: see :func:`box_row`); ``passed``
+    becomes where the widened fit was kept."""
+    for u in range(passed.shape[0]):
+        ok = passed[u] & (dof2[u] > 0.0) & (rss2[u] <= limit[u] * dof2[u])
+        g_u3[u] = select(ok, g_u2[u], g_u[u])
+        g_v3[u] = select(ok, g_v2[u], g_v[u])
+        a3[u] = select(ok, a2[u], a[u])
+        rss3[u] = select(ok, rss2[u], rss[u])
+        dof3[u] = select(ok, dof2[u], dof[u])
+        r3[u] = select(ok, r2[u], r[u])
+        passed[u] = ok
+
+
+@njit(noalias=True, _nrt=False)
 def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_row):
     """Eq. (2): the unit normal facing the camera from each pixel's fit; ``fill`` without one."""
     W = z_row.shape[0]
@@ -546,6 +562,12 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
     a2 = np.empty(W)
     rss2 = np.empty(W)
     dof2 = np.empty(W)
+    g_u3 = np.empty(W)
+    g_v3 = np.empty(W)
+    a3 = np.empty(W)
+    rss3 = np.empty(W)
+    dof3 = np.empty(W)
+    r_next = np.empty(W, np.int64)
     present = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)
     n_table = r_table.shape[0]
@@ -633,16 +655,14 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
             for u in range(W):
                 r_float[u] = r_try[u]
             fit_row(m_try, m_coords2, r_float, x_row, y, g_u2, g_v2, a2, rss2, dof2)
-            for u in range(W):
-                if passed[u] and dof2[u] > 0.0 and rss2[u] <= limit[u] * dof2[u]:
-                    g_u[u] = g_u2[u]
-                    g_v[u] = g_v2[u]
-                    a[u] = a2[u]
-                    rss[u] = rss2[u]
-                    dof[u] = dof2[u]
-                    r_row[u] = r_try[u]
-                else:
-                    passed[u] = False
+            keep_row(passed, limit, g_u2, g_v2, a2, rss2, dof2, r_try, g_u, g_v, a, rss, dof, r_row,
+                     g_u3, g_v3, a3, rss3, dof3, r_next)
+            g_u, g_u3 = g_u3, g_u
+            g_v, g_v3 = g_v3, g_v
+            a, a3 = a3, a
+            rss, rss3 = rss3, rss
+            dof, dof3 = dof3, dof
+            r_row, r_next = r_next, r_row
         # The edge test: a pixel whose fit fails the noise test takes the best of the four
         # quadrant windows (smallest residual per dof).
         for u in range(W):

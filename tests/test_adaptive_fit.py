@@ -219,3 +219,33 @@ def test_window_ties_go_the_same_way_in_every_unit():
         differing += int((have & (np.abs(np.nan_to_num(b - a, nan=2.0)).max(-1) > 1e-4)).sum())
         total += int(have.sum())
     assert differing <= 1e-5 * total, (differing, total)
+
+
+@pytest.mark.parametrize("r", [1, 2, 4, 15, 40])
+def test_row_window_sums_are_the_box_formula_where_picked(r):
+    """box_row and coordinate_sums (the row path of the window sums) give, for every picked pixel, exactly
+    (bottom - top at column u + r + 1) - (bottom - top at column u - r), clipped; box_row keeps src elsewhere
+    unless ``first``, and coordinate_sums fills only windows that are not the full square. The kernel's
+    outputs rest on these bits (the windows' fits and every decision made from them)."""
+    from surfnorm.kernels.adaptive_fit import _BOXED, _COORDS, box_row, coordinate_sums
+
+    rng = np.random.default_rng(r)
+    W = 50
+    top, bottom = rng.normal(0, 1e3, (2, 10, W + 1))
+    pick = rng.random(W) < 0.6
+    u = np.arange(W)
+    u0, u1 = np.clip(u - r, 0, W), np.clip(u + r + 1, 0, W)
+    box = (bottom[:, u1] - top[:, u1]) - (bottom[:, u0] - top[:, u0])  # (10, W), same operations in NumPy
+    src = rng.normal(size=(len(_BOXED), W))
+    for first in (False, True):
+        dst = np.full((len(_BOXED), W), np.nan)
+        box_row(top, bottom, r, pick, first, src, dst)
+        np.testing.assert_array_equal(dst[:, pick], box[list(_BOXED)][:, pick])
+        if not first:
+            np.testing.assert_array_equal(dst[:, ~pick], src[:, ~pick])
+    counts = np.where(rng.random(W) < 0.5, float((2 * r + 1) ** 2), box[0])
+    coords = np.full((len(_COORDS), W), np.nan)
+    coordinate_sums(top, bottom, r, pick, counts, coords)
+    fill = pick & (counts != (2 * r + 1) ** 2)
+    np.testing.assert_array_equal(coords[:, fill], box[list(_COORDS)][:, fill])
+    assert np.isnan(coords[:, ~fill]).all()

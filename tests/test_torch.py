@@ -1,7 +1,9 @@
 """The PyTorch backend: parity with the NumPy backend, gradients, shapes, dtypes, devices, errors."""
 
+import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -50,6 +52,10 @@ def variants(name):
         out += [(name, {"mnr_dlf": "gamma"})]
     if "window" in opts:
         out += [(name, {"window": 5}), (name + "+mnr", {"window": 7, "mnr_dlf": "beta"})]
+    if "max_window" in opts:
+        out += [(name, {"max_window": 7}), (name, {"window": 3, "max_window": 15, "fill": -2.0})]
+    if "tau" in opts and "dlf" not in opts:  # auto: d2nt_v3's tau where it picks d2nt_v3
+        out += [(name, {"tau": 0.5}), (name + "+mnr", {"mnr_dlf": "gamma", "fill": 1.0})]
     if "base" in opts:
         out += [(name, {"base": "3f2n"}), (name, {"base": "3f2n", "border": "reflect", "iterations": 1}),
                 (name, {"iterations": None})]
@@ -111,9 +117,8 @@ class TestParity:
     def test_every_registered_method_runs_in_torch(self):
         # Issue 16, acceptance 1: every method of surfnorm.methods() (the parity tests above take their
         # list from st.methods(), so a method missing here would be missing there too)
-        assert list(st.methods()) == [m for m in surfnorm.methods() if m not in st.NUMPY_ONLY]
-        with pytest.raises(surfnorm.InputError, match="runs only in surfnorm.estimate"):  # named, not "unknown"
-            st.estimate(torch.ones(8, 8), torch.eye(3), method="auto")
+        assert st.NUMPY_ONLY == ()
+        assert list(st.methods()) == list(surfnorm.methods())
 
     def test_options_match_the_numpy_backend(self):
         for name in TORCH_METHODS:
@@ -126,6 +131,19 @@ class TestParity:
 
         assert _sda.SDA_PENALTY == sda.SDA_PENALTY and _sda.MAX_ITERATIONS == sda.MAX_ITERATIONS
         assert (_plane_fit._NEWTON_STEPS, _plane_fit._NEWTON_TOL) == (plane_fit._NEWTON_STEPS, plane_fit._NEWTON_TOL)
+        from surfnorm import adaptive_fit, auto
+        from surfnorm.torch import _adaptive
+
+        for name in ("ALPHA", "KAPPA", "RHO_FLOOR", "RADII", "N_WIDEN", "MIN_POINTS", "N_BINS", "MIN_SAMPLES",
+                     "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS", "_CLIP_ROUNDS", "_TABLE"):
+            assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name  # noqa: B009
+        assert _adaptive._SHIFTS == tuple(map(tuple, adaptive_fit._SHIFTS.tolist()))
+        assert _adaptive.CLEAN_FLOOR == auto.CLEAN_FLOOR
+        assert _adaptive.MAX_WINDOW == adaptive_fit.MAX_WINDOW == surfnorm.methods()["adaptive_fit"].options["max_window"]
+        for r_max in (1, 3, 7, 15, 20, 63):
+            widen, grow = _adaptive._ladder_tables(r_max)
+            np.testing.assert_array_equal(widen, adaptive_fit.widen_table(r_max))
+            np.testing.assert_array_equal(grow, adaptive_fit.growth_table(r_max))
 
 
 def scene_with_holes(h=40, w=52, seed=0):
@@ -139,6 +157,202 @@ def scene_with_holes(h=40, w=52, seed=0):
     depth[0, w - 3] = -1.0
     mask = rng.random((h, w)) > 0.03
     return depth, mask
+
+
+SENSOR_SAMPLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "sensor-sample"
+SENSOR_FRAMES = sorted(p.name for p in SENSOR_SAMPLE.iterdir() if (p / "depth.npy").is_file()) if SENSOR_SAMPLE.is_dir() else []
+
+
+def read_sensor(name):
+    """A frame of the sensor sample: float32 depth (0 where invalid) and K."""
+    k = json.loads((SENSOR_SAMPLE / name / "K.json").read_text())
+    return np.load(SENSOR_SAMPLE / name / "depth.npy"), np.array([[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1]])
+
+
+def sensor_like(h=48, w=64, seed=0, step=0.008, sigma=0.01, holes=0.05):
+    """Depth as a sensor gives it: two tilted planes with a step and a ball in front, noise, quantised to
+    ``step``, holes. Its noise profile has samples in several depth bins, so the radius, the widening, the
+    growth (around the holes) and the quadrant windows (at the step and the ball's rim) all come into play."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:h, 0:w]
+    z = np.where(u < w // 2, 1.5 + 0.01 * u + 0.004 * v, 2.4 - 0.012 * v)
+    ball = (u - 0.7 * w) ** 2 + (v - 0.5 * h) ** 2 < (0.2 * h) ** 2
+    z = np.where(ball, 1.2 - 0.2 * np.sqrt(np.clip(1 - ((u - 0.7 * w) ** 2 + (v - 0.5 * h) ** 2) / (0.2 * h) ** 2, 0, 1)), z)
+    z = np.round((z + sigma * rng.standard_normal(z.shape)) / step) * step
+    z[rng.random(z.shape) < holes] = 0.0
+    z[3:7, 5:12] = 0.0
+    return z.astype(np.float32)
+
+
+def torch_normals(depth, Ks, method, masks=None, **options):
+    return nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method=method,
+                            mask=None if masks is None else torch.from_numpy(masks)[:, None], **options))
+
+
+class TestAdaptive:
+    """adaptive_fit and auto: the same data-dependent choices as the NumPy kernel, per frame of a batch."""
+
+    @staticmethod
+    def numpy_tables(depth, K, mask=None, window=None, max_window=31):
+        from surfnorm.adaptive_fit import noise_profile, radius_table
+
+        valid = np.isfinite(depth) & (depth > 0) & (True if mask is None else mask)
+        f = np.sqrt(K[0, 0] * K[1, 1])
+        profile = noise_profile(depth, valid, f)
+        return profile, radius_table(profile.depths, profile.rho, window=window, max_window=max_window)
+
+    @staticmethod
+    def torch_tables(depth, K, mask=None, window=None, max_window=31):
+        from surfnorm.torch import _adaptive
+
+        d = torch.from_numpy(depth)[None].double()
+        valid = torch.isfinite(d) & (d > 0)
+        if mask is not None:
+            valid = valid & torch.from_numpy(mask)[None]
+        f = torch.tensor([np.sqrt(K[0, 0] * K[1, 1])], dtype=torch.float64)
+        return _adaptive.noise_tables(torch.where(valid, d, 1.0), valid, f, window=window, r_max=(max_window - 1) // 2)
+
+    def scenes(self):
+        f = threef2n.read_frame(threef2n.sample_root(), "Medium/Trex/000001")
+        sparse = sensor_like(seed=4, holes=0.8)  # too few valid pixels: windows grow
+        yield "3F2N frame", f.depth, f.K.matrix, None
+        yield "3F2N frame, foreground", f.depth, f.K.matrix, f.mask
+        yield "sensor-like", sensor_like(seed=1), K, None
+        yield "sparse", sparse, K, None
+        yield "flat", np.full((40, 50), 2.0, np.float32), K, None  # one depth: no depth range
+        yield "tiny", sensor_like(8, 9, seed=2), K, None  # too few samples: no profile, NaN floor
+        yield "no valid depth", np.zeros((20, 24), np.float32), K, None
+
+    def test_noise_tables_as_numpy(self):
+        for label, depth, Kf, mask in self.scenes():
+            for window, max_window in ((None, 31), (None, 9), (5, 31)):
+                profile, (z0, inv_step, radius, rho) = self.numpy_tables(depth, Kf, mask, window, max_window)
+                got = self.torch_tables(depth, Kf, mask, window, max_window)
+                msg = f"{label}, window {window}, max_window {max_window}"
+                assert (np.isnan(profile.floor) and np.isnan(got.floor.item())) or profile.floor == got.floor.item(), msg
+                np.testing.assert_array_equal(got.radius[0].numpy(), radius, err_msg=msg)
+                np.testing.assert_allclose(got.rho[0].numpy(), rho, rtol=1e-13, atol=0, err_msg=msg)
+                np.testing.assert_allclose([got.z0.item(), got.inv_step.item()], [z0, inv_step], rtol=1e-13, err_msg=msg)
+
+    def test_choices_differ_across_the_scene(self):
+        # the parity tests on sensor_like() scenes are only worth something if the scene exercises every choice
+        from surfnorm.torch import _adaptive
+
+        depth = sensor_like(seed=1)
+        z = torch.from_numpy(depth)[None].double()
+        valid = z > 0
+        cam = tuple(torch.tensor(c, dtype=torch.float64).view(1, 1, 1) for c in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+        _, choice = _adaptive.choices(torch.where(valid, z, 1.0), valid, cam)
+        radii = set(choice.radius.tolist())
+        assert len(radii) >= 3, radii
+        assert (choice.shift >= 0).sum() > 20  # quadrant windows
+        assert set(range(4)) <= set(choice.shift.tolist())
+
+    @pytest.mark.parametrize("seed", [1, 2, 3])
+    @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
+    def test_sensor_like_batch(self, method, seed):
+        # a batch of three different frames: each gets its own noise profile and choice, as if run alone
+        depth = np.stack([sensor_like(seed=seed), sensor_like(seed=seed + 10, sigma=0.0, step=1e-6, holes=0.0),
+                          sensor_like(seed=seed + 20, holes=0.5)])
+        Ks = np.stack([K, K, K])
+        assert_parity(depth, None, Ks, method, {}, ["noisy", "clean", "sparse"])
+        masks = np.random.default_rng(seed).random(depth.shape) > 0.1
+        assert_parity(depth, masks, Ks, method + "+mnr", {"fill": -3.0}, ["noisy", "clean", "sparse"])
+
+    def test_auto_chooses_per_frame(self):
+        from surfnorm.auto import choose
+        from surfnorm.camera import Intrinsics
+
+        f = threef2n.read_frame(threef2n.sample_root(), "Medium/Trex/000001")
+        clean = f.depth[100:260, 200:400].copy()
+        noisy = (np.round(clean * 1000 / 4) * 4 / 1000).astype(np.float32)  # quantised to 4 mm
+        noisy += 0.002 * np.random.default_rng(0).standard_normal(noisy.shape).astype(np.float32)
+        noisy[clean == 0] = 0
+        Kc = f.K.matrix.copy()
+        Kc[0, 2] -= 200
+        Kc[1, 2] -= 100
+        cam = Intrinsics.from_matrix(Kc)
+        picks = [choose(d, d > 0, cam) for d in (clean, noisy)]
+        assert picks == ["d2nt_v3", "adaptive_fit"]  # otherwise this test shows nothing
+        depth, Ks = np.stack([clean, noisy, clean]), np.stack([Kc, Kc, Kc])
+        got = assert_parity(depth, None, Ks, "auto", {}, ["clean", "noisy", "clean again"])
+        np.testing.assert_array_equal(got[0], nchw(st.estimate(torch.from_numpy(clean), Kc, method="d2nt_v3"))[0])
+        np.testing.assert_array_equal(got[1], nchw(st.estimate(torch.from_numpy(noisy), Kc, method="adaptive_fit"))[0])
+
+    @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
+    def test_masked_path_as_gathered_path(self, method, monkeypatch):
+        # other devices work on all pixels (and frames) with masks; the CPU on the ones concerned: same normals
+        from surfnorm.torch import _adaptive
+
+        depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, sigma=0.0, step=1e-6), sensor_like(seed=7, holes=0.6)])
+        Ks = np.stack([K, K, K])
+        gathered = torch_normals(depth, Ks, method, window=None) if method == "adaptive_fit" else torch_normals(depth, Ks, method)
+        monkeypatch.setattr(_adaptive, "_GATHER_ON_CPU", False)
+        masked = torch_normals(depth, Ks, method)
+        np.testing.assert_array_equal(masked, gathered)
+
+    @pytest.mark.skipif(not SENSOR_FRAMES, reason=f"the sensor sample is not at {SENSOR_SAMPLE}")
+    @pytest.mark.parametrize("name", SENSOR_FRAMES or ["none"])
+    def test_sensor_sample(self, name):
+        # adaptive_fit on the whole frame; auto (which runs adaptive_fit on all of them but the rendered one)
+        # on a quarter of it, with its own noise floor
+        depth, Kf = read_sensor(name)
+        assert_parity(depth[None], None, Kf[None], "adaptive_fit", {}, [name])
+        H, W = depth.shape
+        crop = np.ascontiguousarray(depth[H // 4: H // 4 + H // 2, W // 4: W // 4 + W // 2])
+        Kc = Kf.copy()
+        Kc[0, 2] -= W // 4
+        Kc[1, 2] -= H // 4
+        assert_parity(crop[None], None, Kc[None], "auto", {}, [name + " (crop)"])
+
+
+class TestAdaptiveGradients:
+    """The choices carry no gradient; given them, the fit is differentiable and the gradient flows through it."""
+
+    def test_gradcheck_through_chosen_windows(self):
+        # big enough to have a noise profile (several radii, widening, quadrant windows), small enough for gradcheck
+        depth = sensor_like(12, 16, seed=3, holes=0.05).astype(np.float64)
+        depth[depth == 0] = np.nan
+        z = torch.from_numpy(depth).requires_grad_()
+        assert torch.autograd.gradcheck(lambda d: st.estimate(d, K, method="adaptive_fit"), (z,), eps=1e-7,
+                                        atol=1e-6)
+
+    @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
+    def test_same_normals_with_and_without_a_graph(self, method):
+        # with a graph the chosen windows are summed once more from integral images that carry it
+        depth = np.stack([sensor_like(seed=8), sensor_like(seed=9, holes=0.5)]).astype(np.float64)
+        z = torch.from_numpy(depth)[:, None]
+        plain = st.estimate(z, K, method=method)
+        graph = st.estimate(z.clone().requires_grad_(), K, method=method)
+        assert graph.requires_grad
+        torch.testing.assert_close(graph.detach(), plain, rtol=0, atol=0)
+
+    def test_gradient_only_from_the_chosen_window(self):
+        # a pixel's normal depends on the depths of its window only: a finite window, not the whole frame
+        depth = sensor_like(seed=1).astype(np.float64)
+        z = torch.from_numpy(depth).requires_grad_()
+        n = st.estimate(z, K, method="adaptive_fit")
+        v, u = 30, 15
+        (g,) = torch.autograd.grad(n[0, 2, v, u], z)
+        rows, cols = torch.nonzero(g, as_tuple=True)
+        assert len(rows) > 8
+        assert (rows - v).abs().max() <= 15 and (cols - u).abs().max() <= 15  # within max_window // 2
+
+    @pytest.mark.parametrize("seed,expected", [(1, "adaptive_fit"), (11, "d2nt_v3")])
+    def test_auto_gradient_is_its_choice(self, seed, expected):
+        noisy = expected == "adaptive_fit"
+        depth = sensor_like(seed=seed, **({} if noisy else {"sigma": 0.0, "step": 1e-6})).astype(np.float64)
+        from surfnorm.auto import choose
+        from surfnorm.camera import Intrinsics
+
+        assert choose(depth.astype(np.float32), depth > 0, Intrinsics.from_matrix(K)) == expected
+        grads = []
+        for method in ("auto", expected):
+            z = torch.from_numpy(depth).requires_grad_()
+            (st.estimate(z, K, method=method) * torch.linspace(0.5, 1.5, 3 * depth.size, dtype=torch.float64).view(1, 3, *depth.shape)).sum().backward()
+            grads.append(z.grad)
+        torch.testing.assert_close(grads[0], grads[1], rtol=0, atol=0)
+        assert (grads[0] != 0).sum() > depth.size // 2
 
 
 class TestSDA:

@@ -69,7 +69,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without torch
 from ..errors import InputError
 from ..methods import methods as numpy_methods, resolve as numpy_resolve
 from ..methods import MNR_SUFFIX
-from . import _averaging, _ops, _plane_fit, _sda, _sne
+from . import _adaptive, _averaging, _ops, _plane_fit, _sda, _sne
 from ._validate import as_depth, as_intrinsics, as_mask, compute_dtype
 
 __all__ = ["estimate", "DepthToNormal", "methods"]
@@ -107,11 +107,15 @@ _register("plane_pca", _plane_fit.plane_pca)
 _register("vector_svd", _plane_fit.vector_svd)
 _register("area_weighted", _averaging.area_weighted)
 _register("angle_weighted", _averaging.angle_weighted)
+_register("adaptive_fit", _adaptive.adaptive_fit)
+_register("auto", _adaptive.auto)
 
+#: Kernels that take the intrinsics in float64 whatever the depth's dtype, as the NumPy kernels do: their
+#: data-dependent choices (noise test, radius) must see the same numbers.
+_FLOAT64_CAMERA = (_adaptive.adaptive_fit, _adaptive.auto)
 
-#: Registered methods that run only in :func:`surfnorm.estimate` so far: the sensor-depth estimator, whose
-#: windows differ per pixel (an integral-image port is the plan), and the default that chooses it.
-NUMPY_ONLY = ("adaptive_fit", "auto")
+#: Registered methods that run only in :func:`surfnorm.estimate` (none left).
+NUMPY_ONLY = ()
 
 
 def methods() -> dict[str, dict]:
@@ -186,7 +190,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     user_mask = as_mask(mask, z, plain)
     work, out_dtype = compute_dtype(z)
     z = z.to(work)
-    cam = as_intrinsics(K, z.shape[0], z.device, work)
+    cam = as_intrinsics(K, z.shape[0], z.device, torch.float64 if run in _FLOAT64_CAMERA else work)
     valid = (z > 0) & (z < math.inf)  # finite and positive (NaN fails both)
     if user_mask is not None:
         valid = valid & user_mask

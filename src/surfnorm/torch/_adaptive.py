@@ -1,0 +1,609 @@
+"""The adaptive plane fit of inverse depth and ``auto`` on tensors (the twins of ``surfnorm.adaptive_fit`` and
+``surfnorm.auto``).
+
+Same rule as the NumPy kernel, step for step (its module docstring explains the method):
+
+1. The noise profile of each frame (:func:`noise_tables`): the second differences of w = 1/z on every
+   step-th row and column, their sigma-clipped RMS per depth bin, and from it the depth -> (radius, rho)
+   table; and the noise floor that ``auto`` compares with ``CLEAN_FLOOR``. Computed per frame of a batch,
+   as if each ran alone, on the device, without host synchronisation.
+2. The ten moment sums (count, u, v, uu, uv, vv, w, uw, vw, ww) in integral images, float64, built with
+   the NumPy kernel's order of additions (a row prefix, then down the columns: ``torch.cumsum`` on the CPU
+   adds in that order), so that every window's sums, and so the data-dependent choices made from them,
+   are those of the NumPy kernel; the window sums use its two orders of subtraction (``box_row`` for the
+   centred windows, ``window_sums`` for the quadrant ones).
+3. The radius ladder has few rungs (1, 2, 4, 8 and 15 for the default ``max_window`` of 31), and every
+   choice only ever moves a pixel up it (growth where too few pixels are valid, widening while the fit
+   is within the noise). So one pass over the rungs in ascending order settles everything: at rung r,
+   the pixels still growing at r grow or settle, the settled ones whose next wider window is r try it,
+   and the ones that settle at r and fail the noise test take the best of the four quadrant windows
+   (the Kuwahara fallback). Each step is element-wise over pixels: on the CPU over the pixels concerned
+   (gathered: a minority at every rung but the first), elsewhere over all pixels with masks, so that
+   nothing waits for the device.
+
+Gradients: the choices (the noise profile, each pixel's radius, widening, quadrant, and ``auto``'s choice)
+are piecewise constant in depth and carry none; given them, the normal is a differentiable function of
+the inverse depths in the chosen window, and the gradient flows through it (the chosen window's sums are
+gathered once more from integral images built with the graph; see :func:`_normals`).
+
+Where the two backends can differ: ``torch.log``/``log10``/``pow`` on float64 are not always correctly
+rounded (libm is, as NumPy and Numba use), so a depth-bin boundary or table entry can differ by one ulp;
+a choice then differs only where a pixel's value lies within an ulp of its threshold. ``torch.sqrt`` is
+not correctly rounded either, so :func:`_sqrt` corrects it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ._ops import Grid
+
+# As surfnorm.adaptive_fit and surfnorm.auto (not imported: those modules load Numba); tests/test_torch.py
+# checks that they agree.
+ALPHA = 1.0
+KAPPA = 3.0
+RHO_FLOOR = 0.25
+MAX_WINDOW = 31  # auto's (adaptive_fit's default)
+RADII = (1, 2, 4, 8, 16, 32, 64, 128)
+N_WIDEN = 3
+MIN_POINTS = 12
+N_BINS = 8
+MIN_SAMPLES = 64
+_NOISE_SAMPLES = 12_000
+_MAX_GAP = 4
+_MAX_SPREAD = 1.25
+_CLIP_SIGMAS = 5.0
+_CLIP_ROUNDS = 5
+_TABLE = 512
+CLEAN_FLOOR = 0.15
+#: The quadrant windows (dv, du) / r, in the NumPy kernel's order.
+_SHIFTS = ((1, 1), (1, -1), (-1, 1), (-1, -1))
+
+_F64 = torch.float64
+
+#: On the CPU, work on the pixels (and frames) concerned only; False: as on other devices, on all of them with
+#: masks (the tests compare the two paths on the CPU).
+_GATHER_ON_CPU = True
+
+
+def _sqrt(x: torch.Tensor) -> torch.Tensor:
+    """sqrt correctly rounded, as NumPy's and libm's (``torch.sqrt`` on float64 is off by one ulp for about
+    1 % of inputs): one Newton correction with the residual x - s^2 computed exactly (Dekker's product)."""
+    s = torch.sqrt(x)
+    c = s * 134217729.0  # 2^27 + 1: Veltkamp's split of s into two 26-bit halves
+    hi = c - (c - s)
+    lo = s - hi
+    p = s * s
+    e = ((hi * hi - p) + 2.0 * hi * lo) + lo * lo  # s * s = p + e exactly
+    r = (x - p) - e
+    fixed = s + r / (2.0 * s)
+    return torch.where((s > 0) & torch.isfinite(s), fixed, s)
+
+
+def allowed_radii(r: torch.Tensor, r_max: int) -> torch.Tensor:
+    """``adaptive_fit.allowed_radii``: the smallest radius of RADII that is at least r, at most r_max (int64)."""
+    ladder = torch.tensor(RADII, dtype=r.dtype, device=r.device)
+    at = torch.searchsorted(ladder, r.contiguous(), right=False).clamp(max=len(RADII) - 1)
+    rung = ladder[at]
+    return torch.where(rung >= r, rung, torch.full_like(rung, r_max)).clamp(max=r_max).long()
+
+
+def _ladder_tables(r_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """(widen, grow) of ``adaptive_fit._tables``, from :func:`allowed_radii`."""
+    r = torch.arange(r_max + 1, dtype=_F64)
+    widen = torch.where(r > 0, allowed_radii(2 * r, r_max), 1)
+    grow = torch.where(r > 0, allowed_radii(torch.ceil(1.5 * r), r_max), 1)
+    return widen.numpy(), grow.numpy()
+
+
+def rungs(window, r_max: int) -> list[int]:
+    """The radii a window can take, ascending: the starting radii and all that growth and widening reach."""
+    widen, grow = _ladder_tables(r_max)
+    if window is None:
+        todo = set(allowed_radii(torch.arange(1, r_max + 1, dtype=_F64), r_max).tolist())
+    else:
+        todo = {(window - 1) // 2}
+    seen: set[int] = set()
+    while todo:
+        r = todo.pop()
+        if r in seen:
+            continue
+        seen.add(r)
+        if r <= r_max:
+            todo |= {int(widen[r]), int(grow[r])} if r < r_max else {int(widen[r])}
+    return sorted(seen)
+
+
+# --- noise profile -------------------------------------------------------------------------------
+
+
+class NoiseTables(NamedTuple):
+    """Per frame (B,): the depth -> (radius, rho) table of ``adaptive_fit.radius_table`` and the noise floor."""
+
+    z0: torch.Tensor  # (B,) depth of entry 0
+    inv_step: torch.Tensor  # (B,) entries per unit depth
+    radius: torch.Tensor  # (B, _TABLE) int64
+    rho: torch.Tensor  # (B, _TABLE)
+    floor: torch.Tensor  # (B,) NaN where too few samples
+
+
+def _samples(z, valid, f, lo, span):
+    """``adaptive_fit._second_differences`` on every frame: xs (3, B, N), taken (B, N), bins (B, N), in the
+    NumPy kernel's sample order (row-major over the sampled pixels, horizontal then vertical)."""
+    B, H, W = z.shape
+    step = max(1, int(round(math.sqrt(H * W / _NOISE_SAMPLES))))
+    pad = 4 * _MAX_GAP
+    zp = F.pad(z, (pad, pad, pad, pad), value=1.0)
+    vp = F.pad(valid, (pad, pad, pad, pad), value=False)
+    rows = (torch.arange(0, H, step, device=z.device) + pad).view(-1, 1)
+    cols = (torch.arange(0, W, step, device=z.device) + pad).view(1, -1)
+
+    def at(dv, du):
+        return zp[:, rows + dv, cols + du], vp[:, rows + dv, cols + du]
+
+    zb, ok_b = at(0, 0)
+    w0 = torch.reciprocal(zb) * 2.0  # = 2.0 / zb exactly (a power of two)
+    scale = (f / math.sqrt(6.0)).view(B, 1, 1)
+    span_safe = torch.where(span > 0, span, torch.ones_like(span)).view(B, 1, 1)
+    bins = torch.trunc((torch.log(zb) - lo.view(B, 1, 1)) / span_safe * N_BINS).clamp(0, N_BINS - 1)
+    bins = torch.where((span > 0).view(B, 1, 1), bins, torch.zeros_like(bins)).long()
+    per_axis = []
+    for axis in (0, 1):
+        found = torch.zeros_like(ok_b)
+        taken = torch.zeros_like(ok_b)
+        xs = [torch.zeros_like(zb) for _ in range(3)]
+        for a in range(1, _MAX_GAP + 1):
+            offsets = (-4 * a, -2 * a, -a, a, 2 * a, 4 * a)
+            views = [at(0, o) if axis == 0 else at(o, 0) for o in offsets]
+            ok = ok_b
+            for _, v_ok in views:
+                ok = ok & v_ok
+            zs = [zv for zv, _ in views]
+            lo7 = hi7 = zb
+            for zv in zs:
+                lo7, hi7 = torch.minimum(lo7, zv), torch.maximum(hi7, zv)
+            take = ok & ~found & ~(hi7 > _MAX_SPREAD * lo7)  # first a with a full stencil, not across an edge
+            z_m4, z_m2, z_m1, z_p1, z_p2, z_p4 = zs
+            for i, (z_m, z_p) in enumerate(((z_m1, z_p1), (z_m2, z_p2), (z_m4, z_p4))):
+                x = ((torch.reciprocal(z_m) - w0 + torch.reciprocal(z_p)) * zb) * scale
+                xs[i] = torch.where(take, x, xs[i])
+            taken = taken | take
+            found = found | ok
+        per_axis.append((xs, taken))
+    xs = torch.stack([torch.stack((h, v), dim=-1).reshape(B, -1) for h, v in zip(per_axis[0][0], per_axis[1][0])])
+    taken = torch.stack((per_axis[0][1], per_axis[1][1]), dim=-1).reshape(B, -1)
+    bins = bins.unsqueeze(-1).expand(-1, -1, -1, 2).reshape(B, -1)
+    return xs, taken, bins
+
+
+def _sequential_sum(x: torch.Tensor) -> torch.Tensor:
+    """Sum over the last dimension in index order (the NumPy kernel's loop): ``torch.cumsum`` adds in order
+    on the CPU (elsewhere it is a parallel scan: the same sum to rounding)."""
+    return torch.cumsum(x, dim=-1)[..., -1]
+
+
+def _interp_full(x, xp, fp):
+    """``np.interp(x, xp, fp)`` per frame for increasing xp (B, P) and x (B, M), with NumPy's arithmetic."""
+    P = xp.shape[1]
+    j = torch.searchsorted(xp.contiguous(), x.contiguous(), right=True) - 1
+    jc = j.clamp(0, P - 2)
+    x_j, x_k = xp.gather(1, jc), xp.gather(1, jc + 1)
+    f_j, f_k = fp.gather(1, jc), fp.gather(1, jc + 1)
+    slope = (f_k - f_j) / (x_k - x_j)
+    inner = slope * (x - x_j) + f_j
+    inner = torch.where(x_j == x, f_j, inner)
+    out = torch.where(j < 0, fp[:, :1], torch.where(j >= P - 1, fp[:, -1:], inner))
+    return out
+
+
+def _interp_ok(lc, rho, ok):
+    """``np.interp(lc, lc[ok], rho[ok])`` per frame (B, P): the bins without enough samples take their nearest
+    ok neighbours' values, interpolated in log depth (NumPy's slope form), or the end values outside them."""
+    B, P = lc.shape
+    idx = torch.arange(P, device=lc.device).expand(B, P)
+    left = torch.cummax(torch.where(ok, idx, -1), dim=1).values
+    right = torch.flip(torch.cummin(torch.flip(torch.where(ok, idx, P), [1]), dim=1).values, [1])
+    lc_l, rho_l = lc.gather(1, left.clamp(0, P - 1)), rho.gather(1, left.clamp(0, P - 1))
+    lc_r, rho_r = lc.gather(1, right.clamp(0, P - 1)), rho.gather(1, right.clamp(0, P - 1))
+    slope = (rho_r - rho_l) / torch.where(right > left, lc_r - lc_l, torch.ones_like(lc))
+    inner = slope * (lc - lc_l) + rho_l
+    out = torch.where(left < 0, rho_r, torch.where(right >= P, rho_l, inner))
+    return torch.where(ok, rho, out)
+
+
+def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, window=None, r_max: int) -> NoiseTables:
+    """``adaptive_fit.noise_profile`` then ``radius_table`` for every frame: z (B, H, W) float64 (any value
+    where invalid), valid (B, H, W), f (B,) = sqrt(fx fy)."""
+    B = z.shape[0]
+    dev = z.device
+    zmin = torch.where(valid, z, torch.full_like(z, math.inf)).amin(dim=(1, 2))
+    zmax = torch.where(valid, z, torch.zeros_like(z)).amax(dim=(1, 2))
+    any_valid = zmax > 0
+    zmin_s = torch.where(any_valid, zmin, torch.ones_like(zmin))
+    zmax_s = torch.where(any_valid, zmax, torch.ones_like(zmax))
+    lo = torch.log(zmin_s)
+    span = torch.log(zmax_s) - lo
+    xs, taken, bins = _samples(z, valid, f, lo, span)
+    n = taken.sum(dim=1)
+    enough = n >= MIN_SAMPLES
+    # the floor: median |x_1| / 0.6745 (NumPy's median: the mean of the two middle values when n is even)
+    mags = torch.sort(torch.where(taken, xs[0].abs(), torch.full_like(xs[0], math.inf)), dim=1).values
+    lo_i = ((n - 1) // 2).clamp(min=0).view(B, 1)
+    hi_i = (n // 2).clamp(max=mags.shape[1] - 1).view(B, 1)
+    median = (mags.gather(1, lo_i) + mags.gather(1, hi_i)).view(B) / 2
+    floor = torch.where(enough, median / 0.6745, torch.full_like(median, math.nan))
+    # the clipped mean squares per depth bin and stride
+    member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & taken.unsqueeze(1)
+    ms = []
+    for x in xs:
+        xx = (x * x).unsqueeze(1)
+        rms = torch.full((B, N_BINS), math.inf, dtype=_F64, device=dev)
+        for _ in range(_CLIP_ROUNDS + 1):
+            keep = member & (x.abs() <= (_CLIP_SIGMAS * rms).gather(1, bins)).unsqueeze(1)
+            sums = _sequential_sum(torch.where(keep, xx, torch.zeros_like(xx)))
+            counts = keep.sum(dim=-1)
+            rms = torch.where(counts > 0, _sqrt(sums / counts.clamp(min=1)), torch.zeros_like(sums))
+        ms.append(rms * rms)
+    rho_bins = _sqrt(torch.clamp_min(torch.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
+    # bin centres: np.geomspace(zmin, zmax, N_BINS + 1) (its arithmetic), or all zmin
+    ls, le = torch.log10(zmin_s), torch.log10(zmax_s)
+    i = torch.arange(N_BINS + 1, dtype=_F64, device=dev).view(1, -1)
+    y = i * ((le - ls) / N_BINS).view(B, 1) + ls.view(B, 1)
+    edges = torch.pow(10.0, y)
+    edges = torch.cat((zmin_s.view(B, 1), edges[:, 1:-1], zmax_s.view(B, 1)), dim=1)
+    edges = torch.where((zmax_s > zmin_s).view(B, 1), edges, zmin_s.view(B, 1).expand(B, N_BINS + 1))
+    centres = _sqrt(edges[:, :-1] * edges[:, 1:])
+    lc = torch.log(centres)
+    ok = member.sum(dim=-1) >= MIN_SAMPLES
+    rho_bins = torch.where(ok.any(dim=1, keepdim=True), _interp_ok(lc, rho_bins, ok), torch.zeros_like(rho_bins))
+    # too few samples: one depth (zmin, or 1 without valid depth), rho 0
+    single = torch.where(any_valid, zmin, torch.ones_like(zmin)).view(B, 1)
+    centres = torch.where(enough.view(B, 1), centres, single.expand(B, N_BINS))
+    rho_bins = torch.where(enough.view(B, 1), rho_bins, torch.zeros_like(rho_bins))
+    lc = torch.log(centres)
+    # the table (radius_table): linear in depth between the first and last centre
+    z0, z1 = centres[:, 0], centres[:, -1]
+    wide = z1 > z0
+    step = ((z1 - z0) / (_TABLE - 1)).view(B, 1)
+    zs = torch.arange(_TABLE, dtype=_F64, device=dev).view(1, -1) * step + z0.view(B, 1)
+    zs = torch.cat((zs[:, :-1], z1.view(B, 1)), dim=1)
+    rho_t = torch.where(wide.view(B, 1), _interp_full(torch.log(torch.where(wide.view(B, 1), zs, 1.0)), lc, rho_bins),
+                        rho_bins[:, :1].expand(B, _TABLE))
+    if window is None:
+        radius = allowed_radii(torch.clamp(torch.ceil(ALPHA * _sqrt(rho_t)), 1, r_max), r_max)
+    else:
+        radius = torch.full((B, _TABLE), (window - 1) // 2, dtype=torch.int64, device=dev)
+    inv_step = torch.where(wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0),
+                           torch.zeros_like(z0))
+    return NoiseTables(z0, inv_step, radius, rho_t, floor)
+
+
+# --- the fit ---------------------------------------------------------------------------------------
+
+
+def integral_images(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """(10, B, H + 1, W + 1) float64: ``adaptive_fit.integral_row`` for every row of every frame (sums over the
+    valid pixels above and left of each corner of 1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww; u' = u - W/2,
+    v' = v - H/2, w = 1/z), in its order of additions on the CPU."""
+    B, H, W = z.shape
+    x = (torch.arange(W, dtype=_F64, device=z.device) - 0.5 * W).view(1, 1, W).expand(B, H, W)
+    y = (torch.arange(H, dtype=_F64, device=z.device) - 0.5 * H).view(1, H, 1).expand(B, H, W)
+    w = torch.reciprocal(z)
+    one = torch.ones_like(w)
+    m = torch.stack((one, x, y, x * x, x * y, y * y, w, x * w, y * w, w * w))
+    m = torch.where(valid.unsqueeze(0), m, torch.zeros_like(m))
+    m = torch.cumsum(torch.cumsum(m, dim=-1), dim=-2)
+    return F.pad(m, (1, 0, 1, 0))
+
+
+class _Pixels:
+    """A list of pixels of the batch (flat indices into B x H x W) with their coordinates."""
+
+    def __init__(self, flat: torch.Tensor, shape):
+        B, H, W = shape
+        self.flat = flat
+        self.b = torch.div(flat, H * W, rounding_mode="floor")
+        rest = flat - self.b * (H * W)
+        self.v = torch.div(rest, W, rounding_mode="floor")
+        self.u = rest - self.v * W
+        self.H, self.W = H, W
+        self.x = self.u.to(_F64) - 0.5 * W
+        self.y = self.v.to(_F64) - 0.5 * H
+
+
+def window_sums(I_flat, px: _Pixels, sub, r, dv, du, centred: bool, channels: int = 10):
+    """The moment sums of the windows of radius r centred at (v + dv, u + du) (clipped to the image) of the
+    pixels ``sub`` of ``px`` (None: all), (C, n), from the integral images flattened to (B (H+1) (W+1), 10).
+    ``centred``: ``box_row``'s order of subtraction ((B[u1] - T[u1]) - (B[u0] - T[u0])), else
+    ``window_sums``' (((I11 - I01) - I10) + I00)."""
+    H, W = px.H, px.W
+    b, v, u = (px.b, px.v, px.u) if sub is None else (px.b[sub], px.v[sub], px.u[sub])
+    v0, v1 = (v + dv - r).clamp(0, H), (v + dv + r + 1).clamp(0, H)
+    u0, u1 = (u + du - r).clamp(0, W), (u + du + r + 1).clamp(0, W)
+    base = b * ((H + 1) * (W + 1))
+    rows_1, rows_0 = base + v1 * (W + 1), base + v0 * (W + 1)
+    src = I_flat if channels == I_flat.shape[1] else I_flat[:, :channels]
+    c = src.index_select(0, torch.cat((rows_1 + u1, rows_0 + u1, rows_1 + u0, rows_0 + u0))).view(4, -1, channels)
+    c11, c01, c10, c00 = c.unbind(0)
+    m = (c11 - c01) - (c10 - c00) if centred else ((c11 - c01) - c10) + c00
+    return m.t()
+
+
+def affine_fit(m, r, x, y):
+    """``adaptive_fit.affine_fit`` element-wise: (a, g_u, g_v, rss, dof) of the least-squares w = a + g_u (u' - x)
+    + g_v (v' - y) from the window's moment sums m (10, n), same arithmetic."""
+    n, s_u, s_v, s_uu, s_uv, s_vv, s_w, s_uw, s_vw, s_ww = m.unbind(0)
+    k = 2 * r + 1
+    full = n == k * k
+    inv_n = torch.reciprocal(torch.clamp_min(n, 1.0))
+    mw = s_w * inv_n
+    mu = torch.where(full, x, s_u * inv_n)
+    mv = torch.where(full, y, s_v * inv_n)
+    c_full = n * (r * (r + 1)) * (1.0 / 3.0)
+    cuu = torch.where(full, c_full, s_uu - s_u * mu)
+    cuv = torch.where(full, torch.zeros_like(n), s_uv - s_u * mv)
+    cvv = torch.where(full, c_full, s_vv - s_v * mv)
+    cuw = s_uw - n * mu * mw
+    cvw = s_vw - n * mv * mw
+    cww = s_ww - s_w * mw
+    det = cuu * cvv - cuv * cuv
+    ok = (n >= 4.0) & (cuu > 0.0) & (cvv > 0.0) & (det > 1e-6 * cuu * cvv)
+    inv_det = torch.reciprocal(torch.where(ok, det, torch.ones_like(det)))
+    g_u = (cvv * cuw - cuv * cvw) * inv_det
+    g_v = (cuu * cvw - cuv * cuw) * inv_det
+    a = mw + g_u * (x - mu) + g_v * (y - mv)
+    rss = torch.clamp_min(cww - g_u * cuw - g_v * cvw, 0.0)
+    return a, g_u, g_v, rss, torch.where(ok, n - 3.0, torch.zeros_like(n))
+
+
+class _Choice(NamedTuple):
+    """Each pixel's final window: radius, quadrant (-1: centred) and its fit (a at the pixel, slopes, dof)."""
+
+    radius: torch.Tensor
+    shift: torch.Tensor
+    a: torch.Tensor
+    g_u: torch.Tensor
+    g_v: torch.Tensor
+    dof: torch.Tensor
+
+
+def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float, gather: bool) -> _Choice:
+    """The NumPy kernel's choices for the pixels ``px`` (all valid) in one ascending pass over the rungs.
+
+    ``gather``: at each rung work on the pixels concerned only (indices: the CPU, where finding them costs
+    nothing); else on all of them with masks (no host synchronisation)."""
+    widen_np, grow_np = _ladder_tables(r_max)
+    dev = z.device
+    widen = torch.from_numpy(widen_np).to(dev)
+    n_px = z.shape[0]
+    zeros = torch.zeros(n_px, dtype=_F64, device=dev)
+    r_cur = r0.clone()
+    growing = torch.ones(n_px, dtype=torch.bool, device=dev)
+    passed = torch.zeros_like(growing)
+    widened = torch.zeros(n_px, dtype=torch.int64, device=dev)
+    shift = torch.full((n_px,), -1, dtype=torch.int64, device=dev)
+    a, g_u, g_v, rss, dof, count = (zeros.clone() for _ in range(6))
+    need = (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))  # the full window of the starting radius
+
+    def select(mask):
+        return mask.nonzero().squeeze(1) if gather else None
+
+    def take(t, sub):
+        return t if sub is None else t[sub]
+
+    def put(state, sub, where, new):
+        if sub is None:
+            return torch.where(where, new, state)
+        state[sub] = torch.where(where, new, state[sub])
+        return state
+
+    def scatter(mask_sub, sub):
+        if sub is None:
+            return mask_sub
+        out = torch.zeros(n_px, dtype=torch.bool, device=dev)
+        out[sub] = mask_sub
+        return out
+
+    for r in ladder:
+        # growth (sparse depth): too few valid pixels, or too little spread to pin the slope
+        here = growing & (r_cur == r)
+        sub = select(here)
+        if r < r_max:
+            n = window_sums(I_flat, px, sub, r, 0, 0, True, 1)[0]
+            grow = take(here, sub) & ((n < MIN_POINTS) | (2.0 * n * (r * (r + 1)) < take(need, sub)))
+            r_cur = put(r_cur, sub, grow, torch.full_like(take(r_cur, sub), int(grow_np[r])))
+            settle = here & ~scatter(grow, sub)
+        else:
+            settle = here
+        growing = growing & ~settle
+        # the fit at r: for the pixels that settle here, and those whose next wider window is r
+        trying = passed & (widened < N_WIDEN) & (r_cur < r) & (widen[r_cur.clamp(max=r_max)] == r)
+        sub = select(settle | trying)
+        m = window_sums(I_flat, px, sub, r, 0, 0, True)
+        a_r, gu_r, gv_r, rss_r, dof_r = affine_fit(m, r, take(px.x, sub), take(px.y, sub))
+        ok_r = (dof_r > 0.0) & (rss_r <= take(limit, sub) * dof_r)
+        s_settle, s_trying = take(settle, sub), take(trying, sub)
+        adopt = s_settle | (s_trying & ok_r)
+        a, g_u, g_v = put(a, sub, adopt, a_r), put(g_u, sub, adopt, gu_r), put(g_v, sub, adopt, gv_r)
+        rss, dof = put(rss, sub, adopt, rss_r), put(dof, sub, adopt, dof_r)
+        r_cur = put(r_cur, sub, adopt, torch.full_like(take(r_cur, sub), r))
+        count = put(count, sub, s_settle, m[0])
+        widened = put(widened, sub, s_trying & ok_r, take(widened, sub) + 1)
+        passed = put(passed, sub, s_settle | s_trying, ok_r)
+        # the edge test: a pixel that settles here and fits worse than the noise takes the best quadrant
+        fails = scatter(s_settle & ~ok_r, sub)
+        sub = select(fails)
+        q_mask = None if gather else fails
+        z_q, lim = take(z, sub), take(limit, sub)
+        w_p = torch.reciprocal(z_q)
+        a_q, gu_q, gv_q, dof_q, rss_q = (take(t, sub) for t in (a, g_u, g_v, dof, rss))
+        ok = dof_q > 0.0
+        best = torch.where(ok, rss_q / torch.where(ok, dof_q, 1.0), math.inf)
+        best_in = ok & ((a_q - w_p) * (a_q - w_p) <= kappa * kappa * torch.maximum(best, lim))
+        n_min = torch.clamp_min(0.25 * take(count, sub), 6.0)
+        s_q = take(shift, sub)
+        x_q, y_q = take(px.x, sub), take(px.y, sub)
+        for k, (sv, su) in enumerate(_SHIFTS):
+            dv, du = sv * r, su * r
+            mk = window_sums(I_flat, px, sub, r, dv, du, False)
+            a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(mk, r, x_q + du, y_q + dv)
+            has = (mk[0] >= n_min) & (dof_k > 0.0)
+            score = rss_k / torch.where(dof_k > 0.0, dof_k, 1.0)
+            a_p = a_k - gu_k * du - gv_k * dv
+            inside = (a_p - w_p) * (a_p - w_p) <= kappa * kappa * torch.maximum(score, lim)
+            better = has & ((inside & ~best_in) | ((inside == best_in) & (score < best)))
+            if q_mask is not None:
+                better = better & q_mask
+            best, best_in = torch.where(better, score, best), torch.where(better, inside, best_in)
+            a_q, gu_q, gv_q = torch.where(better, a_p, a_q), torch.where(better, gu_k, gu_q), torch.where(better, gv_k, gv_q)
+            dof_q, s_q = torch.where(better, dof_k, dof_q), torch.where(better, k, s_q)
+        every = torch.ones_like(a_q, dtype=torch.bool)
+        a, g_u, g_v = put(a, sub, every, a_q), put(g_u, sub, every, gu_q), put(g_v, sub, every, gv_q)
+        dof, shift = put(dof, sub, every, dof_q), put(shift, sub, every, s_q)
+    return _Choice(r_cur, shift, a, g_u, g_v, dof)
+
+
+def _refit(I_flat, px: _Pixels, choice: _Choice):
+    """(a, g_u, g_v) of each pixel's chosen window, from integral images that carry the graph: the same
+    arithmetic as :func:`_choose`, gathered once per pixel."""
+    r, shift = choice.radius, choice.shift
+    sv = torch.tensor([0] + [s[0] for s in _SHIFTS], device=r.device)[shift + 1]
+    su = torch.tensor([0] + [s[1] for s in _SHIFTS], device=r.device)[shift + 1]
+    dv, du = sv * r, su * r
+    m = torch.where(shift < 0, window_sums(I_flat, px, None, r, dv, du, True),
+                    window_sums(I_flat, px, None, r, dv, du, False))
+    a, g_u, g_v, _, _ = affine_fit(m, r, px.x + du, px.y + dv)
+    return a - g_u * du - g_v * dv, g_u, g_v
+
+
+def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
+    """The pixels to fit, their depth and noise limit, the integral images, and the choices (:func:`_choose`)."""
+    B, H, W = z.shape
+    dev = z.device
+    r_max = (max_window - 1) // 2
+    fx, fy, cx, cy = (c.reshape(B) for c in cam)
+    f = _sqrt(fx * fy)
+    gather = dev.type == "cpu" and _GATHER_ON_CPU
+    flat = valid.reshape(-1).nonzero().squeeze(1) if gather else torch.arange(B * H * W, device=dev)
+    px = _Pixels(flat, (B, H, W))
+    z_p = z.reshape(-1)[flat]
+    with torch.no_grad():
+        t = torch.clamp(torch.trunc((z_p - tables.z0[px.b]) * tables.inv_step[px.b]), 0, _TABLE - 1).long()
+        r0 = tables.radius[px.b, t]
+        rho = tables.rho[px.b, t]
+        zf = z_p * f[px.b]
+        s_w = KAPPA * torch.clamp_min(rho, RHO_FLOOR)
+        limit = (s_w * s_w) / (zf * zf)  # the noise test: rss <= limit * dof
+    I_flat = integral_images(z, valid).permute(1, 2, 3, 0).reshape(-1, 10)  # channels last: one row per corner
+    with torch.no_grad():
+        choice = _choose(I_flat.detach(), px, z_p.detach(), limit, r0, rungs(window, r_max), r_max, KAPPA, gather)
+    return px, z_p, I_flat, choice, gather
+
+
+def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tuple[torch.Tensor, _Choice]:
+    """(flat indices of the valid pixels, their choices) for frames z (B, H, W) float64 on the CPU: for tests
+    and diagnostics."""
+    cam = _cameras64(cam, z.shape[0])
+    tables = noise_tables(z, valid, _sqrt(cam[0] * cam[1]).reshape(-1), window=window, r_max=(max_window - 1) // 2)
+    px, _, _, choice, _ = _setup(z, valid, cam, tables, window=window, max_window=max_window)
+    return px.flat, choice
+
+
+def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fill: float, out_dtype):
+    """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables."""
+    B, H, W = z.shape
+    fx, fy, cx, cy = (c.reshape(B) for c in cam)
+    px, z_p, I_flat, choice, gather = _setup(z, valid, cam, tables, window=window, max_window=max_window)
+    if torch.is_grad_enabled() and z.requires_grad:
+        a, g_u, g_v = _refit(I_flat, px, choice)
+    else:
+        a, g_u, g_v = choice.a, choice.g_u, choice.g_v
+    ok = choice.dof > 0.0
+    if not gather:
+        ok = ok & valid.reshape(-1)
+    a = torch.where(a > 0.0, a, torch.reciprocal(z_p))  # a fit that passes behind the camera: the pixel's own w
+    n_x = fx[px.b] * g_u
+    n_y = fy[px.b] * g_v
+    n_z = a - g_u * (px.u.to(_F64) - cx[px.b]) - g_v * (px.v.to(_F64) - cy[px.b])
+    sq = n_x * n_x + n_y * n_y + n_z * n_z
+    norm = _sqrt_graph(torch.where(ok, sq, torch.ones_like(sq)))
+    n = torch.stack((n_x, n_y, n_z), dim=1) * (-1.0 / norm).unsqueeze(1)
+    n = torch.where(ok.unsqueeze(1), n.to(out_dtype), torch.full_like(n, fill, dtype=out_dtype))
+    out = torch.full((B * H * W, 3), fill, dtype=out_dtype, device=z.device)
+    out = out.index_put((px.flat,), n) if gather else n
+    return out.view(B, H, W, 3).permute(0, 3, 1, 2)
+
+
+def _sqrt_graph(x):
+    """:func:`_sqrt`'s value with ``torch.sqrt``'s gradient."""
+    s = torch.sqrt(x)
+    return s + (_sqrt(x.detach()) - s.detach())
+
+
+def _cameras64(cam, batch: int):
+    """(fx, fy, cx, cy) in float64, each (B, 1, 1) (one K may serve the whole batch)."""
+    return tuple(c.to(_F64).expand(batch, 1, 1) for c in cam)
+
+
+def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float):
+    """Adaptive plane fit of inverse depth (``surfnorm.adaptive_fit``); ``cam`` in float64."""
+    z = g.z.to(_F64)
+    cam = _cameras64(cam, z.shape[0])
+    r_max = (max_window - 1) // 2
+    with torch.no_grad():
+        tables = noise_tables(z.detach(), g.valid, _sqrt(cam[0] * cam[1]).reshape(-1), window=window, r_max=r_max)
+    return _normals(z, g.valid, cam, tables, window=window, max_window=max_window, fill=fill, out_dtype=g.z.dtype)
+
+
+def auto(g: Grid, cam, *, tau: float, fill: float):
+    """``surfnorm.auto``: per frame, ``d2nt_v3`` where the depth's noise floor is below CLEAN_FLOOR, else
+    ``adaptive_fit``; ``cam`` in float64.
+
+    On the CPU each estimator runs on its own frames only; elsewhere both run on the whole batch and each
+    frame takes its own (no host synchronisation)."""
+    from . import _ops
+
+    z = g.z.to(_F64)
+    cam64 = _cameras64(cam, z.shape[0])
+    r_max = (MAX_WINDOW - 1) // 2
+    with torch.no_grad():
+        tables = noise_tables(z.detach(), g.valid, _sqrt(cam64[0] * cam64[1]).reshape(-1), r_max=r_max)
+    clean = tables.floor < CLEAN_FLOOR  # NaN (too few samples): adaptive_fit
+
+    def d2nt_v3(grid, c):
+        c = tuple(x.to(grid.z.dtype) for x in c)
+        n = _ops.d2nt_dag(grid, c, dlf="1d", tau=tau, truncate=True, fill=fill)
+        return _ops.mnr(grid, n, dlf="alpha", fill=fill)
+
+    def fit(grid, z_f, c, tab):
+        return _normals(z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill, out_dtype=grid.z.dtype)
+
+    if g.z.device.type != "cpu" or not _GATHER_ON_CPU:
+        both = torch.where(clean.view(-1, 1, 1, 1), d2nt_v3(g, cam64), fit(g, z, cam64, tables))
+        return both
+    B = z.shape[0]
+    out = None
+    parts = []
+    for pick in (clean, ~clean):
+        idx = pick.nonzero().squeeze(1)
+        if idx.numel() == 0:
+            continue
+        sub = Grid(g.z[idx], g.valid[idx]) if idx.numel() < B else g
+        c_sub = tuple(c[idx] for c in cam64) if idx.numel() < B else cam64
+        if pick is clean:
+            n = d2nt_v3(sub, c_sub)
+        else:
+            t_sub = NoiseTables(*(t[idx] for t in tables))
+            n = fit(sub, z[idx], c_sub, t_sub)
+        parts.append((idx, n))
+    if len(parts) == 1:
+        return parts[0][1]
+    out = torch.empty((B,) + parts[0][1].shape[1:], dtype=parts[0][1].dtype, device=g.z.device)
+    for idx, n in parts:
+        out = out.index_put((idx,), n)
+    return out

@@ -131,14 +131,14 @@ class TestParity:
 
         assert _sda.SDA_PENALTY == sda.SDA_PENALTY and _sda.MAX_ITERATIONS == sda.MAX_ITERATIONS
         assert (_plane_fit._NEWTON_STEPS, _plane_fit._NEWTON_TOL) == (plane_fit._NEWTON_STEPS, plane_fit._NEWTON_TOL)
-        from surfnorm import adaptive_fit, auto
+        from surfnorm.kernels import adaptive_fit, auto
         from surfnorm.torch import _adaptive
 
         for name in ("ALPHA", "KAPPA", "RHO_FLOOR", "RADII", "N_WIDEN", "MIN_POINTS", "N_BINS", "MIN_SAMPLES",
-                     "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS", "_CLIP_ROUNDS", "_TABLE"):
+                     "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS", "_CLIP_ROUNDS", "_TABLE", "TIE"):
             assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name  # noqa: B009
         assert _adaptive._SHIFTS == tuple(map(tuple, adaptive_fit._SHIFTS.tolist()))
-        assert _adaptive.CLEAN_FLOOR == auto.CLEAN_FLOOR
+        assert (_adaptive.CLEAN_FLOOR, _adaptive.NOISY_FLOOR) == (auto.CLEAN_FLOOR, auto.NOISY_FLOOR)
         assert _adaptive.MAX_WINDOW == adaptive_fit.MAX_WINDOW == surfnorm.methods()["adaptive_fit"].options["max_window"]
         for r_max in (1, 3, 7, 15, 20, 63):
             widen, grow = _adaptive._ladder_tables(r_max)
@@ -194,7 +194,7 @@ class TestAdaptive:
 
     @staticmethod
     def numpy_tables(depth, K, mask=None, window=None, max_window=31):
-        from surfnorm.adaptive_fit import noise_profile, radius_table
+        from surfnorm.kernels.adaptive_fit import noise_profile, radius_table
 
         valid = np.isfinite(depth) & (depth > 0) & (True if mask is None else mask)
         f = np.sqrt(K[0, 0] * K[1, 1])
@@ -251,45 +251,52 @@ class TestAdaptive:
     @pytest.mark.parametrize("seed", [1, 2, 3])
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
     def test_sensor_like_batch(self, method, seed):
-        # a batch of three different frames: each gets its own noise profile and choice, as if run alone
+        # a batch of four different frames: each gets its own noise profile and choice, as if run alone (auto:
+        # adaptive_fit, d2nt_v3, adaptive_fit, and the blend of both: noise floors 0.55, 0.003, 0.5, 0.15)
         depth = np.stack([sensor_like(seed=seed), sensor_like(seed=seed + 10, sigma=0.0, step=1e-6, holes=0.0),
-                          sensor_like(seed=seed + 20, holes=0.5)])
-        Ks = np.stack([K, K, K])
-        assert_parity(depth, None, Ks, method, {}, ["noisy", "clean", "sparse"])
+                          sensor_like(seed=seed + 20, holes=0.5), sensor_like(seed=seed + 30, sigma=0.003, step=0.004)])
+        Ks = np.stack([K, K, K, K])
+        names = ["noisy", "clean", "sparse", "between"]
+        assert_parity(depth, None, Ks, method, {}, names)
         masks = np.random.default_rng(seed).random(depth.shape) > 0.1
-        assert_parity(depth, masks, Ks, method + "+mnr", {"fill": -3.0}, ["noisy", "clean", "sparse"])
+        assert_parity(depth, masks, Ks, method + "+mnr", {"fill": -3.0}, names)
 
     def test_auto_chooses_per_frame(self):
-        from surfnorm.auto import choose
+        from surfnorm.kernels.auto import choose
         from surfnorm.camera import Intrinsics
 
         f = threef2n.read_frame(threef2n.sample_root(), "Medium/Trex/000001")
         clean = f.depth[100:260, 200:400].copy()
-        noisy = (np.round(clean * 1000 / 4) * 4 / 1000).astype(np.float32)  # quantised to 4 mm
-        noisy += 0.002 * np.random.default_rng(0).standard_normal(noisy.shape).astype(np.float32)
-        noisy[clean == 0] = 0
+        noise = np.random.default_rng(0).standard_normal(clean.shape).astype(np.float32)
+        quantised = (np.round(clean * 1000 / 4) * 4 / 1000).astype(np.float32)  # to 4 mm
+        noisy = np.where(clean > 0, quantised + 0.002 * noise, 0).astype(np.float32)
+        between = np.where(clean > 0, quantised + 0.0005 * noise, 0).astype(np.float32)
         Kc = f.K.matrix.copy()
         Kc[0, 2] -= 200
         Kc[1, 2] -= 100
         cam = Intrinsics.from_matrix(Kc)
-        picks = [choose(d, d > 0, cam) for d in (clean, noisy)]
-        assert picks == ["d2nt_v3", "adaptive_fit"]  # otherwise this test shows nothing
-        depth, Ks = np.stack([clean, noisy, clean]), np.stack([Kc, Kc, Kc])
-        got = assert_parity(depth, None, Ks, "auto", {}, ["clean", "noisy", "clean again"])
+        picks = [choose(d, d > 0, cam) for d in (clean, noisy, between)]
+        assert picks == ["d2nt_v3", "adaptive_fit", "blend"]  # otherwise this test shows nothing
+        depth, Ks = np.stack([clean, noisy, between, clean]), np.stack([Kc, Kc, Kc, Kc])
+        got = assert_parity(depth, None, Ks, "auto", {}, ["clean", "noisy", "between", "clean again"])
         np.testing.assert_array_equal(got[0], nchw(st.estimate(torch.from_numpy(clean), Kc, method="d2nt_v3"))[0])
         np.testing.assert_array_equal(got[1], nchw(st.estimate(torch.from_numpy(noisy), Kc, method="adaptive_fit"))[0])
+        np.testing.assert_array_equal(got[3], got[0])
 
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
     def test_masked_path_as_gathered_path(self, method, monkeypatch):
         # other devices work on all pixels (and frames) with masks; the CPU on the ones concerned: same normals
         from surfnorm.torch import _adaptive
 
-        depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, sigma=0.0, step=1e-6), sensor_like(seed=7, holes=0.6)])
-        Ks = np.stack([K, K, K])
-        gathered = torch_normals(depth, Ks, method, window=None) if method == "adaptive_fit" else torch_normals(depth, Ks, method)
-        monkeypatch.setattr(_adaptive, "_GATHER_ON_CPU", False)
-        masked = torch_normals(depth, Ks, method)
-        np.testing.assert_array_equal(masked, gathered)
+        depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, sigma=0.0, step=1e-6), sensor_like(seed=7, holes=0.6),
+                          sensor_like(seed=8, sigma=0.003, step=0.004)])
+        Ks = np.stack([K, K, K, K])
+        for fill in (0.0, 1.0):
+            gathered = torch_normals(depth, Ks, method, fill=fill)
+            monkeypatch.setattr(_adaptive, "_GATHER_ON_CPU", False)
+            masked = torch_normals(depth, Ks, method, fill=fill)
+            monkeypatch.setattr(_adaptive, "_GATHER_ON_CPU", True)
+            np.testing.assert_array_equal(masked, gathered)
 
     @pytest.mark.skipif(not SENSOR_FRAMES, reason=f"the sensor sample is not at {SENSOR_SAMPLE}")
     @pytest.mark.parametrize("name", SENSOR_FRAMES or ["none"])
@@ -345,7 +352,7 @@ class TestAdaptiveGradients:
     def test_auto_gradient_is_its_choice(self, seed, expected):
         noisy = expected == "adaptive_fit"
         depth = sensor_like(seed=seed, **({} if noisy else {"sigma": 0.0, "step": 1e-6})).astype(np.float64)
-        from surfnorm.auto import choose
+        from surfnorm.kernels.auto import choose
         from surfnorm.camera import Intrinsics
 
         assert choose(depth.astype(np.float32), depth > 0, Intrinsics.from_matrix(K)) == expected

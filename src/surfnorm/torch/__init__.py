@@ -15,19 +15,25 @@ tensor operations instead of Numba kernels. Needs the ``torch`` extra
 Every method of :func:`surfnorm.methods` runs here (each also with
 ``+mnr``), and on the CPU gives the NumPy backend's normals to 1e-4 per
 component (the tests compare them on the 12 frames of the 3F2N sample, with
-and without holes).
+and without holes; ``adaptive_fit`` and ``auto`` also on the real frames of
+the sensor sample, where ``adaptive_fit`` gives the same bits).
 
 * Device and dtype follow ``depth``: float32 and float64 are computed as
   they are; float16 and bfloat16 are computed in float32 and returned in
   their own dtype; integer depth gives float32. Where the NumPy kernels work
-  in float64 (3F2N, SNE-RoadSeg, SDA-SNE, the plane fits and the averaging
-  methods), so does this backend inside, whatever the input dtype.
+  in float64 (3F2N, SNE-RoadSeg, SDA-SNE, the plane fits, the averaging
+  methods and the adaptive fit), so does this backend inside, whatever the
+  input dtype. ``adaptive_fit`` and ``auto`` also take ``K`` in float64, so
+  that their data-dependent choices (noise profile, radius, widening,
+  quadrant, ``auto``'s weight) are those of the NumPy kernels: see
+  :mod:`surfnorm.torch._adaptive`.
 * No host synchronisation in the forward pass: every per-pixel choice is a
   ``torch.where`` on masks, so it runs asynchronously on a GPU and traces
   under ``torch.compile``. One exception: ``sda_sne`` with
   ``iterations=None`` (until stable) reads once per pass whether every frame
   has stopped. (On the CPU the plane fits also gather the pixels whose
-  Newton iteration still moves, which is free there.)
+  Newton iteration still moves, and ``adaptive_fit`` and ``auto`` the pixels
+  and frames each step concerns, which is free there.)
 * SDA-SNE's dynamic programming is a Jacobi iteration: each pass is
   element-wise over all pixels, scanlines and both axes at once (see
   :mod:`surfnorm.torch._sda`), and each frame of a batch stops on its own,
@@ -41,7 +47,12 @@ why:
 * the discrete choices are piecewise constant: the truncated softmin and
   MNR (which neighbour), 3F2N's median (which candidate), SDA-SNE's dynamic
   programming (which of the nine candidates; its energies are computed on
-  detached depth), the plane fits' null vector (which pair of rows). The
+  detached depth), the plane fits' null vector (which pair of rows),
+  ``adaptive_fit``'s noise profile and windows (each pixel's radius,
+  widening and quadrant: the fit of the chosen window is differentiable in
+  the depths inside it, and the gradient flows there only), ``auto``'s
+  choice and blend weight (from the noise floor; the blend itself passes
+  the gradient to both normals). The
   gradient flows through the value that was chosen; exactly at a tie it is
   that of the side the forward pass took;
 * constant outputs have zero gradient: the fill value (invalid pixels get

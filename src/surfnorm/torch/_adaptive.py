@@ -5,8 +5,9 @@ Same rule as the NumPy kernel, step for step (its module docstring explains the 
 
 1. The noise profile of each frame (:func:`noise_tables`): the second differences of w = 1/z on every
    step-th row and column, their sigma-clipped RMS per depth bin, and from it the depth -> (radius, rho)
-   table; and the noise floor that ``auto`` compares with ``CLEAN_FLOOR``. Computed per frame of a batch,
-   as if each ran alone, on the device, without host synchronisation.
+   table; and the noise floor from which ``auto`` weighs ``d2nt_v3`` against ``adaptive_fit``
+   (:func:`adaptive_weight`, :func:`blend`). Computed per frame of a batch, as if each ran alone, on the
+   device, without host synchronisation.
 2. The ten moment sums (count, u, v, uu, uv, vv, w, uw, vw, ww) in integral images, float64, built with
    the NumPy kernel's order of additions (a row prefix, then down the columns: ``torch.cumsum`` on the CPU
    adds in that order), so that every window's sums, and so the data-dependent choices made from them,
@@ -60,7 +61,9 @@ _MAX_SPREAD = 1.25
 _CLIP_SIGMAS = 5.0
 _CLIP_ROUNDS = 5
 _TABLE = 512
-CLEAN_FLOOR = 0.15
+TIE = 1e-3
+CLEAN_FLOOR = 0.10
+NOISY_FLOOR = 0.20
 #: The quadrant windows (dv, du) / r, in the NumPy kernel's order.
 _SHIFTS = ((1, 1), (1, -1), (-1, 1), (-1, -1))
 
@@ -443,7 +446,9 @@ def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float,
         w_p = torch.reciprocal(z_q)
         a_q, gu_q, gv_q, dof_q, rss_q = (take(t, sub) for t in (a, g_u, g_v, dof, rss))
         ok = dof_q > 0.0
-        best = torch.where(ok, rss_q / torch.where(ok, dof_q, 1.0), math.inf)
+        # residuals within TIE of each other tie (and those below TIE times the noise are rounding): the
+        # first window in the fixed order keeps the pixel (the centred one, then the quadrants)
+        best = torch.where(ok, torch.maximum(rss_q / torch.where(ok, dof_q, 1.0), TIE * lim), math.inf)
         best_in = ok & ((a_q - w_p) * (a_q - w_p) <= kappa * kappa * torch.maximum(best, lim))
         n_min = torch.clamp_min(0.25 * take(count, sub), 6.0)
         s_q = take(shift, sub)
@@ -453,10 +458,10 @@ def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float,
             mk = window_sums(I_flat, px, sub, r, dv, du, False)
             a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(mk, r, x_q + du, y_q + dv)
             has = (mk[0] >= n_min) & (dof_k > 0.0)
-            score = rss_k / torch.where(dof_k > 0.0, dof_k, 1.0)
+            score = torch.maximum(rss_k / torch.where(dof_k > 0.0, dof_k, 1.0), TIE * lim)
             a_p = a_k - gu_k * du - gv_k * dv
             inside = (a_p - w_p) * (a_p - w_p) <= kappa * kappa * torch.maximum(score, lim)
-            better = has & ((inside & ~best_in) | ((inside == best_in) & (score < best)))
+            better = has & ((inside & ~best_in) | ((inside == best_in) & (score < best * (1.0 - TIE))))
             if q_mask is not None:
                 better = better & q_mask
             best, best_in = torch.where(better, score, best), torch.where(better, inside, best_in)
@@ -560,12 +565,36 @@ def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float):
     return _normals(z, g.valid, cam, tables, window=window, max_window=max_window, fill=fill, out_dtype=g.z.dtype)
 
 
-def auto(g: Grid, cam, *, tau: float, fill: float):
-    """``surfnorm.auto``: per frame, ``d2nt_v3`` where the depth's noise floor is below CLEAN_FLOOR, else
-    ``adaptive_fit``; ``cam`` in float64.
+def adaptive_weight(floor: torch.Tensor) -> torch.Tensor:
+    """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
+    (adaptive_fit), linear between; 1 for a NaN floor (too few samples)."""
+    t = ((floor - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR)).clamp(0.0, 1.0)
+    return torch.where(torch.isnan(floor), torch.ones_like(t), t)
 
-    On the CPU each estimator runs on its own frames only; elsewhere both run on the whole batch and each
-    frame takes its own (no host synchronisation)."""
+
+def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> torch.Tensor:
+    """``auto.blend`` per frame: the unit normal along (1 - t) a + t b of two normal maps (B, 3, H, W) with NaN
+    where they have none; where only one has a normal, that one; where neither, ``fill``; where the mean
+    vanishes, the one with the larger weight."""
+    B = a.shape[0]
+    have_a, have_b = ~torch.isnan(a[:, :1]), ~torch.isnan(b[:, :1])
+    w_b = t.to(a.dtype).view(B, 1, 1, 1)
+    w_a = (1.0 - t).to(a.dtype).view(B, 1, 1, 1)  # as NumPy: the weight rounded to the maps' dtype
+    m = w_a * torch.nan_to_num(a, nan=0.0) + w_b * torch.nan_to_num(b, nan=0.0)
+    m = torch.where(have_a & ~have_b, a, torch.where(have_b & ~have_a, b, m))
+    norm = torch.linalg.vector_norm(m, dim=1, keepdim=True)
+    cancelled = norm < 1e-6
+    m = torch.where(cancelled, torch.where((t >= 0.5).view(B, 1, 1, 1), b, a),
+                    m / torch.where(cancelled, torch.ones_like(norm), norm))
+    return torch.where(have_a | have_b, m, torch.full_like(m, fill))
+
+
+def auto(g: Grid, cam, *, tau: float, fill: float):
+    """``surfnorm.auto``: per frame, ``d2nt_v3`` where the depth's noise floor is at or below CLEAN_FLOOR,
+    ``adaptive_fit`` at or above NOISY_FLOOR, their blend between; ``cam`` in float64.
+
+    On the CPU each estimator runs on the frames that need it only; elsewhere both run on the whole batch
+    and each frame takes its own (no host synchronisation)."""
     from . import _ops
 
     z = g.z.to(_F64)
@@ -573,33 +602,43 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
     r_max = (MAX_WINDOW - 1) // 2
     with torch.no_grad():
         tables = noise_tables(z.detach(), g.valid, _sqrt(cam64[0] * cam64[1]).reshape(-1), r_max=r_max)
-    clean = tables.floor < CLEAN_FLOOR  # NaN (too few samples): adaptive_fit
+    t = adaptive_weight(tables.floor)
 
-    def d2nt_v3(grid, c):
+    def d2nt_v3(grid, c, fill_value):
         c = tuple(x.to(grid.z.dtype) for x in c)
-        n = _ops.d2nt_dag(grid, c, dlf="1d", tau=tau, truncate=True, fill=fill)
-        return _ops.mnr(grid, n, dlf="alpha", fill=fill)
+        n = _ops.d2nt_dag(grid, c, dlf="1d", tau=tau, truncate=True, fill=fill_value)
+        return _ops.mnr(grid, n, dlf="alpha", fill=fill_value)
 
-    def fit(grid, z_f, c, tab):
-        return _normals(z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill, out_dtype=grid.z.dtype)
+    def fit(grid, z_f, c, tab, fill_value):
+        return _normals(z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value,
+                        out_dtype=grid.z.dtype)
 
     if g.z.device.type != "cpu" or not _GATHER_ON_CPU:
-        both = torch.where(clean.view(-1, 1, 1, 1), d2nt_v3(g, cam64), fit(g, z, cam64, tables))
-        return both
+        a = d2nt_v3(g, cam64, math.nan)
+        b = fit(g, z, cam64, tables, math.nan)
+        # MNR reads the fill of d2nt_v3's raw normals as normals unless it is 0 or NaN: run it with the fill then
+        a_pure = torch.where(torch.isnan(a), fill, a) if fill == 0.0 or math.isnan(fill) else d2nt_v3(g, cam64, fill)
+        b_pure = torch.where(torch.isnan(b), fill, b)
+        t4 = t.view(-1, 1, 1, 1)
+        return torch.where(t4 == 0.0, a_pure, torch.where(t4 == 1.0, b_pure, blend(a, b, t, fill)))
     B = z.shape[0]
-    out = None
     parts = []
-    for pick in (clean, ~clean):
+    for kind in ("d2nt_v3", "adaptive_fit", "blend"):
+        pick = t == 0.0 if kind == "d2nt_v3" else t == 1.0 if kind == "adaptive_fit" else (t > 0.0) & (t < 1.0)
         idx = pick.nonzero().squeeze(1)
         if idx.numel() == 0:
             continue
-        sub = Grid(g.z[idx], g.valid[idx]) if idx.numel() < B else g
-        c_sub = tuple(c[idx] for c in cam64) if idx.numel() < B else cam64
-        if pick is clean:
-            n = d2nt_v3(sub, c_sub)
+        whole = idx.numel() == B
+        sub = g if whole else Grid(g.z[idx], g.valid[idx])
+        c_sub = cam64 if whole else tuple(c[idx] for c in cam64)
+        t_sub = tables if whole else NoiseTables(*(x[idx] for x in tables))
+        z_sub = z if whole else z[idx]
+        if kind == "d2nt_v3":
+            n = d2nt_v3(sub, c_sub, fill)
+        elif kind == "adaptive_fit":
+            n = fit(sub, z_sub, c_sub, t_sub, fill)
         else:
-            t_sub = NoiseTables(*(t[idx] for t in tables))
-            n = fit(sub, z[idx], c_sub, t_sub)
+            n = blend(d2nt_v3(sub, c_sub, math.nan), fit(sub, z_sub, c_sub, t_sub, math.nan), t[idx], fill)
         parts.append((idx, n))
     if len(parts) == 1:
         return parts[0][1]

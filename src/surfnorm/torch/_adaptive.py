@@ -375,18 +375,32 @@ class _Choice(NamedTuple):
     dof: torch.Tensor
 
 
-def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float, gather: bool) -> _Choice:
-    """The NumPy kernel's choices for the pixels ``px`` (all valid) in one ascending pass over the rungs.
+def dense_sums(I_pad, pad: int, H: int, W: int, r: int, dv: int, du: int, centred: bool, channels: int = 10):
+    """:func:`window_sums` for every pixel of every frame, (C, B H W), from slices of the integral images
+    (10, B, H + 1, W + 1) padded by ``pad`` >= 2 r + |dv| (replicated: the clipping of the windows)."""
+    src = I_pad[:channels]
+    top, bottom = src[:, :, pad + dv - r: pad + dv - r + H], src[:, :, pad + dv + r + 1: pad + dv + r + 1 + H]
+    left, right = pad + du - r, pad + du + r + 1
+    c11, c01 = bottom[..., right: right + W], top[..., right: right + W]
+    c10, c00 = bottom[..., left: left + W], top[..., left: left + W]
+    m = (c11 - c01) - (c10 - c00) if centred else ((c11 - c01) - c10) + c00
+    return m.reshape(channels, -1)
 
-    ``gather``: at each rung work on the pixels concerned only (indices: the CPU, where finding them costs
-    nothing); else on all of them with masks (no host synchronisation)."""
+
+def _choose(I_flat, I_pad, pad, px: _Pixels, valid, z, limit, r0, ladder, r_max: int, kappa: float,
+            gather: bool) -> _Choice:
+    """The NumPy kernel's choices for every pixel ``px`` of the batch in one ascending pass over the rungs.
+
+    The centred windows of a rung are summed for all pixels at once (slices of the integral images); the
+    quadrant windows, which a minority of pixels needs, for those pixels only where ``gather`` (the CPU,
+    where finding them costs nothing), else for all with masks (no host synchronisation)."""
     widen_np, grow_np = _ladder_tables(r_max)
     dev = z.device
     widen = torch.from_numpy(widen_np).to(dev)
     n_px = z.shape[0]
     zeros = torch.zeros(n_px, dtype=_F64, device=dev)
     r_cur = r0.clone()
-    growing = torch.ones(n_px, dtype=torch.bool, device=dev)
+    growing = valid.clone()
     passed = torch.zeros_like(growing)
     widened = torch.zeros(n_px, dtype=torch.int64, device=dev)
     shift = torch.full((n_px,), -1, dtype=torch.int64, device=dev)
@@ -395,6 +409,11 @@ def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float,
 
     def select(mask):
         return mask.nonzero().squeeze(1) if gather else None
+
+    def sums(sub, r, dv, du, centred, channels=10):
+        if sub is None:
+            return dense_sums(I_pad, pad, px.H, px.W, r, dv, du, centred, channels)
+        return window_sums(I_flat, px, sub, r, dv, du, centred, channels)
 
     def take(t, sub):
         return t if sub is None else t[sub]
@@ -415,9 +434,9 @@ def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float,
     for r in ladder:
         # growth (sparse depth): too few valid pixels, or too little spread to pin the slope
         here = growing & (r_cur == r)
-        sub = select(here)
+        sub = None
         if r < r_max:
-            n = window_sums(I_flat, px, sub, r, 0, 0, True, 1)[0]
+            n = sums(sub, r, 0, 0, True, 1)[0]
             grow = take(here, sub) & ((n < MIN_POINTS) | (2.0 * n * (r * (r + 1)) < take(need, sub)))
             r_cur = put(r_cur, sub, grow, torch.full_like(take(r_cur, sub), int(grow_np[r])))
             settle = here & ~scatter(grow, sub)
@@ -426,8 +445,8 @@ def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float,
         growing = growing & ~settle
         # the fit at r: for the pixels that settle here, and those whose next wider window is r
         trying = passed & (widened < N_WIDEN) & (r_cur < r) & (widen[r_cur.clamp(max=r_max)] == r)
-        sub = select(settle | trying)
-        m = window_sums(I_flat, px, sub, r, 0, 0, True)
+        sub = None
+        m = sums(sub, r, 0, 0, True)
         a_r, gu_r, gv_r, rss_r, dof_r = affine_fit(m, r, take(px.x, sub), take(px.y, sub))
         ok_r = (dof_r > 0.0) & (rss_r <= take(limit, sub) * dof_r)
         s_settle, s_trying = take(settle, sub), take(trying, sub)
@@ -455,7 +474,7 @@ def _choose(I_flat, px: _Pixels, z, limit, r0, ladder, r_max: int, kappa: float,
         x_q, y_q = take(px.x, sub), take(px.y, sub)
         for k, (sv, su) in enumerate(_SHIFTS):
             dv, du = sv * r, su * r
-            mk = window_sums(I_flat, px, sub, r, dv, du, False)
+            mk = sums(sub, r, dv, du, False)
             a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(mk, r, x_q + du, y_q + dv)
             has = (mk[0] >= n_min) & (dof_k > 0.0)
             score = torch.maximum(rss_k / torch.where(dof_k > 0.0, dof_k, 1.0), TIE * lim)
@@ -494,9 +513,8 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
     f = _sqrt(fx * fy)
     gather = dev.type == "cpu" and _GATHER_ON_CPU
-    flat = valid.reshape(-1).nonzero().squeeze(1) if gather else torch.arange(B * H * W, device=dev)
-    px = _Pixels(flat, (B, H, W))
-    z_p = z.reshape(-1)[flat]
+    px = _Pixels(torch.arange(B * H * W, device=dev), (B, H, W))
+    z_p = z.reshape(-1)
     with torch.no_grad():
         t = torch.clamp(torch.trunc((z_p - tables.z0[px.b]) * tables.inv_step[px.b]), 0, _TABLE - 1).long()
         r0 = tables.radius[px.b, t]
@@ -504,9 +522,14 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
         zf = z_p * f[px.b]
         s_w = KAPPA * torch.clamp_min(rho, RHO_FLOOR)
         limit = (s_w * s_w) / (zf * zf)  # the noise test: rss <= limit * dof
-    I_flat = integral_images(z, valid).permute(1, 2, 3, 0).reshape(-1, 10)  # channels last: one row per corner
+    I = integral_images(z, valid)
+    I_flat = I.permute(1, 2, 3, 0).reshape(-1, 10)  # channels last: one row per corner, for gathers
+    ladder = rungs(window, r_max)
+    pad = 2 * max(ladder) + 1
     with torch.no_grad():
-        choice = _choose(I_flat.detach(), px, z_p.detach(), limit, r0, rungs(window, r_max), r_max, KAPPA, gather)
+        I_pad = F.pad(I.detach(), (pad, pad, pad, pad), mode="replicate")
+        choice = _choose(I_flat.detach(), I_pad, pad, px, valid.reshape(-1), z_p.detach(), limit, r0, ladder, r_max,
+                         KAPPA, gather)
     return px, z_p, I_flat, choice, gather
 
 
@@ -528,9 +551,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
         a, g_u, g_v = _refit(I_flat, px, choice)
     else:
         a, g_u, g_v = choice.a, choice.g_u, choice.g_v
-    ok = choice.dof > 0.0
-    if not gather:
-        ok = ok & valid.reshape(-1)
+    ok = (choice.dof > 0.0) & valid.reshape(-1)
     a = torch.where(a > 0.0, a, torch.reciprocal(z_p))  # a fit that passes behind the camera: the pixel's own w
     n_x = fx[px.b] * g_u
     n_y = fy[px.b] * g_v
@@ -539,9 +560,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     norm = _sqrt_graph(torch.where(ok, sq, torch.ones_like(sq)))
     n = torch.stack((n_x, n_y, n_z), dim=1) * (-1.0 / norm).unsqueeze(1)
     n = torch.where(ok.unsqueeze(1), n.to(out_dtype), torch.full_like(n, fill, dtype=out_dtype))
-    out = torch.full((B * H * W, 3), fill, dtype=out_dtype, device=z.device)
-    out = out.index_put((px.flat,), n) if gather else n
-    return out.view(B, H, W, 3).permute(0, 3, 1, 2)
+    return n.view(B, H, W, 3).permute(0, 3, 1, 2)
 
 
 def _sqrt_graph(x):

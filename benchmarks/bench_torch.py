@@ -5,7 +5,8 @@
 
 Frames per second on batches of 480x640 frames (the shipped sample's three
 frames, repeated to fill the batch) for every method of
-``surfnorm.torch.methods()`` and two peers on the same device:
+``surfnorm.torch.methods()`` (``auto`` runs ``d2nt_v3`` on these rendered frames, after measuring
+their noise) and two peers on the same device:
 
 * kornia's ``depth_to_normals`` (the cross product of finite-difference
   tangents; its normals face away from the camera, ours face it: checked on

@@ -136,7 +136,7 @@ class TestParity:
 
         for name in ("ALPHA", "KAPPA", "RHO_FLOOR", "RADII", "N_WIDEN", "MIN_POINTS", "N_BINS", "MIN_SAMPLES",
                      "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS", "_CLIP_ROUNDS", "_TABLE", "TIE"):
-            assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name  # noqa: B009
+            assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name
         assert _adaptive._SHIFTS == tuple(map(tuple, adaptive_fit._SHIFTS.tolist()))
         assert (_adaptive.CLEAN_FLOOR, _adaptive.NOISY_FLOOR) == (auto.CLEAN_FLOOR, auto.NOISY_FLOOR)
         assert _adaptive.MAX_WINDOW == adaptive_fit.MAX_WINDOW == surfnorm.methods()["adaptive_fit"].options["max_window"]
@@ -262,8 +262,8 @@ class TestAdaptive:
         assert_parity(depth, masks, Ks, method + "+mnr", {"fill": -3.0}, names)
 
     def test_auto_chooses_per_frame(self):
-        from surfnorm.kernels.auto import choose
         from surfnorm.camera import Intrinsics
+        from surfnorm.kernels.auto import choose
 
         f = threef2n.read_frame(threef2n.sample_root(), "Medium/Trex/000001")
         clean = f.depth[100:260, 200:400].copy()
@@ -352,8 +352,8 @@ class TestAdaptiveGradients:
     def test_auto_gradient_is_its_choice(self, seed, expected):
         noisy = expected == "adaptive_fit"
         depth = sensor_like(seed=seed, **({} if noisy else {"sigma": 0.0, "step": 1e-6})).astype(np.float64)
-        from surfnorm.kernels.auto import choose
         from surfnorm.camera import Intrinsics
+        from surfnorm.kernels.auto import choose
 
         assert choose(depth.astype(np.float32), depth > 0, Intrinsics.from_matrix(K)) == expected
         grads = []

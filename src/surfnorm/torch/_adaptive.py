@@ -139,7 +139,7 @@ def _samples(z, valid, f, lo, span):
     """``adaptive_fit._second_differences`` on every frame: xs (3, B, N), taken (B, N), bins (B, N), in the
     NumPy kernel's sample order (row-major over the sampled pixels, horizontal then vertical)."""
     B, H, W = z.shape
-    step = max(1, int(round(math.sqrt(H * W / _NOISE_SAMPLES))))
+    step = max(1, round(math.sqrt(H * W / _NOISE_SAMPLES)))
     pad = 4 * _MAX_GAP
     zp = F.pad(z, (pad, pad, pad, pad), value=1.0)
     vp = F.pad(valid, (pad, pad, pad, pad), value=False)
@@ -308,7 +308,7 @@ class _Pixels:
     """A list of pixels of the batch (flat indices into B x H x W) with their coordinates."""
 
     def __init__(self, flat: torch.Tensor, shape):
-        B, H, W = shape
+        _, H, W = shape
         self.flat = flat
         self.b = torch.div(flat, H * W, rounding_mode="floor")
         rest = flat - self.b * (H * W)
@@ -510,7 +510,7 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
     B, H, W = z.shape
     dev = z.device
     r_max = (max_window - 1) // 2
-    fx, fy, cx, cy = (c.reshape(B) for c in cam)
+    fx, fy = (c.reshape(B) for c in cam[:2])
     f = _sqrt(fx * fy)
     gather = dev.type == "cpu" and _GATHER_ON_CPU
     px = _Pixels(torch.arange(B * H * W, device=dev), (B, H, W))
@@ -534,8 +534,8 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
 
 
 def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tuple[torch.Tensor, _Choice]:
-    """(flat indices of the valid pixels, their choices) for frames z (B, H, W) float64 on the CPU: for tests
-    and diagnostics."""
+    """(flat indices into B x H x W, the choices) of every pixel of the frames z (B, H, W) float64 (invalid
+    pixels keep dof 0): for tests and diagnostics."""
     cam = _cameras64(cam, z.shape[0])
     tables = noise_tables(z, valid, _sqrt(cam[0] * cam[1]).reshape(-1), window=window, r_max=(max_window - 1) // 2)
     px, _, _, choice, _ = _setup(z, valid, cam, tables, window=window, max_window=max_window)
@@ -546,7 +546,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
-    px, z_p, I_flat, choice, gather = _setup(z, valid, cam, tables, window=window, max_window=max_window)
+    px, z_p, I_flat, choice, _ = _setup(z, valid, cam, tables, window=window, max_window=max_window)
     if torch.is_grad_enabled() and z.requires_grad:
         a, g_u, g_v = _refit(I_flat, px, choice)
     else:

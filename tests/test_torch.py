@@ -698,7 +698,7 @@ class TestCompile:
 
 class TestErrors:
     def test_method(self):
-        with pytest.raises(InputError, match=r"method: expected one of d2nt_basic, .*angle_weighted \(optionally followed by '\+mnr'\) in the torch backend, got 'plane_fit'"):
+        with pytest.raises(InputError, match=r"method: expected one of d2nt_basic, .*angle_weighted, adaptive_fit, auto \(optionally followed by '\+mnr'\) in the torch backend, got 'plane_fit'"):
             st.estimate(torch.ones(5, 5), K, method="plane_fit")
         with pytest.raises(InputError, match="method: expected a method name"):
             st.estimate(torch.ones(5, 5), K, method=3)

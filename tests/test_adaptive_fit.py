@@ -249,3 +249,10 @@ def test_row_window_sums_are_the_box_formula_where_picked(r):
     fill = pick & (counts != (2 * r + 1) ** 2)
     np.testing.assert_array_equal(coords[:, fill], box[list(_COORDS)][:, fill])
     assert np.isnan(coords[:, ~fill]).all()
+
+
+def test_a_fixed_window_wider_than_max_window_is_refused():
+    z, K = scene(1, holes=0.0)
+    with pytest.raises(InputError, match=r"window: expected at most max_window \(5\), got 9"):
+        surfnorm.estimate(z, K, method="adaptive_fit", window=9, max_window=5)
+    assert surfnorm.estimate(z, K, method="adaptive_fit", window=5, max_window=5).shape == z.shape + (3,)

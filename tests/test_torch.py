@@ -744,3 +744,10 @@ class TestErrors:
             st.estimate(torch.ones(2, 1, 5, 5), np.stack([K, -K]))
         with pytest.raises(InputError, match="K: expected a real"):
             st.estimate(torch.ones(5, 5), torch.ones(3, 3, dtype=torch.bool))
+
+
+def test_adaptive_fit_refuses_a_fixed_window_wider_than_max_window_as_numpy_does():
+    z = torch.rand(20, 30, dtype=torch.float32) + 1
+    K = [[50.0, 0, 15], [0, 50.0, 10], [0, 0, 1]]
+    with pytest.raises(InputError, match=r"window: expected at most max_window \(5\), got 9"):
+        st.estimate(z, K, method="adaptive_fit", window=9, max_window=5)

@@ -339,6 +339,10 @@ ADAPTIVE_OPTIONS = {
 def _run_adaptive_fit(z, valid, cam, out, **options):
     from .kernels.adaptive_fit import adaptive_fit
 
+    window, max_window = options.get("window"), options.get("max_window", 31)
+    if window is not None and window > max_window:  # the kernel's tables stop at max_window
+        raise InputError(f"window: expected at most max_window ({max_window}), got {window}")
+
     return adaptive_fit(z, valid, cam, out, **options)
 
 

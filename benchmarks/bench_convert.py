@@ -174,7 +174,6 @@ def main(argv=None):
                 starts.append(run["cluster_start_s"])
             loads.append(os.getloadavg()[0])
             print(f"round {r + 1}: {name}: {run['files_per_s']:.2f} files/s (load {loads[-1]:.1f})", file=sys.stderr)
-    load_after = os.getloadavg()
 
     rows = [(name, statistics.median(rates[name]), statistics.median(ratios[name])) for name, _ in configs]
     print(f"\n{len(inputs)} depth frames {W}x{H} 16-bit PNG -> {args.fmt}, method {args.method}; "

@@ -55,8 +55,11 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relativ
 
 
 def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, dict]:
-    """The paper-faithful mode's range rescale of one frame (surfnorm.units, "Range"): depth and tau multiplied
-    by a power of two where the frame's depth would leave float32's range in the kernels; else unchanged."""
+    """The paper-faithful mode's range rescale of one frame (surfnorm.units, "Range").
+
+    Depth and tau are multiplied by a power of two where the frame's depth would leave float32's range in the
+    kernels; else unchanged.
+    """
     if not method.equivariant:
         return z, options
     from .units import range_exponent, scaled_frame

@@ -16,6 +16,7 @@ shape, intrinsics are finite with positive focal lengths.
 from __future__ import annotations
 
 import functools
+import math
 import numbers
 
 import numpy as np
@@ -185,7 +186,7 @@ def check_choice(name: str, value, choices) -> str:
 
 
 def check_positive(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value <= 0:
         raise InputError(f"{name}: expected a positive finite number, got {value!r}")
     return float(value)
 

@@ -35,6 +35,7 @@ class Intrinsics:
     cy: float
 
     def __post_init__(self):
+        """Check that every parameter is a finite number in range (an InputError naming it otherwise)."""
         for name in ("fx", "fy", "cx", "cy"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):

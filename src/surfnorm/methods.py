@@ -107,6 +107,7 @@ _REGISTRY: dict[str, Method] = {}
 
 
 def register(method: Method) -> Method:
+    """Add ``method`` to the registry under its name (its category checked) and return it."""
     if method.category not in CATEGORIES:
         raise ValueError(f"category of {method.name!r}: expected one of {CATEGORIES}, got {method.category!r}")
     if MNR_SUFFIX in method.name:

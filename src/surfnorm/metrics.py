@@ -86,7 +86,7 @@ def proportion_below(normals, gt, mask=None, thresholds=(5.0, 10.0, 20.0, 30.0))
 
 
 def tradeoff(e_a: float, t_ms: float) -> float:
-    """pi = e_A * t (eq. 22) in degrees/kHz, with e_A in degrees and t in milliseconds."""
+    """The trade-off pi = e_A * t (eq. 22) in degrees/kHz, with e_A in degrees and t in milliseconds."""
     return float(e_a) * float(t_ms)
 
 

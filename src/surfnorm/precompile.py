@@ -35,7 +35,7 @@ import numpy as np
 __all__ = ["precompile", "variants"]
 
 #: Option values that select other kernels than the defaults (applied where a method has the option).
-KERNEL_CHOICES = {"window": [5], "base": ["3f2n"]}
+KERNEL_CHOICES: dict[str, list] = {"window": [5], "base": ["3f2n"]}
 
 
 def variants(name: str) -> list[dict]:
@@ -43,7 +43,7 @@ def variants(name: str) -> list[dict]:
     from .methods import _REGISTRY
 
     method = _REGISTRY[name]
-    out = [{"method": name}, {"method": name, "mask": True}, {"method": name + "+mnr"}]
+    out: list[dict] = [{"method": name}, {"method": name, "mask": True}, {"method": name + "+mnr"}]
     if method.ties:
         out.append({"method": name, "scale_invariant": True})
     for option, values in KERNEL_CHOICES.items():

@@ -150,7 +150,7 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
     position = {id(task): i for i, task in enumerate(tasks)}
     results: list = [None] * len(tasks)
     shard_of = {}   # future key -> its tasks
-    suspects = deque()  # files of shards that kept killing workers, to be tried one at a time
+    suspects: deque = deque()  # files of shards that kept killing workers, to be tried one at a time
     lane = None     # key of the one suspect in flight
     counter = 0
 

@@ -98,7 +98,7 @@ def _panel_frame(result) -> str | None:
     from ..io.threef2n import read_frame
 
     for lv in reversed(paper.LEVELS):  # the hardest level present
-        firsts = {}
+        firsts: dict = {}
         for f in ok:
             if f.startswith(lv + "/"):
                 firsts.setdefault(f.rsplit("/", 1)[0], f)  # the first frame of each object

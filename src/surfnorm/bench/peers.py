@@ -111,8 +111,8 @@ def _make_open3d_tensor():
     import open3d as o3d
 
     def run(depth, cam: Intrinsics, mask, clean=True):
-        img = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth, dtype=np.float32)[..., None]))
-        K = o3d.core.Tensor(cam.matrix.astype(np.float64))
+        img = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth, dtype=np.float32)[..., None]))  # type: ignore[call-overload]  # its stubs want dtype and device
+        K = o3d.core.Tensor(cam.matrix.astype(np.float64))  # type: ignore[call-overload]  # its stubs want dtype and device
         n = img.create_vertex_map(K).create_normal_map().as_tensor().numpy()  # HxWx3, not always unit length
         return _clean(n) if clean else n
 

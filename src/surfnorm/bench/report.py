@@ -59,7 +59,7 @@ def _official(result: BenchResult, method: str, levels) -> dict[str, float]:
         frames = [f for f in result.frames if f.startswith(lv + "/") and f not in result.unreadable]
         vals = [official_figures(f).get(method) for f in frames]
         if frames and all(v is not None for v in vals):
-            out[lv] = float(np.mean(vals))
+            out[lv] = float(np.mean([v for v in vals if v is not None]))
     return out
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import time
 import zlib
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -114,7 +113,7 @@ def experiments(cfg: BenchConfig, registered: list[str], peer_names: list[str]) 
     def s(method, noise=0.0, **options):
         return Spec("surfnorm", method, tuple(sorted(options.items())), float(noise))
 
-    out = {"table3": {}, "table2": {}, "table4": {}, "noise": {}, "faithfulness": {}}
+    out: dict[str, dict] = {"table3": {}, "table2": {}, "table4": {}, "noise": {}, "faithfulness": {}}
     if "table3" in cfg.tables:
         for name in (cfg.methods if cfg.methods is not None else registered):
             out["table3"][name] = s(name)
@@ -285,7 +284,7 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
     """Warm-up call of each spec, then interleaved single-thread calls; {key: {'ms': median, 'calls': n}}."""
     from .._api import estimate
 
-    calls = {}
+    calls: dict[str, Callable] = {}
     for spec in specs:
         if spec.kind == "peer":
             run = peer_runs[spec.method]
@@ -317,7 +316,7 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
                 t0 = time.perf_counter()
                 calls[key]()
                 times[key].append((time.perf_counter() - t0) * 1e3)
-    out = {k: {"ms": float(np.median(v)), "calls": len(v)} for k, v in times.items()}
+    out: dict[str, dict] = {k: {"ms": float(np.median(v)), "calls": len(v)} for k, v in times.items()}
     out.update({k: {"error": e} for k, e in errors.items()})
     return out
 
@@ -389,7 +388,8 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
     cache = Cache(Path(cfg.out) / "cache", code_version(), cfg.root)
 
     # accuracy: what is not cached yet, one task per frame
-    accuracy, todo = [], {}
+    accuracy: list = []
+    todo: dict = {}
     for name in frames:
         for spec in specs:
             rec = cache.get("accuracy", name, spec.key)

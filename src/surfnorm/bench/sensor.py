@@ -89,7 +89,7 @@ def _surfnorm_entry(method: str, options: dict) -> Entry:
 
     resolve(method, dict(options))  # a bad name or option is an InputError now, not on the first frame
 
-    def call(depth, cam, valid, method=method, options=dict(options)):
+    def call(depth, cam, valid, method=method, options=dict(options)):  # noqa: B006 (binds a copy, never mutated)
         return estimate(depth, cam, method=method, **options)
 
     info_summary = f"surfnorm.estimate(method={method!r}" + "".join(f", {k}={v!r}" for k, v in options.items()) + ")"
@@ -119,7 +119,7 @@ def make_entries(names: list[str] | None = None, *, peer_libraries: list[str] | 
     registered = list(methods())
     peer_keys = [p.name for p in SENSOR_PEERS]
     if names is None:
-        wanted = [(m, {}) for m in registered] + [(m, o) for m, o in VARIANTS if m in registered]
+        wanted: list = [(m, {}) for m in registered] + [(m, o) for m, o in VARIANTS if m in registered]
         libs = {p.library for p in SENSOR_PEERS}
         for lib in peer_libraries or []:
             if lib not in libs:
@@ -343,6 +343,7 @@ def score_frame(n: np.ndarray, frame: SensorFrame) -> tuple[str, float, float]:
     if frame.planes is not None:
         mean, cov = metrics.plane_error(n, *frame.planes)
         return "planes", mean, cov
+    assert frame.gt is not None  # a frame holds planes.npz or gt.npy (read_sensor_frame)
     sq = np.einsum("hwc,hwc->hw", frame.gt.astype(np.float64), frame.gt.astype(np.float64))
     where = (frame.depth > 0) & np.isfinite(sq) & (sq > 0)
     return "gt", metrics.mean_angular_error(n, frame.gt, where), metrics.coverage(n, where)

@@ -42,13 +42,13 @@ def new_file_mode(path) -> int:
         return 0o666 & ~_umask()
 
 
-def atomic_write(path, write: Callable[[Path], None]) -> Path:
+def atomic_write(path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp_path)`` and rename the result to ``path`` (same directory, same filesystem)."""
     path = Path(path)
     mode = new_file_mode(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
     os.close(fd)
-    tmp = Path(tmp)
+    tmp = Path(tmp_name)
     try:
         write(tmp)
         os.chmod(tmp, mode)

@@ -46,6 +46,7 @@ import sys
 import tempfile
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -222,8 +223,9 @@ _EXR_MAGIC = b"\x76\x2f\x31\x01"
 
 @contextlib.contextmanager
 def _library_output(lines: list):
-    """Collect what a library prints (through Python's sys.stdout/sys.stderr or C's file descriptors 1 and 2)
-    into ``lines`` instead of the terminal.
+    """Collect what a library prints into ``lines`` instead of the terminal.
+
+    Both what goes through Python's sys.stdout/sys.stderr and C's file descriptors 1 and 2.
 
     The OpenEXR library reports a truncated file there, sometimes without
     raising; surfnorm reports it once, in a DataFileError. (Other threads'
@@ -232,8 +234,9 @@ def _library_output(lines: list):
     python_out = io.StringIO()
     with tempfile.TemporaryFile() as tmp, contextlib.redirect_stdout(python_out), contextlib.redirect_stderr(python_out):
         try:
-            sys.__stdout__.flush()
-            sys.__stderr__.flush()
+            for stream in (sys.__stdout__, sys.__stderr__):  # None where Python runs without a console
+                if stream is not None:
+                    stream.flush()
             saved = (os.dup(1), os.dup(2))
         except (OSError, ValueError, AttributeError):  # no such descriptors (e.g. a daemon)
             saved = None
@@ -316,7 +319,7 @@ def _exr_depth_channel(path: Path, channels: dict) -> str:
 def _read_exr(path: Path) -> np.ndarray:
     channels = _exr_channels(path)
     name = _exr_depth_channel(path, channels)
-    ch = channels[name]
+    ch: Any = channels[name]  # an OpenEXR channel
     if (getattr(ch, "xSampling", 1), getattr(ch, "ySampling", 1)) != (1, 1):
         raise DataFileError(f"{path}: expected a full-resolution depth channel, got channel {name!r} subsampled "
                             f"{ch.xSampling}x{ch.ySampling}")

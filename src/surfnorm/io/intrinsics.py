@@ -172,8 +172,8 @@ def _opencv_matrix(path: Path, key: str, node):
         raise DataFileError(f"{path}: expected {key!r} to be an opencv-matrix (rows, cols, dt, data)")
     rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
     if not (rows.isInt() and cols.isInt() and int(rows.real()) > 0 and int(rows.real()) * int(cols.real()) == 9):
-        got = [f"{n}: {int(x.real()) if x.isInt() else 'not an integer'}" for n, x in (("rows", rows), ("cols", cols))]
-        raise DataFileError(f"{path}: expected rows: 3 and cols: 3 for {key!r}, got {', '.join(got)}")
+        shape = [f"{n}: {int(x.real()) if x.isInt() else 'not an integer'}" for n, x in (("rows", rows), ("cols", cols))]
+        raise DataFileError(f"{path}: expected rows: 3 and cols: 3 for {key!r}, got {', '.join(shape)}")
     if not (dt.isString() and dt.string() in _OPENCV_DT):
         got = repr(dt.string()[:20]) if dt.isString() else "no string"
         raise DataFileError(f"{path}: expected {key}.dt to be one of {', '.join(_OPENCV_DT)}, got {got}")

@@ -33,8 +33,11 @@ BACKGROUND_DEPTH = 1.0
 
 @dataclass
 class Frame:
-    """One frame: depth (H, W) float32, ground-truth normals (H, W, 3) float32 (camera-facing),
-    mask (foreground, depth != 1), intrinsics (0-based) and its name ``level/object/frame``."""
+    """One frame of the 3F2N dataset.
+
+    Depth (H, W) float32, ground-truth normals (H, W, 3) float32 (camera-facing), mask (foreground,
+    depth != 1), intrinsics (0-based) and its name ``level/object/frame``.
+    """
 
     name: str
     level: str

@@ -443,7 +443,7 @@ def _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill
     infinite energy does not exist. Branch-free, into a flat view of each row of ``out`` (C-contiguous),
     so that the loop vectorises (see :func:`surfnorm.kernels._rows.store_unit_flat`). Rows v0 .. v1 - 1.
     """
-    H, W = out.shape[0], out.shape[1]
+    W = out.shape[1]
     for v in range(v0, v1):
         v_c = v - c_y
         out_flat = out[v].reshape(3 * W)

@@ -231,7 +231,9 @@ class DepthToNormal(torch.nn.Module):
         self.options = dict(options)
 
     def forward(self, depth: torch.Tensor, K, mask=None) -> torch.Tensor:
+        """:func:`estimate` with the stored method and options."""
         return estimate(depth, K, method=self.method, mask=mask, **self.options)
 
     def extra_repr(self) -> str:
+        """The method and options, as shown by ``print(module)``."""
         return ", ".join([f"method={self.method!r}"] + [f"{k}={v!r}" for k, v in self.options.items()])

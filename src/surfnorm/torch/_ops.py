@@ -90,7 +90,7 @@ class Grid:
         self.valid = valid
         self._z = Shifted(z)
         self._valid = Shifted(valid, False)
-        self._differences = {}
+        self._differences: dict = {}
 
     def z_at(self, dv, du):
         return self._z.at(dv, du)

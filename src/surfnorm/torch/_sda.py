@@ -156,7 +156,7 @@ def sda_pass(f: _Fixed, state, c: float):
     gp_u, gp_v = pad(g_u, 0.0), pad(g_v, 0.0)
     ep_u, ep_v = pad(e_u, _INF), pad(e_v, _INF)
     sp_u, sp_v = pad(s_u, -1.0), pad(s_v, -1.0)
-    a_u, a_v, s, sg = f.a_u, f.a_v, f.sp, f.sp_grad
+    a_u, a_v, sg = f.a_u, f.a_v, f.sp_grad
     B = SDA_PENALTY
     inf = torch.full_like(e_u, _INF)
     z_p = view(sg, 0, 0)

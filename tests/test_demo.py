@@ -11,7 +11,8 @@ from typer.testing import CliRunner
 import surfnorm
 from surfnorm import demo
 from surfnorm.cli import app
-from surfnorm.demo import default_label, read_sensor_frame, run_sensor_demo, sensor_root
+from surfnorm.demo import (CONTACT_SHEET, default_label, read_sensor_frame, run_demo, run_sensor_demo, sensor_root,
+                           write_contact_sheet)
 
 SENSOR_SAMPLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "sensor-sample" / "d435_080"
 HAS_RGBD_NORMALS = hasattr(cv2, "RgbdNormals") and hasattr(cv2, "depthTo3d")
@@ -19,8 +20,13 @@ HAS_RGBD_NORMALS = hasattr(cv2, "RgbdNormals") and hasattr(cv2, "depthTo3d")
 
 def test_shipped_frame_files_and_notice():
     root = sensor_root()
-    assert sorted(p.name for p in root.iterdir()) == ["K.json", "NOTICE", "depth.png", "meta.json", "planes.npz"]
+    assert sorted(p.name for p in root.iterdir()) == ["K.json", "LICENSE", "NOTICE", "depth.png", "meta.json", "planes.npz"]
     assert sum(p.stat().st_size for p in root.iterdir()) < 1_000_000
+    # the License's full text beside the frame: its title, all nine sections, the end of the terms, the appendix
+    license_text = (root / "LICENSE").read_text()
+    assert license_text.lstrip().startswith("Apache License\n") and "Version 2.0, January 2004" in license_text
+    assert all(f"   {k}. " in license_text for k in range(1, 10)) and "END OF TERMS AND CONDITIONS" in license_text
+    assert "APPENDIX: How to apply the Apache License to your work." in license_text
     notice = (root / "NOTICE").read_text()
     assert "Shreeyak/cleargrasp" in notice and "000000080-opaque-depth-img.exr" in notice
     assert "Apache License, Version 2.0" in notice and "http://www.apache.org/licenses/LICENSE-2.0" in notice
@@ -108,3 +114,51 @@ def test_cli_demo_prints_the_sensor_table(tmp_path, monkeypatch):
     assert "RealSense D435" in result.output and default_label() in result.output
     assert "OpenCV RgbdNormals skipped" in result.output
     assert (tmp_path / "out" / "realsense-d435_normals.png").is_file()
+    # the contact sheet, and the line that says where it is
+    assert f"contact sheet (every frame and method on one picture): {tmp_path / 'out' / CONTACT_SHEET}" in result.output
+    assert cv2.imread(str(tmp_path / "out" / CONTACT_SHEET)) is not None
+
+
+def _rgb(path):
+    return cv2.imread(str(path), cv2.IMREAD_COLOR)[:, :, ::-1]
+
+
+def test_contact_sheet_shows_every_frame_and_method(tmp_path):
+    """One PNG beside the per-method files: each tile is that file at half size, each error tile's caption
+    carries e_A (and the authors' figure), and the colour scale spans the error maps' 0 to 30 degrees."""
+    from matplotlib import colormaps
+
+    names = ["d2nt_basic", "cp2tv"]
+    rows = run_demo(tmp_path, methods_=names)
+    written = _rgb(tmp_path / CONTACT_SHEET)
+    sheet = write_contact_sheet(tmp_path, rows)  # the same picture again, now with its layout
+    assert sheet.path == tmp_path / CONTACT_SHEET
+    np.testing.assert_array_equal(_rgb(sheet.path), written)
+    frames = list(dict.fromkeys(r.frame for r in rows))
+    assert len(frames) == 3 and len(rows) == 3 * len(names)
+    expected = {(f, "", k) for f in frames for k in ("depth", "gt")}
+    expected |= {(f, m, k) for f in frames for m in names for k in ("normals", "error")}
+    assert set(sheet.tiles) == expected == set(sheet.captions)
+    boxes = list(sheet.tiles.values()) + [sheet.scale]
+    for i, (t, l, h, w) in enumerate(boxes):  # inside the picture, and no two overlap
+        assert 0 <= t and t + h <= written.shape[0] and 0 <= l and l + w <= written.shape[1]
+        for t2, l2, h2, w2 in boxes[i + 1:]:
+            assert t + h <= t2 or t2 + h2 <= t or l + w <= l2 or l2 + w2 <= l
+    for (frame, method, kind), (t, l, h, w) in sheet.tiles.items():
+        stem = frame.replace("/", "_")
+        file = f"{stem}_{kind}.png" if not method else f"{stem}_{method}_{kind}.png"
+        full = _rgb(tmp_path / file)
+        assert (h, w) == (full.shape[0] // 2, full.shape[1] // 2)
+        np.testing.assert_array_equal(written[t:t + h, l:l + w],
+                                      cv2.resize(full, (w, h), interpolation=cv2.INTER_AREA))
+        assert (written[t:t + h, l:l + w] != 255).any()  # not an empty tile
+    for r in rows:
+        caption = sheet.captions[(r.frame, r.method, "error")]
+        assert f"e_A {r.e_a:.3f} deg" in caption
+        assert ("authors'" in caption) == (r.official is not None)
+        assert r.official is None or f"[authors' {r.official:.3f}]" in caption
+        assert sheet.captions[(r.frame, r.method, "normals")] == f"{r.method} normals"
+    assert any(r.official is not None for r in rows)
+    t, l, h, w = sheet.scale  # the bar: inferno from 0 (left) to 30 degrees (right), as the error maps
+    for x, value in ((l, 0.0), (l + w - 1, 1.0)):
+        np.testing.assert_array_equal(written[t + h // 2, x], np.rint(np.array(colormaps["inferno"](value)[:3]) * 255))

@@ -43,13 +43,17 @@ def say_error(message: str):
 
 
 def fail(message: str, code: int = USAGE):
+    """Print ``message`` as one line on stderr and exit with ``code`` (2, a usage error, by default)."""
     say_error(message)
     raise typer.Exit(code)
 
 
 def _click_exceptions():
-    """(errors, passed through): Click's exception classes, from the Click that Typer uses (recent Typer
-    versions carry their own copy as ``typer._click``) and from Click itself where it is installed."""
+    """(errors, passed through): Click's exception classes.
+
+    From the Click that Typer uses (recent Typer versions carry their own copy as ``typer._click``) and from
+    Click itself where it is installed.
+    """
     import importlib
 
     modules = []
@@ -93,10 +97,12 @@ class OneLineGroup(TyperGroup):
     """
 
     def make_context(self, info_name, args, parent=None, **extra):
+        """Parse the command line, turning a usage error into one line on stderr and exit status 2."""
         with _one_line_errors():
             return super().make_context(info_name, args, parent=parent, **extra)
 
     def invoke(self, ctx):
+        """Run the command, turning a usage error into one line on stderr and exit status 2."""
         with _one_line_errors():
             return super().invoke(ctx)
 
@@ -106,6 +112,7 @@ app = typer.Typer(cls=OneLineGroup, add_completion=False, no_args_is_help=True, 
 
 
 def method_names() -> list[str]:
+    """The registered method names, the choices of ``--method``."""
     from .methods import methods
 
     return list(methods())
@@ -118,8 +125,11 @@ BYTE_ORDER_HELP = "Byte order of 16-bit .pgm samples: big (netpbm, default) or l
 
 
 def _intrinsics(intrinsics: Optional[Path], fx, fy, cx, cy, depth_path: Optional[Path] = None):
-    """The camera from --intrinsics or --fx --fy --cx --cy; a depth file falls back to its 3F2N params.txt
-    (beside it or in the folder above, whether its path is relative or absolute)."""
+    """The camera from --intrinsics or --fx --fy --cx --cy.
+
+    A depth file falls back to its 3F2N params.txt (beside it or in the folder above, whether its path is
+    relative or absolute).
+    """
     from .io.intrinsics import resolve_intrinsics
     from .io.threef2n import params_for
 
@@ -201,7 +211,7 @@ def demo(
     """
     from rich.progress import Progress
 
-    from .demo import demo_methods, run_demo
+    from .demo import CONTACT_SHEET, demo_methods, run_demo
     from .io.threef2n import find_frames, sample_root
 
     names = demo_methods()
@@ -227,6 +237,7 @@ def demo(
         table.add_row(name, *cells, f"{ms:.1f}")
     console.print(table)
     console.print(f"normal maps and error maps (PNG) written to {out}/")
+    console.print(f"contact sheet (every frame and method on one picture): {out / CONTACT_SHEET}", highlight=False, soft_wrap=True)
     _sensor_demo(out)
 
 
@@ -434,6 +445,7 @@ def _table3_text(report_path: Path) -> str:
 
 
 def main():  # pragma: no cover
+    """Run the ``surfnorm`` command."""
     app()
 
 

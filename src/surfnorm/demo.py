@@ -6,7 +6,9 @@ from __future__ import annotations
 import inspect
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -21,7 +23,7 @@ from .io.threef2n import find_frames, read_frame, sample_root
 from .methods import methods
 from .reference import official_figures
 
-__all__ = ["demo_methods", "run_demo", "DemoRow", "run_sensor_demo", "read_sensor_frame", "sensor_root", "SensorFrame",
+__all__ = ["demo_methods", "run_demo", "DemoRow", "write_contact_sheet", "ContactSheet", "CONTACT_SHEET", "run_sensor_demo", "read_sensor_frame", "sensor_root", "SensorFrame",
            "SensorRow", "default_method", "default_label", "opencv_rgbd_normals"]
 
 #: Table IV of the paper: MNR on other depth-to-normal estimators.
@@ -30,6 +32,8 @@ TABLE_IV_COMBOS = ("3f2n_median+mnr", "cp2tv+mnr")
 
 @dataclass
 class DemoRow:
+    """One method on one frame: e_A (degrees), the authors' figure where they published one, time (ms)."""
+
     frame: str
     method: str
     e_a: float
@@ -38,6 +42,7 @@ class DemoRow:
 
 
 def demo_methods() -> list[str]:
+    """Every registered method, then the MNR combinations of the paper's Table IV."""
     names = list(methods())
     return names + [c for c in TABLE_IV_COMBOS if c.split("+")[0] in names]
 
@@ -54,6 +59,7 @@ def run_demo(out_dir, *, methods_=None, root=None, progress=None) -> list[DemoRo
         official = official_figures(frame_name)
         stem = frame_name.replace("/", "_")
         write_rgb8(out_dir / f"{stem}_gt.png", normal_to_rgb8(np.where(frame.mask[..., None], frame.normals, 0)))
+        write_rgb8(out_dir / f"{stem}_depth.png", depth_to_rgb8(frame.depth, frame.mask))
         for name in names:
             estimate(frame.depth[:8, :8], frame.K, method=name)  # compile or load the kernel outside the timing
             t0 = time.perf_counter()
@@ -64,11 +70,160 @@ def run_demo(out_dir, *, methods_=None, root=None, progress=None) -> list[DemoRo
             e_a = metrics.mean_angular_error(n, frame.normals, frame.mask)
             safe = name.replace("+", "_plus_")
             write_rgb8(out_dir / f"{stem}_{safe}_normals.png", normal_to_rgb8(np.where(frame.mask[..., None], n, 0)))
-            write_rgb8(out_dir / f"{stem}_{safe}_error.png", error_to_rgb8(err))
+            write_rgb8(out_dir / f"{stem}_{safe}_error.png", error_to_rgb8(err, vmax=ERROR_VMAX))
             rows.append(DemoRow(frame_name, name, e_a, official.get(name), ms))
             if progress is not None:
                 progress()
+    write_contact_sheet(out_dir, rows, root=root)
     return rows
+
+
+# ---------------------------------------------------------------------------- the contact sheet
+
+#: The one picture of ``surfnorm demo``: every frame's depth and ground truth, every method's normals and error.
+CONTACT_SHEET = "contact_sheet.png"
+#: Error maps are coloured on this fixed scale, in degrees (:func:`surfnorm.io.pictures.error_to_rgb8`).
+ERROR_VMAX = 30.0
+_TILE_W = 320  # tile width in pixels: the 640-pixel frames at half size
+_CAPTION_H, _LABEL_W, _GAP, _MARGIN = 26, 190, 8, 16
+
+
+def depth_to_rgb8(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Depth (H, W) as an RGB uint8 picture.
+
+    Viridis from the nearest (dark) to the farthest (light) pixel of ``mask``; pixels outside it are white.
+    """
+    from matplotlib import colormaps
+
+    z = np.asarray(depth, dtype=np.float64)
+    lo, hi = (float(z[mask].min()), float(z[mask].max())) if mask.any() else (0.0, 1.0)
+    t = np.clip((z - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
+    img = np.rint(colormaps["viridis"](t)[..., :3] * 255).astype(np.uint8)
+    img[~mask] = 255
+    return img
+
+
+@dataclass
+class ContactSheet:
+    """The contact sheet written by :func:`write_contact_sheet`.
+
+    ``tiles`` maps ``(frame, method, kind)`` to the tile's ``(top, left, height, width)`` in the picture,
+    ``kind`` being ``"depth"`` or ``"gt"`` (method ``""``), ``"normals"`` or ``"error"``; ``captions`` maps
+    the same keys to the text written above each tile; ``scale`` is the error colour scale's box.
+    """
+
+    path: Path
+    tiles: dict
+    captions: dict
+    scale: tuple
+
+
+def _put(img, text, x, y, size=0.5, colour=(0, 0, 0)):
+    import cv2
+
+    cv2.putText(img, text, (int(x), int(y)), cv2.FONT_HERSHEY_SIMPLEX, size, colour, 1, cv2.LINE_AA)
+
+
+def _read_rgb8(path: Path) -> np.ndarray:
+    import cv2
+
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise DataFileError(f"{path}: cannot read the demo's picture")
+    return bgr[:, :, ::-1]
+
+
+def _tile(rgb: np.ndarray, scale: float) -> np.ndarray:
+    import cv2
+
+    return cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+
+
+def write_contact_sheet(out_dir, rows: list[DemoRow], *, root=None) -> ContactSheet:
+    """Compose the pictures that :func:`run_demo` wrote into ``out_dir`` into one PNG, ``contact_sheet.png``.
+
+    Two columns per frame: its depth and ground truth on top, then one row per method with its normal map
+    and its error map, each under a caption (the error map's carries e_A and the authors' figure in
+    brackets), and the error maps' colour scale, labelled in degrees, at the bottom.
+
+    Parameters
+    ----------
+    out_dir : path
+        The folder that :func:`run_demo` wrote: ``<frame>_depth.png``, ``<frame>_gt.png``,
+        ``<frame>_<method>_normals.png`` and ``<frame>_<method>_error.png``.
+    rows : list of DemoRow
+        What :func:`run_demo` returned: the frames and methods, in order, with e_A.
+    root : path, optional
+        The 3F2N folder of the frames (default: the sample shipped in the package), for the depth range.
+
+    Returns
+    -------
+    ContactSheet
+        The picture's path, and where each tile and caption lies in it.
+    """
+    from matplotlib import colormaps
+
+    out_dir = Path(out_dir)
+    root = sample_root() if root is None else Path(root)
+    frames = list(dict.fromkeys(r.frame for r in rows))
+    names = list(dict.fromkeys(r.method for r in rows))
+    by_key = {(r.frame, r.method): r for r in rows}
+    if not frames:
+        raise DataFileError(f"{out_dir}: no demo results to put on a contact sheet")
+    H, W = read_frame(root, frames[0]).depth.shape
+    scale = _TILE_W / W
+    tile_h = int(round(H * scale))
+    col_w = 2 * _TILE_W + _GAP + 3 * _GAP  # two tiles and the space to the next frame
+    row_h = _CAPTION_H + tile_h + _GAP
+    scale_h = 90
+    width = _MARGIN + _LABEL_W + len(frames) * col_w + _MARGIN
+    height = _MARGIN + 30 + (1 + len(names)) * row_h + scale_h + _MARGIN
+    img = np.full((height, width, 3), 255, np.uint8)
+    tiles, captions = {}, {}
+    _put(img, "surfnorm demo: normal maps and angular error (degrees) on the 3F2N frames shipped in the package",
+         _MARGIN, _MARGIN + 16, 0.6)
+
+    def place(key, rgb, caption, r, c):
+        top = _MARGIN + 30 + r * row_h + _CAPTION_H
+        left = _MARGIN + _LABEL_W + (c // 2) * col_w + (c % 2) * (_TILE_W + _GAP)
+        t = _tile(rgb, scale)
+        img[top:top + t.shape[0], left:left + t.shape[1]] = t
+        _put(img, caption, left, top - 8, 0.42)
+        tiles[key] = (top, left, t.shape[0], t.shape[1])
+        captions[key] = caption
+
+    for c, frame_name in enumerate(frames):
+        stem = frame_name.replace("/", "_")
+        frame = read_frame(root, frame_name)
+        z = frame.depth[frame.mask]
+        place((frame_name, "", "depth"), _read_rgb8(out_dir / f"{stem}_depth.png"),
+              f"{frame_name}: depth {z.min():.4g} (dark) to {z.max():.4g}", 0, 2 * c)
+        place((frame_name, "", "gt"), _read_rgb8(out_dir / f"{stem}_gt.png"), "ground truth", 0, 2 * c + 1)
+        for r, name in enumerate(names, start=1):
+            safe = name.replace("+", "_plus_")
+            row = by_key.get((frame_name, name))
+            if row is None:
+                continue
+            e_a = f"e_A {row.e_a:.3f} deg" + (f" [authors' {row.official:.3f}]" if row.official is not None else "")
+            place((frame_name, name, "normals"), _read_rgb8(out_dir / f"{stem}_{safe}_normals.png"), f"{name} normals",
+                  r, 2 * c)
+            place((frame_name, name, "error"), _read_rgb8(out_dir / f"{stem}_{safe}_error.png"), e_a, r, 2 * c + 1)
+    for r, label in enumerate(["frame", *names]):
+        _put(img, label, _MARGIN, _MARGIN + 30 + r * row_h + _CAPTION_H + tile_h // 2, 0.55)
+
+    # the error maps' colour scale: a bar from 0 to ERROR_VMAX degrees, ticks every 5, labelled
+    bar_top = height - _MARGIN - scale_h + 34
+    bar_left, bar_w, bar_h = _MARGIN + _LABEL_W, min(width - _MARGIN - _LABEL_W - 2 * _MARGIN, 900), 20
+    ramp = colormaps["inferno"](np.linspace(0.0, 1.0, bar_w))[:, :3]
+    img[bar_top:bar_top + bar_h, bar_left:bar_left + bar_w] = np.rint(ramp * 255).astype(np.uint8)[None]
+    _put(img, f"angular error (degrees), error maps; {ERROR_VMAX:g} and above in the brightest colour; "
+         "white: no ground truth or no normal", bar_left, bar_top - 10, 0.5)
+    for tick in np.arange(0.0, ERROR_VMAX + 1e-9, 5.0):
+        x = bar_left + int(round(tick / ERROR_VMAX * (bar_w - 1)))
+        img[bar_top + bar_h:bar_top + bar_h + 6, x] = 0
+        _put(img, f"{tick:g}", x - 6, bar_top + bar_h + 22, 0.45)
+    path = write_rgb8(out_dir / CONTACT_SHEET, img)
+    return ContactSheet(path, tiles, captions, (bar_top, bar_left, bar_h, bar_w))
 
 
 # ---------------------------------------------------------------------------- real sensor depth
@@ -213,12 +368,12 @@ def run_sensor_demo(out_dir, *, root=None, peers: bool = True, repeats: int = 5)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     frame = read_sensor_frame(root)
-    runs = [(default_label(), lambda: estimate(frame.depth, frame.K))]
+    runs: list[tuple[str, Callable[[], np.ndarray]]] = [(default_label(), lambda: estimate(frame.depth, frame.K))]
     skipped = None
     if peers:
         opencv, skipped = opencv_rgbd_normals()
         if opencv is not None:
-            runs += [(label, lambda m=m, w=w: opencv(frame.depth, frame.K, m, w)) for label, m, w in OPENCV_PEERS]
+            runs += [(label, partial(opencv, frame.depth, frame.K, m, w)) for label, m, w in OPENCV_PEERS]
     rows, maps = [], []
     for label, call in runs:
         n, ms = _timed(call, repeats)

@@ -1,6 +1,9 @@
 # Two commands for a newcomer on a fresh machine:
 #   make demo   set up .venv and run every estimator on the sample frames shipped in the package
-#   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, the authors' d2nt) and run all tests
+#   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, the authors' d2nt) and run all tests:
+#               make lint, make docs, the docstrings' and the documentation's examples, then pytest
+#   make lint   ruff (lint, docstrings) and mypy (the modules that are not Numba kernels)
+#   make docs   the documentation site, warnings as errors -> site/index.html
 #   make bench  speed of the D2NT family next to the authors' d2nt package -> bench-output/speed.{md,json}
 PYTHON ?= python3
 VENV := .venv
@@ -13,7 +16,7 @@ TORCH_STAMP := $(VENV)/.torch-installed-$(TORCH_VERSION)
 # The authors' d2nt package: the peer that the speed benchmark and the tests compare with
 D2NT_STAMP := $(VENV)/.d2nt-installed-0.1.3
 
-.PHONY: demo test bench clean
+.PHONY: demo test lint docs doctest bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -38,7 +41,20 @@ demo: $(STAMP)
 	$(VENV)/bin/surfnorm demo demo-output
 
 test: $(TEST_STAMP) $(TORCH_STAMP) $(D2NT_STAMP)
+	@$(MAKE) --no-print-directory lint docs doctest
 	$(PY) -m pytest -q
+
+lint: $(TEST_STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m mypy
+
+# --strict: a warning (a broken link, a docstring griffe cannot parse, a page missing from nav) fails the build
+docs: $(TEST_STAMP)
+	$(PY) -m mkdocs build --strict --quiet --site-dir site
+
+# The examples in the public docstrings and in the documentation's pages, run as they are written.
+doctest: $(TEST_STAMP)
+	$(PY) -m pytest -q --doctest-modules --doctest-glob='*.md' src/surfnorm docs
 
 # d2nt 0.1.3 declares opencv-python; --no-deps keeps our opencv-python-headless, which provides the same cv2.
 $(D2NT_STAMP): $(STAMP)
@@ -49,5 +65,5 @@ bench: $(D2NT_STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/speed.py --out bench-output
 
 clean:
-	rm -rf $(VENV) demo-output bench-output
+	rm -rf $(VENV) demo-output bench-output site .mypy_cache .ruff_cache
 	find src -name '*.nbi' -o -name '*.nbc' | xargs rm -f

@@ -225,6 +225,19 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
         Discrete Laplace filter for the smoothness (default alpha, as the authors' code).
     fill : float
         Value for pixels without a valid normal.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W, 3)
+        The refined unit normals; ``fill`` where no valid normal exists.
+
+    Examples
+    --------
+    >>> import numpy as np, surfnorm
+    >>> depth = np.full((8, 8), 2.0)
+    >>> noisy = np.zeros((8, 8, 3)); noisy[..., 2] = -1.0; noisy[4, 4] = [0.6, 0.0, -0.8]
+    >>> surfnorm.refine(noisy, depth)[4, 4].tolist()   # on a flat wall every neighbour is as smooth
+    [0.0, 0.0, -1.0]
     """
     from .kernels.mnr import mnr
 

@@ -56,8 +56,17 @@ class Intrinsics:
 
     @classmethod
     def from_matrix(cls, K, *, name: str = "K") -> "Intrinsics":
-        """Read fx, fy, cx, cy from a 3x3 matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (a skew K[0, 1] other than
-        0, or a last row other than [0, 0, 1], is an InputError: the estimators assume a pinhole without skew)."""
+        """Read fx, fy, cx, cy from a 3x3 matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``.
+
+        A skew K[0, 1] other than 0, or a last row other than [0, 0, 1], is an InputError: the estimators assume
+        a pinhole without skew.
+
+        Examples
+        --------
+        >>> from surfnorm import Intrinsics
+        >>> Intrinsics.from_matrix([[525.0, 0, 319.5], [0, 525.0, 239.5], [0, 0, 1]])
+        Intrinsics(fx=525.0, fy=525.0, cx=319.5, cy=239.5)
+        """
         if isinstance(K, Intrinsics):
             return K
         try:

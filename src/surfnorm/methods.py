@@ -120,6 +120,13 @@ def methods() -> dict[str, MethodInfo]:
     """The registered estimators by name, in registration order.
 
     Any name may also be followed by ``+mnr`` to refine its output with MNR.
+
+    Examples
+    --------
+    >>> import surfnorm
+    >>> info = surfnorm.methods()["d2nt_v3"]
+    >>> info.category, info.options["dlf"], info.options["mnr_dlf"]
+    ('depth-to-normal', '1d', 'alpha')
     """
     return {
         m.name: MethodInfo(m.name, m.category, m.reference, m.summary,

@@ -36,6 +36,14 @@ def angular_error(normals, gt, *, fold: bool = True) -> np.ndarray:
     Both are normalised first. NaN where either vector is zero or not finite
     (no estimate, or no ground truth). With ``fold`` (the 3F2N protocol),
     angles above 90 degrees are replaced by 180 minus the angle.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from surfnorm.metrics import angular_error
+    >>> n = np.array([[[0.0, 0.0, -1.0], [0.0, 1.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]])
+    >>> angular_error(n, np.array([[[0.0, 0.0, -1.0]] * 4])).round(6).tolist()
+    [[0.0, 45.0, 0.0, nan]]
     """
     n, g = _pair(normals, gt)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -64,6 +72,15 @@ def mean_angular_error(normals, gt, mask=None) -> float:
 
     Pixels without an estimate (fill value) are left out; see :func:`coverage`.
     NaN when no pixel is evaluated.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from surfnorm.metrics import coverage, mean_angular_error
+    >>> n = np.array([[[0.0, 1.0, -1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]]])  # the last has no normal
+    >>> gt = np.array([[[0.0, 0.0, -1.0]] * 3])
+    >>> round(mean_angular_error(n, gt), 6), round(coverage(n), 4)
+    (22.5, 0.6667)
     """
     sel = _masked(angular_error(normals, gt), mask)
     return float(sel.mean()) if sel.size else float("nan")

@@ -149,6 +149,13 @@ def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH),
         ``.pgm``; ``depth_scale`` with ``kinect_disparity``.
     MissingDependencyError (an ImportError)
         An ``.exr`` file without the OpenEXR package.
+
+    Examples
+    --------
+    >>> from surfnorm.io import read_depth, sample_root
+    >>> z = read_depth(sample_root() / "Easy/android/depth/000001.bin.gz")   # a 3F2N frame shipped in the package
+    >>> z.shape, z.dtype
+    ((480, 640), dtype('float32'))
     """
     path = as_path(path)
     shape = check_shape(shape)

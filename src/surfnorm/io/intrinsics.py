@@ -323,6 +323,12 @@ def read_intrinsics(path) -> Intrinsics:
     DataFileError (a ValueError)
         The file is missing, unreadable, or holds no usable intrinsics; the
         message names the file and what was expected.
+
+    Examples
+    --------
+    >>> from surfnorm.io import read_intrinsics, sample_root
+    >>> read_intrinsics(sample_root() / "Easy/android/params.txt")   # 3F2N's 1-based principal point, made 0-based
+    Intrinsics(fx=1400.0, fy=1380.0, cx=319.0, cy=259.0)
     """
     path = Path(path)
     if path.is_dir():

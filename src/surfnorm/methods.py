@@ -92,8 +92,10 @@ class Method:
 
 @dataclass(frozen=True)
 class MethodInfo:
-    """What :func:`surfnorm.methods` reports about a method; ``kernel`` is where its kernel lives
-    (``"surfnorm.kernels.<module>.<function>"``)."""
+    """What :func:`surfnorm.methods` reports about a method.
+
+    ``kernel`` is where its kernel lives (``"surfnorm.kernels.<module>.<function>"``).
+    """
 
     name: str
     category: str

@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Callable
 
-from ..errors import InputError, SurfnormError
+from ..errors import InputError
 from ..methods import DEFAULT_METHOD
 from .tasks import ConvertSettings, ConvertSummary, FileResult, convert_file, one_thread_per_frame, plan_tasks, remove_stale_temporaries
 
@@ -99,8 +99,11 @@ def _die_with(main_pid: int, poll_s: float = 0.5):
 
 
 def _worker_init(main_pid: int | None = None):
-    """Workers ignore Ctrl-C (the parent handles it for the whole pool, see :func:`convert`), die with
-    ``main_pid``, and run one frame on one thread."""
+    """Set up a worker process.
+
+    Workers ignore Ctrl-C (the parent handles it for the whole pool, see :func:`convert`), die with
+    ``main_pid``, and run one frame on one thread.
+    """
     import signal
 
     one_thread_per_frame()
@@ -110,8 +113,11 @@ def _worker_init(main_pid: int | None = None):
 
 
 def _pool_context():
-    """fork when this process has one thread (fast, and scripts need no ``if __name__ == "__main__"``);
-    otherwise forkserver, because fork() would copy other threads' held locks (e.g. Rich's refresh thread)."""
+    """The start method of the worker processes.
+
+    fork when this process has one thread (fast, and scripts need no ``if __name__ == "__main__"``);
+    otherwise forkserver, because fork() would copy other threads' held locks (e.g. Rich's refresh thread).
+    """
     import multiprocessing
     import threading
 
@@ -165,6 +171,18 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     ------
     InputError
         Bad arguments, no input files, an output folder that is a file or not writable.
+
+    Examples
+    --------
+    >>> import tempfile, surfnorm
+    >>> from surfnorm.io import sample_root
+    >>> depth_files, out = str(sample_root() / "*" / "*" / "depth" / "*.bin.gz"), tempfile.TemporaryDirectory()
+    >>> summary = surfnorm.convert(depth_files, out.name, method="d2nt_basic")   # each file's params.txt
+    >>> summary.written, summary.skipped, summary.errors
+    (3, 0, [])
+    >>> surfnorm.convert(depth_files, out.name, method="d2nt_basic").skipped   # a re-run skips finished outputs
+    3
+    >>> out.cleanup()
     """
     settings = _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity,
                          byte_order)

@@ -18,7 +18,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Iterable
 
 import numpy as np
 
@@ -77,18 +77,22 @@ class ConvertSummary:
     results: list[FileResult]
 
     def count(self, status: str) -> int:
+        """The number of files whose status is ``status`` (``"written"``, ``"skipped"`` or ``"error"``)."""
         return sum(r.status == status for r in self.results)
 
     @property
     def written(self) -> int:
+        """The number of files written."""
         return self.count("written")
 
     @property
     def skipped(self) -> int:
+        """The number of files skipped because their output existed."""
         return self.count("skipped")
 
     @property
     def errors(self) -> list[FileResult]:
+        """The files that failed, each with its error message."""
         return [r for r in self.results if r.status == "error"]
 
     @property
@@ -199,7 +203,8 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
         sources = [(f, r) for f, r in sources if out_root not in f.resolve().parents]
     if not sources:
         raise InputError(f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}")
-    tasks, seen = [], {}
+    tasks: list = []
+    seen: dict = {}
     for file, root in sources:
         try:
             rel = file.parent.relative_to(root)
@@ -224,8 +229,10 @@ _frame_threads: int | None = None
 
 
 def one_thread_per_frame() -> None:
-    """In a worker of a pool (processes, or Dask): run each frame on one thread, since the pool already runs
-    frames side by side."""
+    """Run each frame on one thread, in a worker of a pool (processes, or Dask).
+
+    The pool already runs frames side by side.
+    """
     global _frame_threads
     _frame_threads = 1
 

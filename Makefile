@@ -53,7 +53,7 @@ docs: $(TEST_STAMP)
 	$(PY) -m mkdocs build --strict --quiet --site-dir site
 
 # The examples in the public docstrings and in the documentation's pages, run as they are written.
-doctest: $(TEST_STAMP)
+doctest: $(TEST_STAMP) $(TORCH_STAMP)
 	$(PY) -m pytest -q --doctest-modules --doctest-glob='*.md' src/surfnorm docs
 
 # d2nt 0.1.3 declares opencv-python; --no-deps keeps our opencv-python-headless, which provides the same cv2.

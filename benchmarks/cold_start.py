@@ -7,16 +7,20 @@ Builds a wheel of this checkout (or takes ``--wheel``), creates a new virtual
 environment (``python -m venv``) and installs the wheel into it with pip (its
 dependencies from the configured index). Neither step is timed. Then, for each
 method, it times whole processes ``python -c "import surfnorm; surfnorm.estimate(depth, K, method=...)"``
-on a 480x640 frame with holes, as a new user would run them:
+on a 480x640 frame with holes, as a new user would run them, and the default method also on sensor-like
+depth (noisy, quantised: its other path):
 
-- fresh: no compiled code anywhere (the package's ``__pycache__/*.nbi|*.nbc`` and the
-  user-wide Numba cache are emptied before each run);
+- fresh: nothing that Numba's JIT compiled anywhere (the package's ``__pycache__/*.nbi|*.nbc`` and the
+  user-wide Numba cache are emptied before each run); what the wheel holds (its kernels compiled ahead
+  of time, see ``src/surfnorm/_aot.py``) stays, as it does in a new install;
 - cached: the same process again, with the cache that the previous run left;
 - precompiled: after one ``python -m surfnorm.precompile`` of the timed methods (when the installed
   version has it) from an empty cache, as in an image build; that step is timed too.
 
 Each figure is the median over ``--runs`` processes (the spread is in the JSON). The
-default method (``surfnorm.estimate``'s default at run time) is marked. Writes
+default method (``surfnorm.estimate``'s default at run time) is marked. Every process prints a
+digest of its normals: a row's fresh, cached and precompiled processes must agree (the AOT code
+and the JIT's give the same bits). Writes
 ``cold-start.md`` and ``cold-start.json`` into ``--out``.
 """
 
@@ -38,15 +42,21 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 FIRST_CALL = """
-import numpy as np, surfnorm
+import hashlib, numpy as np, surfnorm
 h, w = 480, 640
 v, u = np.mgrid[0:h, 0:w]
 z = (2.0 + 0.002 * u + 0.001 * v).astype(np.float32)
+if {noisy!r}:  # sensor-like depth (noise 5 mm, quantised to 1 mm): auto runs adaptive_fit
+    z = np.round((z + np.random.default_rng(0).normal(0, 0.005, z.shape)) * 1000).astype(np.float32) / 1000
 z[::7, ::11] = 0.0
 K = [[525.0, 0, 319.5], [0, 525.0, 239.5], [0, 0, 1]]
 n = surfnorm.estimate(z, K, method={method!r})
 assert n.shape == (h, w, 3)
+print(hashlib.sha256(n.tobytes()).hexdigest())
 """
+
+#: The default method's row on sensor depth (its other path), beside every method on clean depth.
+SENSOR = " (sensor depth)"
 
 LIST = "import inspect, json, surfnorm; print(json.dumps([list(surfnorm.methods()), " \
        "inspect.signature(surfnorm.estimate).parameters['method'].default]))"
@@ -78,14 +88,20 @@ def clear_caches(pkg: Path, user_cache: Path) -> None:
     user_cache.mkdir(parents=True)
 
 
-def timed(cmd, env) -> tuple[float, float]:
+DIGESTS: dict[str, set] = {}
+
+
+def timed(cmd, env, row=None) -> tuple[float, float]:
     """(wall, CPU) seconds of one process: CPU time (user + system) is what compilation costs, and on a
-    shared machine it moves less with the load than the wall-clock time does."""
+    shared machine it moves less with the load than the wall-clock time does. The digest of the normals that a
+    first call printed goes into DIGESTS[row] (one digest per row: the same bits however the kernels came)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
+    done = subprocess.run(cmd, check=True, env=env, stdout=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if row is not None and done.stdout.strip():
+        DIGESTS.setdefault(row, set()).add(done.stdout.split()[-1])
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
@@ -121,13 +137,18 @@ def main(argv=None) -> int:
                                         capture_output=True).returncode == 0
         methods = args.methods or names
         rows = {}
-        for name in methods:
-            cmd = [str(py), "-c", FIRST_CALL.format(method=name)]
+        labels = [n for m in methods for n in ([m, m + SENSOR] if m == default else [m])]
+
+        def first_call(label):
+            method = label.removesuffix(SENSOR)
+            return [str(py), "-c", FIRST_CALL.format(method=method, noisy=label.endswith(SENSOR))]
+
+        for name in labels:
             rows[name] = {"fresh_s": [], "cached_s": [], "precompiled_s": []}
             for _ in range(args.runs):
                 clear_caches(pkg, user_cache)
-                rows[name]["fresh_s"].append(timed(cmd, env))
-                rows[name]["cached_s"].append(timed(cmd, env))
+                rows[name]["fresh_s"].append(timed(first_call(name), env, name))
+                rows[name]["cached_s"].append(timed(first_call(name), env, name))
             print(f"{name:16s} " + "  ".join(f"{k[:-2]} {fmt(v)} s" for k, v in rows[name].items() if v), flush=True)
         # Precompiled: one `python -m surfnorm.precompile` (every method and variant, as in an image build) from
         # an empty cache, then the first call of each method.
@@ -135,18 +156,21 @@ def main(argv=None) -> int:
         for _ in range(args.runs if has_precompile else 0):
             clear_caches(pkg, user_cache)
             precompile_step.append(timed([str(py), "-m", "surfnorm.precompile", "--quiet", *methods], env))
-            for name in methods:
-                rows[name]["precompiled_s"].append(timed([str(py), "-c", FIRST_CALL.format(method=name)], env))
+            for name in labels:
+                rows[name]["precompiled_s"].append(timed(first_call(name), env, name))
         if precompile_step:
             print(f"python -m surfnorm.precompile (these methods): {fmt(precompile_step)} s", flush=True)
         clear_caches(pkg, user_cache)
 
     lines = [f"First call in a new virtual environment ({args.label or wheel.name}), whole process, "
-             f"median of {args.runs} runs, seconds of wall-clock time (CPU time); default method: {default}", "",
-             "| method | fresh | cached | precompiled |", "|---|---|---|---|"]
+             f"median of {args.runs} runs, seconds of wall-clock time (CPU time); default method: {default}; "
+             f"load average at the end {' '.join(f'{x:.1f}' for x in os.getloadavg())}", "",
+             "| method | fresh | cached | precompiled | same bits in every run |", "|---|---|---|---|---|"]
     for name, r in rows.items():
-        mark = " (default)" if name == default else ""
-        lines.append(f"| {name}{mark} | {fmt(r['fresh_s'])} | {fmt(r['cached_s'])} | {fmt(r['precompiled_s'])} |")
+        mark = " (default)" if name.removesuffix(SENSOR) == default else ""
+        same = "yes" if len(DIGESTS.get(name, ())) == 1 else f"NO ({len(DIGESTS.get(name, ()))} digests)"
+        lines.append(f"| {name}{mark} | {fmt(r['fresh_s'])} | {fmt(r['cached_s'])} | {fmt(r['precompiled_s'])} "
+                     f"| {same} |")
     if precompile_step:
         lines += ["", f"`python -m surfnorm.precompile {' '.join(methods)}` from an empty cache: {fmt(precompile_step)}"]
     table = "\n".join(lines)
@@ -156,6 +180,7 @@ def main(argv=None) -> int:
     (args.out / f"{stem}.md").write_text(table + "\n")
     (args.out / f"{stem}.json").write_text(json.dumps({
         "label": args.label, "wheel": wheel.name, "default": default, "runs": args.runs, "methods": rows,
+        "digests": {k: sorted(v) for k, v in DIGESTS.items()},
         "precompile_step_s": precompile_step,
         "python": sys.version.split()[0], "machine": platform.processor() or platform.machine(),
         "cpus": os.cpu_count(), "loadavg": os.getloadavg()}, indent=1))

@@ -126,9 +126,10 @@ def _valid_masked_loop(z, mask, out):
 @functools.lru_cache(maxsize=None)
 def _valid_kernels():
     """The two loops above compiled with Numba, on first use (so that ``import surfnorm`` loads no Numba)."""
+    from ._aot import ahead_of_time
     from ._config import njit
 
-    return njit(_valid_loop), njit(_valid_masked_loop)
+    return ahead_of_time(njit(_valid_loop)), ahead_of_time(njit(_valid_masked_loop))
 
 
 def valid_map(z: np.ndarray, mask: np.ndarray | None, out: np.ndarray | None = None) -> np.ndarray:

@@ -70,6 +70,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._aot import ahead_of_time
 from .._config import njit, pixel, select
 
 __all__ = ["adaptive_fit", "noise_profile", "NoiseProfile", "radius_table", "ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW"]
@@ -117,6 +118,7 @@ TIE = 1e-3
 # --- noise profile -------------------------------------------------------------------------------
 
 
+@ahead_of_time
 @njit
 def _depth_range(z, valid):
     zmin = np.inf
@@ -137,6 +139,7 @@ def _spread(z0, z1, z2, z3, z4, z5, z6):
     return hi > _MAX_SPREAD * lo
 
 
+@ahead_of_time
 @njit
 def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
     """Second differences of w = 1/z at strides a, 2a and 4a along rows and columns, in units of
@@ -192,6 +195,7 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
     return k
 
 
+@ahead_of_time
 @njit
 def _clipped_rms(xs, bins, n, nbins, rounds, sigmas, rms, counts):
     """Per bin: RMS of xs[:n], then ``rounds`` times the RMS of those within ``sigmas`` times it."""
@@ -529,6 +533,7 @@ def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_
 _SHIFTS = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], np.int64)
 
 
+@ahead_of_time
 @njit(noalias=True)
 def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen, n_widen, fx, fy, cx, cy, kappa,
                          rho_floor, r_max, fill, ring, out):

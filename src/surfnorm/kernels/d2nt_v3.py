@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._aot import ahead_of_time
 from .._bands import whole
 from .._config import njit, row
 from ._rows import centred_columns, copy_row
@@ -125,6 +126,7 @@ def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h,
             choice, out_row)
 
 
+@ahead_of_time
 @njit
 def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf, tie_tol, fill, out, v0, v1):
     """D2NT with DAG gradients, then MNR (eq. 9-20), fused into one sweep over rows v0 .. v1 - 1 of out.

@@ -88,3 +88,35 @@ def test_read_only_install_precompiles_into_the_user_cache():
         for path in [site, *site.rglob("*")]:
             path.chmod(0o755 if path.is_dir() else 0o644)
         shutil.rmtree(tmp_path)
+
+
+def test_nowhere_writable_but_the_temp_directory():
+    """A read-only package and no writable home: Numba's own locations all fail (it then refused to define any
+    kernel: "no locator available"); surfnorm caches into a private directory in the temporary directory, so
+    the second process compiles nothing."""
+    prefix = _as_unprivileged()
+    tmp_path = Path(tempfile.mkdtemp(prefix="surfnorm-nohome-"))
+    site, tmp = tmp_path / "site", tmp_path / "tmp"
+    shutil.copytree(PACKAGE, site / "surfnorm", ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    tmp.mkdir()
+    for path in [site, *site.rglob("*")]:
+        path.chmod(0o555 if path.is_dir() else 0o444)
+    tmp.chmod(0o1777)
+    tmp_path.chmod(0o755)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CACHE", "XDG_", "HOME", "TMP"))}
+    env.update(PYTHONPATH=str(site), HOME=str(tmp_path / "no-home"), TMPDIR=str(tmp), PYTHONDONTWRITEBYTECODE="1")
+    call = FIRST_CALL.replace('("cp2tv", "cp2tv+mnr")', '("d2nt_basic",)')
+    try:
+        for expected in ("compiled", "0"):
+            run = subprocess.run(prefix + [sys.executable, "-c", call], env=env, cwd=tmp_path, capture_output=True,
+                                 text=True, timeout=900)
+            assert run.returncode == 0, run.stderr[-2000:]
+            assert (run.stdout.split()[-1] == "0") == (expected == "0"), run.stdout
+        cache = [p for p in tmp.iterdir() if p.name.startswith("surfnorm-numba-")]
+        assert len(cache) == 1 and list(cache[0].rglob("*.nbi")), "cached in the temporary directory"
+        assert oct(cache[0].stat().st_mode & 0o777) == "0o700", "private to its user"
+        assert not list(site.rglob("*.nbi"))
+    finally:
+        for path in [site, *site.rglob("*")]:
+            path.chmod(0o755 if path.is_dir() else 0o644)
+        shutil.rmtree(tmp_path)

@@ -9,11 +9,64 @@ must not be optimised away.
 
 from __future__ import annotations
 
+import os
+import stat
+import tempfile
+
 import numba
 import numba.extending
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+
+def _private_dir(path: str) -> bool:
+    """Create ``path`` (mode 0700) if needed; True if it is a directory that only we own and may write."""
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return (stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid() and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+            and os.access(path, os.W_OK))
+
+
+def _temp_cache_fallback() -> None:
+    """Numba caches a kernel beside its source (``__pycache__``), else in ``NUMBA_CACHE_DIR`` or the user's cache
+    directory (``~/.cache/numba``); where none of them is writable (a read-only image run with a read-only or
+    missing home) it refuses to define the kernel at all ("cannot cache function ...: no locator available").
+    This adds a last resort after Numba's own: a private directory (mode 0700, ours) in the temporary directory,
+    ``surfnorm-numba-<uid>``. It serves any function that Numba could otherwise not cache, and none other."""
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    base = getattr(caching, "UserProvidedCacheLocator", None) or getattr(caching, "_UserProvidedCacheLocator", None)
+    if impl is None or base is None or not hasattr(os, "getuid"):
+        return
+    if any(getattr(cls, "surfnorm_fallback", False) for cls in impl._locator_classes):
+        return
+    root = os.path.join(tempfile.gettempdir(), f"surfnorm-numba-{os.getuid()}")
+
+    class TempDirCacheLocator(base):
+        surfnorm_fallback = True
+
+        def __init__(self, py_func, py_file):
+            super().__init__(py_func, py_file)
+            self._cache_path = os.path.join(root, self.get_suitable_cache_subpath(py_file))
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if not _private_dir(root):
+                return None
+            return super(base, cls).from_function(py_func, py_file)  # (base's own checks NUMBA_CACHE_DIR)
+
+    impl._locator_classes = [*impl._locator_classes, TempDirCacheLocator]
+
+
+try:
+    _temp_cache_fallback()
+except Exception:  # another Numba's internals: its own behaviour stays
+    pass
 
 
 class _NoAliasCompiler(CompilerBase):

@@ -67,3 +67,4 @@ bench: $(D2NT_STAMP)
 clean:
 	rm -rf $(VENV) demo-output bench-output site .mypy_cache .ruff_cache
 	find src -name '*.nbi' -o -name '*.nbc' | xargs rm -f
+	rm -f src/surfnorm/_aot_*.so src/surfnorm/_aot_index.json

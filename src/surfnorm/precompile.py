@@ -1,24 +1,29 @@
 """Compile every kernel into Numba's cache ahead of the first call: ``python -m surfnorm.precompile``.
 
 The kernels are compiled on their first call and cached on disk (``cache=True``),
-so only the first process pays for it: about 20 s for ``d2nt_v3`` in a new
-environment, where a process that finds the cache starts in about 1 s. Run this
-once where the package is installed, e.g. in a container image build::
+so only the first process pays for it: about 20-40 s of CPU for ``d2nt_v3`` in a
+new environment, where a process that finds the cache starts in about 1 s. (A
+wheel holds the default method's kernels compiled ahead of time, see
+:mod:`surfnorm._aot`: its first call compiles nothing, precompiled or not.) Run
+this once where the package is installed, e.g. in a container image build::
 
     RUN pip install surfnorm && python -m surfnorm.precompile
 
 or at the end of a CI job's setup. Every later process on that machine (same
 CPU, same Python and Numba) loads the compiled code. It calls
-:func:`surfnorm.estimate` on a small frame for each method (optionally only
-those named) in every variant that compiles different code: the default
-options, with a mask, in the scale-invariant mode, followed by ``+mnr``, and
-the options whose values select other kernels (a larger plane-fit window,
-SDA-SNE's 3F2N base). New registered methods are covered without change.
+:func:`surfnorm.estimate` by the JIT (never the AOT code) on a small clean frame
+and a small noisy one (``auto`` runs d2nt_v3 on the first, adaptive_fit on the
+second) for each method (optionally only those named) in every variant that
+compiles different code: the default options, with a mask, in the
+scale-invariant mode, followed by ``+mnr``, and the options whose values select
+other kernels (a larger plane-fit window, SDA-SNE's 3F2N base). New registered
+methods are covered without change.
 
 Where the cache goes: Numba writes it into ``__pycache__`` beside the sources
 when that directory is writable; when it is not (a read-only image, a system
 package), into its user-wide cache (``$XDG_CACHE_HOME/numba`` or
-``~/.cache/numba``), which belongs to the user who ran it; set
+``~/.cache/numba``), which belongs to the user who ran it; where neither is
+writable, into ``$TMPDIR/surfnorm-numba-<uid>`` (see :mod:`surfnorm._config`). Set
 ``NUMBA_CACHE_DIR`` to one directory for precompiling and running alike when
 they are different users. The cache is keyed on the CPU: an image built on one
 CPU model and run on another compiles again (correctly) on first use.

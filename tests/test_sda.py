@@ -222,3 +222,40 @@ def test_faithful_on_all_twelve_frames(shared_sample):
     assert len(ours) == 3
     for level in ours:
         assert abs(np.mean(ours[level]) - np.mean(theirs[level])) < 1e-3, level
+
+
+def _poison(value, code):
+    """Overwrite every kept working array (its inner part and its margin) with ``value`` / ``code``."""
+    for sets in sda._spare.values():
+        for arrays in sets:
+            for a in arrays:
+                a.fill(value if a.dtype.kind == "f" else code if a.dtype.kind in "iu" else bool(code % 2))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_working_arrays_kept_for_the_next_frame_give_the_same_bits(threads):
+    """sda_sne keeps a frame's working arrays for the next frame of the same size: whatever they hold (another
+    frame's values, or any value at all), the normals are the same bits."""
+    rng = np.random.default_rng(7)
+    K = [[60.0, 0, 31.5], [0, 60.0, 39.5], [0, 0, 1]]
+    frames = []
+    for holes in (0.0, 0.2, 0.05):
+        z = rng.uniform(1.0, 3.0, (80, 64)).astype(np.float32)
+        z[rng.random(z.shape) < holes] = 0.0
+        frames.append(z)
+    for kwargs in ({}, {"base": "3f2n"}, {"scale_invariant": True}):
+        sda.release()
+        runs = {}
+        for i, z in enumerate(frames):  # each frame after another's arrays
+            runs[i] = [surfnorm.estimate(z, K, method="sda_sne", threads=threads, **kwargs)]
+        assert sda._spare, "the working arrays were kept"
+        for value, code in ((np.nan, 5), (-1e300, 3), (0.0, 0)):
+            for i, z in enumerate(frames):
+                _poison(value, code)
+                runs[i].append(surfnorm.estimate(z, K, method="sda_sne", threads=threads, **kwargs))
+        sda.release()
+        for i, z in enumerate(frames):
+            runs[i].append(surfnorm.estimate(z, K, method="sda_sne", threads=threads, **kwargs))  # new arrays
+            for other in runs[i][1:]:
+                np.testing.assert_array_equal(other.view(np.uint32), runs[i][0].view(np.uint32))
+    sda.release()

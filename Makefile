@@ -2,7 +2,7 @@
 #   make demo   set up .venv and run every estimator on the sample frames shipped in the package
 #   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, the authors' d2nt) and run all tests:
 #               make lint, make docs, the docstrings' and the documentation's examples, then pytest
-#   make lint   ruff (lint, docstrings) and mypy (the modules that are not Numba kernels)
+#   make lint   ruff (lint, docstrings, formatting) and mypy (the modules that are not Numba kernels)
 #   make docs   the documentation site, warnings as errors -> site/index.html
 #   make bench  speed of the D2NT family next to the authors' d2nt package -> bench-output/speed.{md,json}
 PYTHON ?= python3
@@ -46,6 +46,7 @@ test: $(TEST_STAMP) $(TORCH_STAMP) $(D2NT_STAMP)
 
 lint: $(TEST_STAMP)
 	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
 	$(PY) -m mypy
 
 # --strict: a warning (a broken link, a docstring griffe cannot parse, a page missing from nav) fails the build

@@ -27,8 +27,10 @@ class BuildPyAot(build_py):
         if done.returncode != 0:
             if want == "1":
                 raise SystemExit("surfnorm: building the ahead-of-time kernels failed (SURFNORM_AOT=1)")
-            print("warning: surfnorm's ahead-of-time kernels were not built; the kernels compile on first use",
-                  file=sys.stderr)
+            print(
+                "warning: surfnorm's ahead-of-time kernels were not built; the kernels compile on first use",
+                file=sys.stderr,
+            )
 
 
 class PlatformDistribution(Distribution):

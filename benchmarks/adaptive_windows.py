@@ -44,8 +44,9 @@ def main(argv=None):
     print("|---|---|---|---|")
     pca_slow = False
     for w in range(3, 32, 2):
-        ms = median_ms(lambda: surfnorm.estimate(z, K, method="adaptive_fit", window=w, max_window=w, threads=1),
-                       args.repeats)
+        ms = median_ms(
+            lambda: surfnorm.estimate(z, K, method="adaptive_fit", window=w, max_window=w, threads=1), args.repeats
+        )
         pca = ""
         if not pca_slow:
             pms = median_ms(lambda: surfnorm.estimate(z, K, method="plane_pca", window=w, threads=1), 3)

@@ -67,8 +67,13 @@ def make_inputs(folder: Path, n: int) -> list[Path]:
 
 def git_commit() -> str:
     try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=Path(__file__).parent, check=True).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
 
@@ -138,8 +143,8 @@ def main(argv=None):
     ap.add_argument("--run", help=argparse.SUPPRESS)  # internal: one timed run in this process
     args = ap.parse_args(argv)
 
-    from surfnorm.camera import Intrinsics
     from surfnorm.batch.cluster import default_shard_size
+    from surfnorm.camera import Intrinsics
 
     common = dict(method=args.method, fmt=args.fmt, depth_scale=1000.0, intrinsics=Intrinsics(**CAMERA))
     inputs = make_inputs(args.workdir / "depth", args.files)
@@ -152,8 +157,9 @@ def main(argv=None):
     default = default_shard_size(len(inputs), 2)
     sizes = list(dict.fromkeys(default if s == "default" else int(s) for s in args.shard_sizes.split(",")))
     configs = [("1 process", "single"), ("local pool, --jobs 2", "pool")]
-    configs += [(f"LocalCluster 2 workers, shard {s}" + (" (default)" if s == default else ""), f"cluster:{s}")
-                for s in sizes]
+    configs += [
+        (f"LocalCluster 2 workers, shard {s}" + (" (default)" if s == default else ""), f"cluster:{s}") for s in sizes
+    ]
     rates = {name: [] for name, _ in configs}
     ratios = {name: [] for name, _ in configs}
     starts = []
@@ -161,8 +167,20 @@ def main(argv=None):
     for r in range(args.rounds):
         base = None
         for name, config in configs:
-            cmd = [sys.executable, __file__, "--files", str(args.files), "--method", args.method, "--format", args.fmt,
-                   "--workdir", str(args.workdir), "--run", config]
+            cmd = [
+                sys.executable,
+                __file__,
+                "--files",
+                str(args.files),
+                "--method",
+                args.method,
+                "--format",
+                args.fmt,
+                "--workdir",
+                str(args.workdir),
+                "--run",
+                config,
+            ]
             done = subprocess.run(cmd, capture_output=True, text=True)
             if done.returncode != 0:
                 sys.exit(f"{name} failed:\n{done.stderr[-3000:]}")
@@ -176,31 +194,57 @@ def main(argv=None):
             print(f"round {r + 1}: {name}: {run['files_per_s']:.2f} files/s (load {loads[-1]:.1f})", file=sys.stderr)
 
     rows = [(name, statistics.median(rates[name]), statistics.median(ratios[name])) for name, _ in configs]
-    print(f"\n{len(inputs)} depth frames {W}x{H} 16-bit PNG -> {args.fmt}, method {args.method}; "
-          f"median of {args.rounds} interleaved rounds; {os.cpu_count()} CPUs; load average (1 min) "
-          f"{load_before[0]:.1f} before, {min(loads):.1f} to {max(loads):.1f} during the runs\n")
+    print(
+        f"\n{len(inputs)} depth frames {W}x{H} 16-bit PNG -> {args.fmt}, method {args.method}; "
+        f"median of {args.rounds} interleaved rounds; {os.cpu_count()} CPUs; load average (1 min) "
+        f"{load_before[0]:.1f} before, {min(loads):.1f} to {max(loads):.1f} during the runs\n"
+    )
     print("| configuration | files/s | vs 1 process |")
     print("|---|---:|---:|")
     for name, rate, ratio in rows:
         print(f"| {name} | {rate:.2f} | {ratio:.2f}x |")
-    print(f"\nLocalCluster start-up (not in the table): median {statistics.median(starts):.1f} s; "
-          f"default shard size for {len(inputs)} files on 2 worker threads: {default}")
+    print(
+        f"\nLocalCluster start-up (not in the table): median {statistics.median(starts):.1f} s; "
+        f"default shard size for {len(inputs)} files on 2 worker threads: {default}"
+    )
 
     import dask
 
     import surfnorm
 
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({
-        "files": len(inputs), "shape": [H, W], "format": args.fmt, "method": args.method, "rounds": args.rounds,
-        "rows": [{"configuration": n, "files_per_s_median": r, "ratio_median": q, "files_per_s": rates[n],
-                  "ratios": ratios[n]} for n, r, q in rows],
-        "cluster_start_s": starts, "default_shard_size": default,
-        "load_average": {"before": load_before, "during": loads},
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
-        "versions": {"surfnorm": surfnorm.__version__, "numpy": np.__version__, "dask": dask.__version__},
-        "commit": git_commit(),
-    }, indent=2))
+    args.json.write_text(
+        json.dumps(
+            {
+                "files": len(inputs),
+                "shape": [H, W],
+                "format": args.fmt,
+                "method": args.method,
+                "rounds": args.rounds,
+                "rows": [
+                    {
+                        "configuration": n,
+                        "files_per_s_median": r,
+                        "ratio_median": q,
+                        "files_per_s": rates[n],
+                        "ratios": ratios[n],
+                    }
+                    for n, r, q in rows
+                ],
+                "cluster_start_s": starts,
+                "default_shard_size": default,
+                "load_average": {"before": load_before, "during": loads},
+                "machine": {
+                    "cpus": os.cpu_count(),
+                    "platform": platform.platform(),
+                    "python": platform.python_version(),
+                },
+                "versions": {"surfnorm": surfnorm.__version__, "numpy": np.__version__, "dask": dask.__version__},
+                "commit": git_commit(),
+            },
+            indent=2,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -105,8 +105,10 @@ def contenders(depth, K, methods, depth_to_normals, o3d, device):
         if device.type == "cuda" and not o3d.core.cuda.is_available():
             skipped[OPEN3D] = "this Open3D build has no CUDA"
         else:
-            images = [o3d.t.geometry.Image(o3d.core.Tensor(depth[i, 0, :, :, None].numpy())).to(o3d_device)
-                      for i in range(depth.shape[0])]
+            images = [
+                o3d.t.geometry.Image(o3d.core.Tensor(depth[i, 0, :, :, None].numpy())).to(o3d_device)
+                for i in range(depth.shape[0])
+            ]
             Ks = [o3d.core.Tensor(K[i].numpy().astype(np.float64)) for i in range(depth.shape[0])]
 
             def run_o3d():
@@ -114,7 +116,7 @@ def contenders(depth, K, methods, depth_to_normals, o3d, device):
 
             out[OPEN3D] = run_o3d
     for m in methods:
-        out[f"surfnorm.torch {m}"] = (lambda m=m: st.estimate(z, Kd, method=m))
+        out[f"surfnorm.torch {m}"] = lambda m=m: st.estimate(z, Kd, method=m)
     return out, skipped
 
 
@@ -167,17 +169,34 @@ def table(device, batch, fns, runs, budget):
         base = times[KORNIA]
         for name, t in times.items():
             pairs = list(zip(base, t))
-            rows.append({"device": str(device), "batch": batch, "contender": name, "runs": len(t),
-                         "median_ms": 1e3 * statistics.median(t), "fps": batch / statistics.median(t),
-                         "speedup_vs_kornia": statistics.median(b / x for b, x in pairs) if pairs else None})
+            rows.append(
+                {
+                    "device": str(device),
+                    "batch": batch,
+                    "contender": name,
+                    "runs": len(t),
+                    "median_ms": 1e3 * statistics.median(t),
+                    "fps": batch / statistics.median(t),
+                    "speedup_vs_kornia": statistics.median(b / x for b, x in pairs) if pairs else None,
+                }
+            )
     else:
         times = cuda_times(fns, runs, batch)
         kornia_ms = statistics.median(times[KORNIA][0])
         for name, (ms, peak) in times.items():
             med = statistics.median(ms)
-            rows.append({"device": str(device), "batch": batch, "contender": name, "runs": len(ms), "median_ms": med,
-                         "fps": 1e3 * batch / med, "speedup_vs_kornia": kornia_ms / med,
-                         "peak_mib_per_frame": peak / 2**20})
+            rows.append(
+                {
+                    "device": str(device),
+                    "batch": batch,
+                    "contender": name,
+                    "runs": len(ms),
+                    "median_ms": med,
+                    "fps": 1e3 * batch / med,
+                    "speedup_vs_kornia": kornia_ms / med,
+                    "peak_mib_per_frame": peak / 2**20,
+                }
+            )
     return rows
 
 
@@ -186,7 +205,9 @@ def print_table(title, rows, skipped):
     print(title)
     print()
     gpu = "peak_mib_per_frame" in rows[0]
-    print("| contender | batch | median ms per batch | frames/s | vs kornia |" + (" peak MiB per frame |" if gpu else ""))
+    print(
+        "| contender | batch | median ms per batch | frames/s | vs kornia |" + (" peak MiB per frame |" if gpu else "")
+    )
     print("|---|---|---|---|---|" + ("---|" if gpu else ""))
     for r in rows:
         ratio = "" if r["speedup_vs_kornia"] is None else f"{r['speedup_vs_kornia']:.2f}x"
@@ -201,13 +222,26 @@ def main():
     parser.add_argument("--batches", type=int, nargs="+", default=[1, 16, 64], help="batch sizes (default 1 16 64)")
     parser.add_argument("--runs", type=int, default=5, help="timed rounds per batch (default 5)")
     parser.add_argument("--methods", nargs="+", default=None, help="torch-backend methods (default: all)")
-    parser.add_argument("--devices", nargs="+", default=["cpu", "cuda"], choices=["cpu", "cuda"],
-                        help="devices to time on (cuda only where present; default both)")
-    parser.add_argument("--budget", type=float, default=60.0,
-                        help="CPU: a contender whose first call takes longer (s) is timed once (default 60)")
-    parser.add_argument("--threads", type=int, default=None,
-                        help="CPU: torch.set_num_threads (default: PyTorch's; on a machine shared with other work, "
-                             "1 avoids OpenMP threads waiting on each other)")
+    parser.add_argument(
+        "--devices",
+        nargs="+",
+        default=["cpu", "cuda"],
+        choices=["cpu", "cuda"],
+        help="devices to time on (cuda only where present; default both)",
+    )
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=60.0,
+        help="CPU: a contender whose first call takes longer (s) is timed once (default 60)",
+    )
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="CPU: torch.set_num_threads (default: PyTorch's; on a machine shared with other work, "
+        "1 avoids OpenMP threads waiting on each other)",
+    )
     parser.add_argument("--json", help="also write the figures to this JSON file")
     args = parser.parse_args()
     if args.threads:
@@ -219,10 +253,19 @@ def main():
     devices = [torch.device("cpu")] if "cpu" in args.devices else []
     if "cuda" in args.devices and torch.cuda.is_available():
         devices.append(torch.device("cuda"))
-    print(f"torch {torch.__version__}, {os.cpu_count()} cores, {torch.get_num_threads()} torch threads; "
-          f"480x640 frames; kornia sign check on a plane: max diff {agreement:.1e}")
-    report = {"rows": [], "skipped": {}, "torch": torch.__version__, "machine": platform.platform(),
-              "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "kornia_sign_check_max_diff": agreement}
+    print(
+        f"torch {torch.__version__}, {os.cpu_count()} cores, {torch.get_num_threads()} torch threads; "
+        f"480x640 frames; kornia sign check on a plane: max diff {agreement:.1e}"
+    )
+    report = {
+        "rows": [],
+        "skipped": {},
+        "torch": torch.__version__,
+        "machine": platform.platform(),
+        "cores": os.cpu_count(),
+        "torch_threads": torch.get_num_threads(),
+        "kornia_sign_check_max_diff": agreement,
+    }
     with torch.inference_mode():
         for device in devices:
             name = "CPU" if device.type == "cpu" else f"CUDA {torch.cuda.get_device_name(device)}"
@@ -230,8 +273,11 @@ def main():
                 depth, K = frames(batch)
                 fns, skipped = contenders(depth, K, methods, depth_to_normals, o3d, device)
                 rows = table(device, batch, fns, args.runs, args.budget)
-                print_table(f"{name}, batch {batch}, {args.runs} rounds" + (" (interleaved)" if device.type == "cpu" else ""),
-                            rows, skipped)
+                print_table(
+                    f"{name}, batch {batch}, {args.runs} rounds" + (" (interleaved)" if device.type == "cpu" else ""),
+                    rows,
+                    skipped,
+                )
                 report["rows"] += rows
                 report["skipped"].update({f"{k} on {device}": v for k, v in skipped.items()})
                 del fns

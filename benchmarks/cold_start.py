@@ -58,13 +58,14 @@ print(hashlib.sha256(n.tobytes()).hexdigest())
 #: The default method's row on sensor depth (its other path), beside every method on clean depth.
 SENSOR = " (sensor depth)"
 
-LIST = "import inspect, json, surfnorm; print(json.dumps([list(surfnorm.methods()), " \
-       "inspect.signature(surfnorm.estimate).parameters['method'].default]))"
+LIST = (
+    "import inspect, json, surfnorm; print(json.dumps([list(surfnorm.methods()), "
+    "inspect.signature(surfnorm.estimate).parameters['method'].default]))"
+)
 
 
 def build_wheel(dest: Path) -> Path:
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(dest),
-                    str(REPO)], check=True)
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(dest), str(REPO)], check=True)
     return next(dest.glob("surfnorm-*.whl"))
 
 
@@ -76,8 +77,12 @@ def make_venv(root: Path, wheel: Path) -> Path:
 
 
 def package_dir(py: Path) -> Path:
-    out = subprocess.run([str(py), "-c", "import surfnorm, os; print(os.path.dirname(surfnorm.__file__))"],
-                         check=True, capture_output=True, text=True)
+    out = subprocess.run(
+        [str(py), "-c", "import surfnorm, os; print(os.path.dirname(surfnorm.__file__))"],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return Path(out.stdout.strip())
 
 
@@ -131,10 +136,12 @@ def main(argv=None) -> int:
         # (then Numba falls back to its user-wide cache, pointed here so that it can be emptied).
         env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
         env["NUMBA_CACHE_DIR"] = str(user_cache)
-        names, default = json.loads(subprocess.run([str(py), "-c", LIST], check=True, capture_output=True,
-                                                   text=True, env=env).stdout)
-        has_precompile = subprocess.run([str(py), "-c", "import surfnorm.precompile"], env=env,
-                                        capture_output=True).returncode == 0
+        names, default = json.loads(
+            subprocess.run([str(py), "-c", LIST], check=True, capture_output=True, text=True, env=env).stdout
+        )
+        has_precompile = (
+            subprocess.run([str(py), "-c", "import surfnorm.precompile"], env=env, capture_output=True).returncode == 0
+        )
         methods = args.methods or names
         rows = {}
         labels = [n for m in methods for n in ([m, m + SENSOR] if m == default else [m])]
@@ -162,28 +169,48 @@ def main(argv=None) -> int:
             print(f"python -m surfnorm.precompile (these methods): {fmt(precompile_step)} s", flush=True)
         clear_caches(pkg, user_cache)
 
-    lines = [f"First call in a new virtual environment ({args.label or wheel.name}), whole process, "
-             f"median of {args.runs} runs, seconds of wall-clock time (CPU time); default method: {default}; "
-             f"load average at the end {' '.join(f'{x:.1f}' for x in os.getloadavg())}", "",
-             "| method | fresh | cached | precompiled | same bits in every run |", "|---|---|---|---|---|"]
+    lines = [
+        f"First call in a new virtual environment ({args.label or wheel.name}), whole process, "
+        f"median of {args.runs} runs, seconds of wall-clock time (CPU time); default method: {default}; "
+        f"load average at the end {' '.join(f'{x:.1f}' for x in os.getloadavg())}",
+        "",
+        "| method | fresh | cached | precompiled | same bits in every run |",
+        "|---|---|---|---|---|",
+    ]
     for name, r in rows.items():
         mark = " (default)" if name.removesuffix(SENSOR) == default else ""
         same = "yes" if len(DIGESTS.get(name, ())) == 1 else f"NO ({len(DIGESTS.get(name, ()))} digests)"
-        lines.append(f"| {name}{mark} | {fmt(r['fresh_s'])} | {fmt(r['cached_s'])} | {fmt(r['precompiled_s'])} "
-                     f"| {same} |")
+        lines.append(
+            f"| {name}{mark} | {fmt(r['fresh_s'])} | {fmt(r['cached_s'])} | {fmt(r['precompiled_s'])} | {same} |"
+        )
     if precompile_step:
-        lines += ["", f"`python -m surfnorm.precompile {' '.join(methods)}` from an empty cache: {fmt(precompile_step)}"]
+        lines += [
+            "",
+            f"`python -m surfnorm.precompile {' '.join(methods)}` from an empty cache: {fmt(precompile_step)}",
+        ]
     table = "\n".join(lines)
     print(table)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = "cold-start" + (f"-{args.label}" if args.label else "")
     (args.out / f"{stem}.md").write_text(table + "\n")
-    (args.out / f"{stem}.json").write_text(json.dumps({
-        "label": args.label, "wheel": wheel.name, "default": default, "runs": args.runs, "methods": rows,
-        "digests": {k: sorted(v) for k, v in DIGESTS.items()},
-        "precompile_step_s": precompile_step,
-        "python": sys.version.split()[0], "machine": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(), "loadavg": os.getloadavg()}, indent=1))
+    (args.out / f"{stem}.json").write_text(
+        json.dumps(
+            {
+                "label": args.label,
+                "wheel": wheel.name,
+                "default": default,
+                "runs": args.runs,
+                "methods": rows,
+                "digests": {k: sorted(v) for k, v in DIGESTS.items()},
+                "precompile_step_s": precompile_step,
+                "python": sys.version.split()[0],
+                "machine": platform.processor() or platform.machine(),
+                "cpus": os.cpu_count(),
+                "loadavg": os.getloadavg(),
+            },
+            indent=1,
+        )
+    )
     return 0
 
 

@@ -22,7 +22,9 @@ from surfnorm.reference import OFFICIAL_KEYS, official_figures
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("dataset", nargs="?", default=str(Path(__file__).resolve().parents[1] / "tests/data/3f2n-sample"))
+    parser.add_argument(
+        "dataset", nargs="?", default=str(Path(__file__).resolve().parents[1] / "tests/data/3f2n-sample")
+    )
     parser.add_argument("--border", default="reflect", choices=["reflect", "one-sided"])
     args = parser.parse_args()
     registered = surfnorm.methods()

@@ -43,7 +43,7 @@ def main(argv=None):
         for f in frames:
             n = surfnorm.estimate(f.depth, f.K, method=method, **options)
             ok = np.abs(n).sum(-1) > 0
-            v, u = np.mgrid[0:n.shape[0], 0:n.shape[1]]
+            v, u = np.mgrid[0 : n.shape[0], 0 : n.shape[1]]
             P = np.stack([(u - f.K.cx) / f.K.fx, (v - f.K.cy) / f.K.fy, np.ones(u.shape)], -1)
             d = np.einsum("hwc,hwc->hw", n.astype(np.float64), P)
             edge = ok & (np.abs(d) <= ORIENTATION_TIE * np.linalg.norm(n, axis=-1) * np.linalg.norm(P, axis=-1))
@@ -51,8 +51,11 @@ def main(argv=None):
             have, band, turned = have + int(ok.sum()), band + int(edge.sum()), turned + int(back.sum())
             e_new.append(mean_angular_error(n, f.normals, f.mask))
             e_old.append(mean_angular_error(np.where(back[..., None], -n, n), f.normals, f.mask))
-        print(f"| {method} | {have} | {band} ({100 * band / have:.3f} %) | {turned} ({100 * turned / have:.3f} %) | "
-              f"{np.mean(e_new):.6f} | {np.mean(e_old):.6f} |", flush=True)
+        print(
+            f"| {method} | {have} | {band} ({100 * band / have:.3f} %) | {turned} ({100 * turned / have:.3f} %) | "
+            f"{np.mean(e_new):.6f} | {np.mean(e_old):.6f} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -24,9 +24,9 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 import surfnorm  # noqa: E402
-from surfnorm.kernels import sda as new  # noqa: E402
 from surfnorm._validate import valid_map  # noqa: E402
 from surfnorm.io.threef2n import find_frames, read_frame  # noqa: E402
+from surfnorm.kernels import sda as new  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "tests" / "data" / "3f2n-sample"
@@ -34,15 +34,19 @@ STAGES = ["alloc", "laplacians", "init", "step 1", "step 2", "step 3", "cp2tv"]
 
 
 def load_old(rev):
-    text = subprocess.run(["git", "show", f"{rev}:src/surfnorm/sda.py"], cwd=ROOT, check=True,
-                          capture_output=True, text=True).stdout
-    text = text.replace("from ._config import", "from surfnorm._config import").replace(
-        "from .three_filters import", "from surfnorm.kernels.three_filters import").replace(
-        "from ._choices import", "from surfnorm._choices import")
+    text = subprocess.run(
+        ["git", "show", f"{rev}:src/surfnorm/sda.py"], cwd=ROOT, check=True, capture_output=True, text=True
+    ).stdout
+    text = (
+        text.replace("from ._config import", "from surfnorm._config import")
+        .replace("from .three_filters import", "from surfnorm.kernels.three_filters import")
+        .replace("from ._choices import", "from surfnorm._choices import")
+    )
     folder = tempfile.mkdtemp(prefix="sda-old-")
     Path(folder, "sda_old.py").write_text(text)
     sys.path.insert(0, folder)
     import sda_old
+
     return sda_old
 
 
@@ -58,9 +62,17 @@ def stages(mod, z, valid, cam, clock):
     ok[inner] = valid
     a_u, a_v = mod._padded(shape, np.float64, np.inf), mod._padded(shape, np.float64, np.inf)
     con = mod._padded(shape, np.uint8, 0)
-    sets = [[mod._padded(shape, np.float64, 0.0), mod._padded(shape, np.float64, 0.0),
-             mod._padded(shape, np.float64, np.inf), mod._padded(shape, np.float64, np.inf),
-             mod._padded(shape, np.int8, -1), mod._padded(shape, np.int8, -1)] for _ in range(2)]
+    sets = [
+        [
+            mod._padded(shape, np.float64, 0.0),
+            mod._padded(shape, np.float64, 0.0),
+            mod._padded(shape, np.float64, np.inf),
+            mod._padded(shape, np.float64, np.inf),
+            mod._padded(shape, np.int8, -1),
+            mod._padded(shape, np.int8, -1),
+        ]
+        for _ in range(2)
+    ]
     l_u, l_v = np.ones(shape), np.ones(shape)
     t.append(clock())
     # Kernels since the scale-invariant near-tie tolerance take it after these arguments (None: exact, the default).
@@ -78,7 +90,9 @@ def stages(mod, z, valid, cam, clock):
         cur = 1 - cur
         t.append(clock())
     out = np.empty(z.shape + (3,), np.float32)
-    (getattr(mod, "_gradients_to_normals_kernel", None) or mod._cp2tv_kernel)(s, *sets[cur][:4], cam.fx, cam.fy, cam.cx, cam.cy, np.float32(0), out, *rows)
+    (getattr(mod, "_gradients_to_normals_kernel", None) or mod._cp2tv_kernel)(
+        s, *sets[cur][:4], cam.fx, cam.fy, cam.cx, cam.cy, np.float32(0), out, *rows
+    )
     t.append(clock())
     return np.diff(t) * 1e3
 
@@ -113,14 +127,21 @@ def main():
             t0 = clock()
             surfnorm.estimate(f.depth, f.K, method="sda_sne")
             whole["estimate"].append(clock() - t0)
-    print(f"{len(frames)} frames x {args.runs} runs, {'CPU' if args.cpu else 'wall'} clock, medians in ms, "
-          f"load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"{len(frames)} frames x {args.runs} runs, {'CPU' if args.cpu else 'wall'} clock, medians in ms, "
+        f"load average {os.getloadavg()[0]:.1f}"
+    )
     for key in ("old", "new"):
         m = np.median(np.array(per_stage[key]), axis=0)
-        print(f"{key:4s} " + "  ".join(f"{n} {x:.2f}" for n, x in zip(STAGES, m))
-              + f"  | sda_sne {np.median(whole[key]) * 1e3:.2f}")
-    print(f"surfnorm.estimate(z, K, method='sda_sne'): {np.median(whole['estimate']) * 1e3:.2f}; "
-          f"old / new sda_sne: {np.median(whole['old']) / np.median(whole['new']):.2f}")
+        print(
+            f"{key:4s} "
+            + "  ".join(f"{n} {x:.2f}" for n, x in zip(STAGES, m))
+            + f"  | sda_sne {np.median(whole[key]) * 1e3:.2f}"
+        )
+    print(
+        f"surfnorm.estimate(z, K, method='sda_sne'): {np.median(whole['estimate']) * 1e3:.2f}; "
+        f"old / new sda_sne: {np.median(whole['old']) / np.median(whole['new']):.2f}"
+    )
 
 
 if __name__ == "__main__":

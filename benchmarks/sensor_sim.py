@@ -58,18 +58,26 @@ def main(argv=None) -> int:
             print(f"sensor {s.name}: {s.summary}")
         return 0
     root = Path(args.root) if args.root else (SHARED_SAMPLE if SHARED_SAMPLE.is_dir() else sample_root())
-    split = (lambda s: [x.strip() for x in s.split(",") if x.strip()] if s else None)
+    split = lambda s: [x.strip() for x in s.split(",") if x.strip()] if s else None
     try:
         entries, absent = make_entries(split(args.methods))
         t0 = time.perf_counter()
-        result = run_simulated(root, entries, split(args.sensors) or list(SENSORS), levels=split(args.levels),
-                               frames_per_level=1 if args.quick else args.frames, seed=args.seed,
-                               progress=lambda msg: print(f"  {msg}", file=sys.stderr, flush=True))
+        result = run_simulated(
+            root,
+            entries,
+            split(args.sensors) or list(SENSORS),
+            levels=split(args.levels),
+            frames_per_level=1 if args.quick else args.frames,
+            seed=args.seed,
+            progress=lambda msg: print(f"  {msg}", file=sys.stderr, flush=True),
+        )
     except (SurfnormError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"## Simulated sensors on {len(result['frames'])} 3F2N frames ({root.name}), seed {args.seed}, "
-          f"one thread, {time.perf_counter() - t0:.0f} s\n")
+    print(
+        f"## Simulated sensors on {len(result['frames'])} 3F2N frames ({root.name}), seed {args.seed}, "
+        f"one thread, {time.perf_counter() - t0:.0f} s\n"
+    )
     print(sim_tables(result))
     for name, why in absent.items():
         print(f"- absent: {name}: {why}")

@@ -46,7 +46,9 @@ def main(argv=None):
     ap.add_argument("root", nargs="?", default=str(DEFAULT_ROOT if DEFAULT_ROOT.is_dir() else sample_root()))
     ap.add_argument("--methods", default=None)
     ap.add_argument("--json", default=None)
-    ap.add_argument("--sweep", default=None, help="comma-separated REFERENCE_DEPTH values: e_A (mask, scale-invariant) per value")
+    ap.add_argument(
+        "--sweep", default=None, help="comma-separated REFERENCE_DEPTH values: e_A (mask, scale-invariant) per value"
+    )
     args = ap.parse_args(argv)
     names = args.methods.split(",") if args.methods else list(surfnorm.methods())
     frames = [read_frame(args.root, n) for n in find_frames(args.root)]
@@ -61,7 +63,10 @@ def main(argv=None):
                 for f in frames:
                     n = surfnorm.estimate(f.depth, f.K, method=name, mask=f.mask, scale_invariant=True)
                     e.setdefault(f.level, []).append(metrics.mean_angular_error(n, f.normals, f.mask))
-                print(f"| {name} | {ref:g} | " + " | ".join(f"{np.mean(e[l]):.3f}" for l in LEVELS if l in e) + " |", flush=True)
+                print(
+                    f"| {name} | {ref:g} | " + " | ".join(f"{np.mean(e[l]):.3f}" for l in LEVELS if l in e) + " |",
+                    flush=True,
+                )
         return
     rows = []
     for f in frames:
@@ -81,10 +86,18 @@ def main(argv=None):
                 scale = kw.pop("_scale", 1.0)
                 depth = f.depth if scale == 1.0 else (f.depth.astype(np.float64) * scale).astype(np.float32)
                 n = surfnorm.estimate(depth, f.K, method=name, **kw)
-                rows.append(dict(frame=f.name, level=f.level, method=name, case=case,
-                                 e_a=metrics.mean_angular_error(n, f.normals, f.mask),
-                                 band=metrics.mean_angular_error(n, f.normals, band),
-                                 band_cov=metrics.coverage(n, band), cov=metrics.coverage(n, f.mask)))
+                rows.append(
+                    dict(
+                        frame=f.name,
+                        level=f.level,
+                        method=name,
+                        case=case,
+                        e_a=metrics.mean_angular_error(n, f.normals, f.mask),
+                        band=metrics.mean_angular_error(n, f.normals, band),
+                        band_cov=metrics.coverage(n, band),
+                        cov=metrics.coverage(n, f.mask),
+                    )
+                )
         print(f"done {f.name}", file=sys.stderr)
 
     def table(title, cases, key, fmt="{:.3f}"):
@@ -97,12 +110,23 @@ def main(argv=None):
                 lv = per_level(sel, key)
                 print(f"| {name} | {case} | " + " | ".join(fmt.format(lv[l]) for l in LEVELS if l in lv) + " |")
 
-    table("e_A (deg) over the foreground, background passed as valid depth 1.0 vs invalid (mask)", ["no mask", "mask"], "e_a")
+    table(
+        "e_A (deg) over the foreground, background passed as valid depth 1.0 vs invalid (mask)",
+        ["no mask", "mask"],
+        "e_a",
+    )
     table("e_A (deg) on the 2-pixel band inside every silhouette", ["no mask", "mask"], "band")
     table("coverage of the band (share with a normal)", ["no mask", "mask"], "band_cov", "{:.4f}")
-    table("scale-invariant mode: e_A (deg) over the foreground", ["mask", "mask, invariant", "no mask", "no mask, invariant"], "e_a")
-    table("units: the same frames with depth x0.001 and x1000 (mask)",
-          ["mask", "mask, x0.001", "mask, x1000", "mask, invariant", "mask, invariant, x0.001", "mask, invariant, x1000"], "e_a")
+    table(
+        "scale-invariant mode: e_A (deg) over the foreground",
+        ["mask", "mask, invariant", "no mask", "no mask, invariant"],
+        "e_a",
+    )
+    table(
+        "units: the same frames with depth x0.001 and x1000 (mask)",
+        ["mask", "mask, x0.001", "mask, x1000", "mask, invariant", "mask, invariant, x0.001", "mask, invariant, x1000"],
+        "e_a",
+    )
     if args.json:
         Path(args.json).write_text(json.dumps(dict(root=str(args.root), rows=rows), indent=1))
 

@@ -54,8 +54,17 @@ REFERENCE_MS = json.loads((Path(surfnorm.__file__).parent / "data" / "official-3
 METHODS = {"d2nt_basic": {"border": "reflect"}, "d2nt_v2": {}, "d2nt_v3": {}, "cp2tv": {}}
 TARGET_MS = {"d2nt_basic": 1.2, "d2nt_v2": 2.5, "d2nt_v3": 4.0}
 # Every other estimator, with the targets of the issues (3F2N median: speed issue; the rest: baselines issue).
-BASELINE_TARGET_MS = {"3f2n_median": 4.0, "3f2n_mean": None, "sne_roadseg": None, "sda_sne": 20.0, "plane_svd": 30.0,
-                      "plane_pca": 30.0, "vector_svd": 30.0, "area_weighted": 30.0, "angle_weighted": 30.0}
+BASELINE_TARGET_MS = {
+    "3f2n_median": 4.0,
+    "3f2n_mean": None,
+    "sne_roadseg": None,
+    "sda_sne": 20.0,
+    "plane_svd": 30.0,
+    "plane_pca": 30.0,
+    "vector_svd": 30.0,
+    "area_weighted": 30.0,
+    "angle_weighted": 30.0,
+}
 
 
 def seeded_frame(seed=0, h=480, w=640, holes=0.0):
@@ -103,6 +112,7 @@ def time_frames(repeats, quick):
     try:
         import cv2
         import d2nt
+
         cv2.setNumThreads(1)
     except ImportError:
         d2nt = None
@@ -119,13 +129,24 @@ def time_frames(repeats, quick):
             # temporaries) they do not; both are reported.
             (alone,) = interleaved([ours], repeats)
             reference = REFERENCE_MS.get(name, {}).get(f"official_{method}_ms")
-            rows.append({"frame": name, "method": method, "shape": list(z.shape), "ours_ms": t[0] * 1e3,
-                         "reference_authors_ms": reference,
-                         "ours_alone_ms": alone * 1e3,
-                         "authors_ms": t[1] * 1e3 if len(t) > 1 else None,
-                         "ratio": t[1] / t[0] if len(t) > 1 else None, "repeats": repeats})
-            print(f"  {name:22s} {method:11s} ours {t[0] * 1e3:7.3f} ms (alone {alone * 1e3:7.3f})"
-                  + (f"  authors {t[1] * 1e3:7.2f} ms  ratio {t[1] / t[0]:5.1f}x" if len(t) > 1 else ""), flush=True)
+            rows.append(
+                {
+                    "frame": name,
+                    "method": method,
+                    "shape": list(z.shape),
+                    "ours_ms": t[0] * 1e3,
+                    "reference_authors_ms": reference,
+                    "ours_alone_ms": alone * 1e3,
+                    "authors_ms": t[1] * 1e3 if len(t) > 1 else None,
+                    "ratio": t[1] / t[0] if len(t) > 1 else None,
+                    "repeats": repeats,
+                }
+            )
+            print(
+                f"  {name:22s} {method:11s} ours {t[0] * 1e3:7.3f} ms (alone {alone * 1e3:7.3f})"
+                + (f"  authors {t[1] * 1e3:7.2f} ms  ratio {t[1] / t[0]:5.1f}x" if len(t) > 1 else ""),
+                flush=True,
+            )
     return rows
 
 
@@ -175,11 +196,20 @@ def time_baselines(repeats, quick):
     """Median ms of every other registered estimator on the shipped frames, one thread (no peer in this table)."""
     rows = []
     frames = inputs()[:3]
-    for method in (["3f2n_median", "sda_sne"] if quick else BASELINE_TARGET_MS):
-        per_frame = [interleaved([lambda: surfnorm.estimate(z, cam, method=method, threads=1)], repeats)[0] * 1e3
-                     for _, z, cam in frames]
-        rows.append({"method": method, "median_ms": statistics.median(per_frame), "per_frame_ms": per_frame,
-                     "target_ms": BASELINE_TARGET_MS[method], "repeats": repeats})
+    for method in ["3f2n_median", "sda_sne"] if quick else BASELINE_TARGET_MS:
+        per_frame = [
+            interleaved([lambda: surfnorm.estimate(z, cam, method=method, threads=1)], repeats)[0] * 1e3
+            for _, z, cam in frames
+        ]
+        rows.append(
+            {
+                "method": method,
+                "median_ms": statistics.median(per_frame),
+                "per_frame_ms": per_frame,
+                "target_ms": BASELINE_TARGET_MS[method],
+                "repeats": repeats,
+            }
+        )
         print(f"  {method:14s} {statistics.median(per_frame):8.2f} ms", flush=True)
     return rows
 
@@ -296,28 +326,61 @@ def time_batches(repeats, quick):
         else:
             list(pool.map(lambda i: stream(stack[i], target[i]), range(16)))
 
-    t1, t2, r1, r2 = interleaved([lambda: floor(1, None), lambda: floor(2, None), lambda: floor(1, buffer),
-                                  lambda: floor(2, buffer)], repeats)
+    t1, t2, r1, r2 = interleaved(
+        [lambda: floor(1, None), lambda: floor(2, None), lambda: floor(1, buffer), lambda: floor(2, buffer)], repeats
+    )
     pool.shutdown()
-    rows.append({"method": "memory floor", "frames": 16, "one_thread_ms": t1 * 1e3, "two_threads_ms": t2 * 1e3,
-                 "speed_up": t1 / t2, "frames_per_s_2_threads": 16 / t2,
-                 "out_one_thread_ms": r1 * 1e3, "out_two_threads_ms": r2 * 1e3, "out_speed_up": r1 / r2,
-                 "out_frames_per_s_2_threads": 16 / r2, "repeats": repeats})
-    print(f"  batch of 16 {'memory floor':11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
-          f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x", flush=True)
-    for method in (["d2nt_v3"] if quick else ["d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv"]):
+    rows.append(
+        {
+            "method": "memory floor",
+            "frames": 16,
+            "one_thread_ms": t1 * 1e3,
+            "two_threads_ms": t2 * 1e3,
+            "speed_up": t1 / t2,
+            "frames_per_s_2_threads": 16 / t2,
+            "out_one_thread_ms": r1 * 1e3,
+            "out_two_threads_ms": r2 * 1e3,
+            "out_speed_up": r1 / r2,
+            "out_frames_per_s_2_threads": 16 / r2,
+            "repeats": repeats,
+        }
+    )
+    print(
+        f"  batch of 16 {'memory floor':11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
+        f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x",
+        flush=True,
+    )
+    for method in ["d2nt_v3"] if quick else ["d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv"]:
         options = METHODS[method]
         t1, t2, r1, r2 = interleaved(
-            [lambda: surfnorm.estimate(stack, cams, method=method, threads=1, **options),
-             lambda: surfnorm.estimate(stack, cams, method=method, threads=2, **options),
-             lambda: surfnorm.estimate(stack, cams, method=method, threads=1, out=buffer, **options),
-             lambda: surfnorm.estimate(stack, cams, method=method, threads=2, out=buffer, **options)], repeats)
-        rows.append({"method": method, "frames": 16, "one_thread_ms": t1 * 1e3, "two_threads_ms": t2 * 1e3,
-                     "speed_up": t1 / t2, "frames_per_s_2_threads": 16 / t2,
-                     "out_one_thread_ms": r1 * 1e3, "out_two_threads_ms": r2 * 1e3, "out_speed_up": r1 / r2,
-                     "out_frames_per_s_2_threads": 16 / r2, "repeats": repeats})
-        print(f"  batch of 16 {method:11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
-              f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x", flush=True)
+            [
+                lambda: surfnorm.estimate(stack, cams, method=method, threads=1, **options),
+                lambda: surfnorm.estimate(stack, cams, method=method, threads=2, **options),
+                lambda: surfnorm.estimate(stack, cams, method=method, threads=1, out=buffer, **options),
+                lambda: surfnorm.estimate(stack, cams, method=method, threads=2, out=buffer, **options),
+            ],
+            repeats,
+        )
+        rows.append(
+            {
+                "method": method,
+                "frames": 16,
+                "one_thread_ms": t1 * 1e3,
+                "two_threads_ms": t2 * 1e3,
+                "speed_up": t1 / t2,
+                "frames_per_s_2_threads": 16 / t2,
+                "out_one_thread_ms": r1 * 1e3,
+                "out_two_threads_ms": r2 * 1e3,
+                "out_speed_up": r1 / r2,
+                "out_frames_per_s_2_threads": 16 / r2,
+                "repeats": repeats,
+            }
+        )
+        print(
+            f"  batch of 16 {method:11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
+            f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x",
+            flush=True,
+        )
     return rows
 
 
@@ -342,17 +405,27 @@ def time_frame_threads(repeats, quick):
     z, cam = seeded_frame(2, h=960, w=1280, holes=0.05)
     rows = []
     counts = thread_counts()
-    for method in (["d2nt_v3", "sda_sne"] if quick else scaling_methods()):
+    for method in ["d2nt_v3", "sda_sne"] if quick else scaling_methods():
         out = {n: np.empty(z.shape + (3,), np.float32) for n in counts}
         funcs = [lambda n=n: surfnorm.estimate(z, cam, method=method, threads=n, out=out[n]) for n in counts]
         times = interleaved(funcs, repeats)
         same = all(np.array_equal(out[n].view(np.uint32), out[1].view(np.uint32)) for n in counts)
-        row = {"method": method, "shape": list(z.shape), "threads": counts, "ms": [t * 1e3 for t in times],
-               "speed_up": [times[0] / t for t in times], "bit_identical": same, "repeats": repeats}
+        row = {
+            "method": method,
+            "shape": list(z.shape),
+            "threads": counts,
+            "ms": [t * 1e3 for t in times],
+            "speed_up": [times[0] / t for t in times],
+            "bit_identical": same,
+            "repeats": repeats,
+        }
         rows.append(row)
-        print(f"  {method:11s} " + ", ".join(f"{n} thread(s) {t * 1e3:7.2f} ms ({times[0] / t:4.2f}x)"
-                                             for n, t in zip(counts, times))
-              + f"; bit-identical: {same}", flush=True)
+        print(
+            f"  {method:11s} "
+            + ", ".join(f"{n} thread(s) {t * 1e3:7.2f} ms ({times[0] / t:4.2f}x)" for n, t in zip(counts, times))
+            + f"; bit-identical: {same}",
+            flush=True,
+        )
     return rows
 
 
@@ -364,32 +437,60 @@ def time_per_pixel(repeats, quick):
     and into a new one; the ratio to 640x480 shows a cache cliff if there is one."""
     rows = []
     frames = {hw: seeded_frame(3, h=hw[0], w=hw[1], holes=0.05) for hw in (SIZES[:3] if quick else SIZES)}
-    for method in (["d2nt_v3"] if quick else scaling_methods()):
+    for method in ["d2nt_v3"] if quick else scaling_methods():
         for (h, w), (z, cam) in frames.items():
             n = max(3, int(repeats * 640 * 480 / (h * w)))
             buffer = np.empty((h, w, 3), np.float32)
-            reused, new = interleaved([lambda: surfnorm.estimate(z, cam, method=method, threads=1, out=buffer),
-                                       lambda: surfnorm.estimate(z, cam, method=method, threads=1)], n)
-            rows.append({"method": method, "shape": [h, w], "ns_per_pixel": reused * 1e9 / (h * w),
-                         "new_output_ns_per_pixel": new * 1e9 / (h * w), "repeats": n})
+            reused, new = interleaved(
+                [
+                    lambda: surfnorm.estimate(z, cam, method=method, threads=1, out=buffer),
+                    lambda: surfnorm.estimate(z, cam, method=method, threads=1),
+                ],
+                n,
+            )
+            rows.append(
+                {
+                    "method": method,
+                    "shape": [h, w],
+                    "ns_per_pixel": reused * 1e9 / (h * w),
+                    "new_output_ns_per_pixel": new * 1e9 / (h * w),
+                    "repeats": n,
+                }
+            )
         base = next(r for r in rows if r["method"] == method and r["shape"] == [480, 640])
         for r in rows:
             if r["method"] == method:
                 r["vs_640x480"] = r["ns_per_pixel"] / base["ns_per_pixel"]
                 r["new_output_vs_640x480"] = r["new_output_ns_per_pixel"] / base["new_output_ns_per_pixel"]
-        print(f"  {method:11s} ns/pixel (out=; new output): " + ", ".join(
-            f"{r['shape'][1]}x{r['shape'][0]} {r['ns_per_pixel']:.2f}; {r['new_output_ns_per_pixel']:.2f}"
-            for r in rows if r["method"] == method), flush=True)
+        print(
+            f"  {method:11s} ns/pixel (out=; new output): "
+            + ", ".join(
+                f"{r['shape'][1]}x{r['shape'][0]} {r['ns_per_pixel']:.2f}; {r['new_output_ns_per_pixel']:.2f}"
+                for r in rows
+                if r["method"] == method
+            ),
+            flush=True,
+        )
     return rows
 
 
 def machine():
-    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
-               platform.processor()) if os.path.exists("/proc/cpuinfo") else platform.processor()
+    cpu = (
+        next(
+            (line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
+            platform.processor(),
+        )
+        if os.path.exists("/proc/cpuinfo")
+        else platform.processor()
+    )
     import numba
 
-    versions = {"python": platform.python_version(), "numpy": np.__version__, "numba": numba.__version__,
-                "surfnorm": surfnorm.__version__}
+    versions = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numba": numba.__version__,
+        "surfnorm": surfnorm.__version__,
+    }
     for mod in ("llvmlite", "cv2", "d2nt"):
         try:
             versions[mod] = __import__(mod).__version__
@@ -397,91 +498,162 @@ def machine():
             versions[mod] = None
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
-        dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
-                                    capture_output=True, text=True).stdout.strip())
+        dirty = bool(
+            subprocess.run(
+                ["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True, text=True
+            ).stdout.strip()
+        )
     except OSError:
         commit, dirty = None, None
-    return {"cpu": cpu, "cores": os.cpu_count(), "numba_threads": int(os.environ["NUMBA_NUM_THREADS"]),
-            "versions": versions, "commit": commit, "uncommitted_changes": dirty, "platform": platform.platform()}
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "numba_threads": int(os.environ["NUMBA_NUM_THREADS"]),
+        "versions": versions,
+        "commit": commit,
+        "uncommitted_changes": dirty,
+        "platform": platform.platform(),
+    }
 
 
 def markdown(record):
-    lines = [f"# surfnorm speed ({record['machine']['cpu']}, {record['machine']['cores']} cores, single thread)", "",
-             f"Commit {record['machine']['commit']}; load average {record['load_before']} before, "
-             f"{record['load_after']} after. Medians of {record['repeats']} interleaved runs.", "",
-             "Ours interleaved with the authors' calls (our frame no longer in the caches), and ours alone (back to back).",
-             "",
-             "| frame (480x640) | method | ours, interleaved (ms) | ours alone (ms) | authors' d2nt 0.1.3 (ms) | ratio |",
-             "|---|---|---:|---:|---:|---:|"]
+    lines = [
+        f"# surfnorm speed ({record['machine']['cpu']}, {record['machine']['cores']} cores, single thread)",
+        "",
+        f"Commit {record['machine']['commit']}; load average {record['load_before']} before, "
+        f"{record['load_after']} after. Medians of {record['repeats']} interleaved runs.",
+        "",
+        "Ours interleaved with the authors' calls (our frame no longer in the caches), and ours alone (back to back).",
+        "",
+        "| frame (480x640) | method | ours, interleaved (ms) | ours alone (ms) | authors' d2nt 0.1.3 (ms) | ratio |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
     for r in record["frames"]:
         theirs = f"{r['authors_ms']:.2f}" if r["authors_ms"] else "-"
         ratio = f"{r['ratio']:.1f}x" if r["ratio"] else "-"
-        lines.append(f"| {r['frame']} | {r['method']} | {r['ours_ms']:.3f} | {r['ours_alone_ms']:.3f} | {theirs} | {ratio} |")
-    lines += ["", "| method | shipped frames: median ours, interleaved (ms) | alone (ms) | target (ms) | median ratio "
-              "| all frames: median ratio | ours at the reference machine's pace (ms) |",
-              "|---|---:|---:|---:|---:|---:|---:|"]
+        lines.append(
+            f"| {r['frame']} | {r['method']} | {r['ours_ms']:.3f} | {r['ours_alone_ms']:.3f} | {theirs} | {ratio} |"
+        )
+    lines += [
+        "",
+        "| method | shipped frames: median ours, interleaved (ms) | alone (ms) | target (ms) | median ratio "
+        "| all frames: median ratio | ours at the reference machine's pace (ms) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for method in METHODS:
         rs = [r for r in record["frames"] if r["method"] == method]
         shipped = [r for r in rs if not r["frame"].startswith("seeded")] or rs
-        ratio = [f"{statistics.median(x):.1f}x" if x else "-"
-                 for x in ([r["ratio"] for r in shipped if r["ratio"]], [r["ratio"] for r in rs if r["ratio"]])]
-        paced = [r["reference_authors_ms"] / r["ratio"] for r in shipped if r.get("reference_authors_ms") and r["ratio"]]
-        lines.append(f"| {method} | {statistics.median(r['ours_ms'] for r in shipped):.3f} | "
-                     f"{statistics.median(r['ours_alone_ms'] for r in shipped):.3f} | "
-                     f"{TARGET_MS.get(method, '-')} | {ratio[0]} | {ratio[1]} | "
-                     f"{f'{statistics.median(paced):.2f}' if paced else '-'} |")
-    lines += ["", "The last column divides the authors' time on each frame in the reference JSON (measured on \"a 2-core "
-              "machine like ours\") by this run's ratio: our time at that machine's pace, as this VM's speed drifts."]
+        ratio = [
+            f"{statistics.median(x):.1f}x" if x else "-"
+            for x in ([r["ratio"] for r in shipped if r["ratio"]], [r["ratio"] for r in rs if r["ratio"]])
+        ]
+        paced = [
+            r["reference_authors_ms"] / r["ratio"] for r in shipped if r.get("reference_authors_ms") and r["ratio"]
+        ]
+        lines.append(
+            f"| {method} | {statistics.median(r['ours_ms'] for r in shipped):.3f} | "
+            f"{statistics.median(r['ours_alone_ms'] for r in shipped):.3f} | "
+            f"{TARGET_MS.get(method, '-')} | {ratio[0]} | {ratio[1]} | "
+            f"{f'{statistics.median(paced):.2f}' if paced else '-'} |"
+        )
+    lines += [
+        "",
+        "The last column divides the authors' time on each frame in the reference JSON (measured on \"a 2-core "
+        "machine like ours\") by this run's ratio: our time at that machine's pace, as this VM's speed drifts.",
+    ]
     f = record["floor"]
-    lines += ["", f"Memory floor on this machine: reading a 480x640 float32 depth and writing it into a new (480, 640, 3) "
-              f"float32 array takes {f['interleaved_ms']:.3f} ms after the authors' call, {f['alone_ms']:.3f} ms alone."]
-    lines += ["", "| every other estimator (480x640, shipped frames) | median ours (ms) | target (ms) |", "|---|---:|---:|"]
+    lines += [
+        "",
+        f"Memory floor on this machine: reading a 480x640 float32 depth and writing it into a new (480, 640, 3) "
+        f"float32 array takes {f['interleaved_ms']:.3f} ms after the authors' call, {f['alone_ms']:.3f} ms alone.",
+    ]
+    lines += [
+        "",
+        "| every other estimator (480x640, shipped frames) | median ours (ms) | target (ms) |",
+        "|---|---:|---:|",
+    ]
     for b in record["baselines"]:
         lines.append(f"| {b['method']} | {b['median_ms']:.2f} | {b['target_ms'] or '-'} |")
     s = record["startup"]
-    lines += ["", "| start-up and memory | measured | target |", "|---|---:|---:|",
-              f"| `import surfnorm` (in-process, median of fresh interpreters) | {s['import_s']:.3f} s | 0.3 s |",
-              f"| `python -c 'import surfnorm'` wall time, interpreter included | {s['import_process_s']:.3f} s | |",
-              f"| first d2nt_v3 estimate, fresh process, warm cache (after the import) | {s['first_call_s']:.3f} s | 0.5 s |",
-              f"| the Numba floor under it: import Numba + first call of a one-line cached function | "
-              f"{s['numba_floor_s']:.3f} s | |",
-              f"| import + first estimate | {s['import_and_first_s']:.3f} s | |"]
+    lines += [
+        "",
+        "| start-up and memory | measured | target |",
+        "|---|---:|---:|",
+        f"| `import surfnorm` (in-process, median of fresh interpreters) | {s['import_s']:.3f} s | 0.3 s |",
+        f"| `python -c 'import surfnorm'` wall time, interpreter included | {s['import_process_s']:.3f} s | |",
+        f"| first d2nt_v3 estimate, fresh process, warm cache (after the import) | {s['first_call_s']:.3f} s | 0.5 s |",
+        f"| the Numba floor under it: import Numba + first call of a one-line cached function | "
+        f"{s['numba_floor_s']:.3f} s | |",
+        f"| import + first estimate | {s['import_and_first_s']:.3f} s | |",
+    ]
     m = record["memory"]
     out_mb = m["output_bytes"] / 2**20
-    lines += [f"| peak memory of one d2nt_v3 call, NumPy (tracemalloc) | {m['tracemalloc_peak_bytes'] / 2**20:.2f} MiB "
-              f"= {m['tracemalloc_peak_bytes'] / m['output_bytes']:.2f}x output ({out_mb:.2f} MiB) | 3x |",
-              f"| peak RSS growth of that call (all allocations, Numba's included) | {m['rss_growth_bytes'] / 2**20:.2f} MiB "
-              f"= {m['rss_growth_bytes'] / m['output_bytes']:.2f}x output | 3x |"]
+    lines += [
+        f"| peak memory of one d2nt_v3 call, NumPy (tracemalloc) | {m['tracemalloc_peak_bytes'] / 2**20:.2f} MiB "
+        f"= {m['tracemalloc_peak_bytes'] / m['output_bytes']:.2f}x output ({out_mb:.2f} MiB) | 3x |",
+        f"| peak RSS growth of that call (all allocations, Numba's included) | {m['rss_growth_bytes'] / 2**20:.2f} MiB "
+        f"= {m['rss_growth_bytes'] / m['output_bytes']:.2f}x output | 3x |",
+    ]
     if m.get("authors_tracemalloc_peak_bytes"):
-        lines.append(f"| authors' d2nt_v3, NumPy peak (tracemalloc) | {m['authors_tracemalloc_peak_bytes'] / 2**20:.2f} MiB "
-                     f"= {m['authors_tracemalloc_peak_bytes'] / m['output_bytes']:.1f}x output | |")
-    lines += ["", "| batch of 16 (N, 480, 640) | new output: 1 thread (ms) | 2 threads (ms) | speed-up "
-              "| `out=` reused: 1 thread (ms) | 2 threads (ms) | speed-up | target |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        lines.append(
+            f"| authors' d2nt_v3, NumPy peak (tracemalloc) | {m['authors_tracemalloc_peak_bytes'] / 2**20:.2f} MiB "
+            f"= {m['authors_tracemalloc_peak_bytes'] / m['output_bytes']:.1f}x output | |"
+        )
+    lines += [
+        "",
+        "| batch of 16 (N, 480, 640) | new output: 1 thread (ms) | 2 threads (ms) | speed-up "
+        "| `out=` reused: 1 thread (ms) | 2 threads (ms) | speed-up | target |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for b in record["batch"]:
-        lines.append(f"| {b['method']} | {b['one_thread_ms']:.1f} | {b['two_threads_ms']:.1f} | {b['speed_up']:.2f}x "
-                     f"| {b['out_one_thread_ms']:.1f} | {b['out_two_threads_ms']:.1f} | {b['out_speed_up']:.2f}x "
-                     f"| {'1.7x' if b['method'] != 'memory floor' else '(bound)'} |")
+        lines.append(
+            f"| {b['method']} | {b['one_thread_ms']:.1f} | {b['two_threads_ms']:.1f} | {b['speed_up']:.2f}x "
+            f"| {b['out_one_thread_ms']:.1f} | {b['out_two_threads_ms']:.1f} | {b['out_speed_up']:.2f}x "
+            f"| {'1.7x' if b['method'] != 'memory floor' else '(bound)'} |"
+        )
     if record.get("frame_threads"):
         counts = record["frame_threads"][0]["threads"]
-        lines += ["", f"One 1280x960 frame split into row bands (`threads=N`, reused `out=`), default method "
-                  f"{record['default_method']}; target for d2nt_v3 and sda_sne: 1.7x on 2 threads", "",
-                  "| method | " + " | ".join(f"{n} thread(s) (ms)" for n in counts) + " | "
-                  + " | ".join(f"speed-up {n}" for n in counts[1:]) + " | bit-identical |",
-                  "|---|" + "---:|" * (2 * len(counts) - 1) + "---|"]
+        lines += [
+            "",
+            f"One 1280x960 frame split into row bands (`threads=N`, reused `out=`), default method "
+            f"{record['default_method']}; target for d2nt_v3 and sda_sne: 1.7x on 2 threads",
+            "",
+            "| method | "
+            + " | ".join(f"{n} thread(s) (ms)" for n in counts)
+            + " | "
+            + " | ".join(f"speed-up {n}" for n in counts[1:])
+            + " | bit-identical |",
+            "|---|" + "---:|" * (2 * len(counts) - 1) + "---|",
+        ]
         for r in record["frame_threads"]:
-            lines.append(f"| {r['method']} | " + " | ".join(f"{t:.2f}" for t in r["ms"]) + " | "
-                         + " | ".join(f"{x:.2f}x" for x in r["speed_up"][1:]) + f" | {r['bit_identical']} |")
+            lines.append(
+                f"| {r['method']} | "
+                + " | ".join(f"{t:.2f}" for t in r["ms"])
+                + " | "
+                + " | ".join(f"{x:.2f}x" for x in r["speed_up"][1:])
+                + f" | {r['bit_identical']} |"
+            )
     if record.get("per_pixel"):
         sizes = list(dict.fromkeys(tuple(r["shape"]) for r in record["per_pixel"]))
-        lines += ["", "Time per pixel on one thread (ns), reused `out=` / new output; in brackets the ratio to 640x480 "
-                  "(target for the D2NT family: within 1.5x up to 3840x2160)", "",
-                  "| method | " + " | ".join(f"{w}x{h}" for h, w in sizes) + " |", "|---|" + "---:|" * len(sizes)]
+        lines += [
+            "",
+            "Time per pixel on one thread (ns), reused `out=` / new output; in brackets the ratio to 640x480 "
+            "(target for the D2NT family: within 1.5x up to 3840x2160)",
+            "",
+            "| method | " + " | ".join(f"{w}x{h}" for h, w in sizes) + " |",
+            "|---|" + "---:|" * len(sizes),
+        ]
         for method in dict.fromkeys(r["method"] for r in record["per_pixel"]):
             rs = {tuple(r["shape"]): r for r in record["per_pixel"] if r["method"] == method}
-            lines.append(f"| {method} | " + " | ".join(
-                f"{rs[hw]['ns_per_pixel']:.2f} ({rs[hw]['vs_640x480']:.2f}x) / {rs[hw]['new_output_ns_per_pixel']:.2f} "
-                f"({rs[hw]['new_output_vs_640x480']:.2f}x)" for hw in sizes) + " |")
+            lines.append(
+                f"| {method} | "
+                + " | ".join(
+                    f"{rs[hw]['ns_per_pixel']:.2f} ({rs[hw]['vs_640x480']:.2f}x) / {rs[hw]['new_output_ns_per_pixel']:.2f} "
+                    f"({rs[hw]['new_output_vs_640x480']:.2f}x)"
+                    for hw in sizes
+                )
+                + " |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -503,8 +675,10 @@ def main():
     (imp,), imp_wall = subprocess_seconds(IMPORT_CODE, 3 if args.quick else 9)
     (t_imp, t_first, t_both), _ = subprocess_seconds(FIRST_CALL_CODE.format(method="d2nt_v3"), 3 if args.quick else 9)
     numba_floor = numba_floor_seconds(3 if args.quick else 9)
-    print(f"  import {imp:.3f} s (process {imp_wall:.3f} s); first d2nt_v3 {t_first:.3f} s; both {t_both:.3f} s; "
-          f"Numba floor {numba_floor:.3f} s")
+    print(
+        f"  import {imp:.3f} s (process {imp_wall:.3f} s); first d2nt_v3 {t_first:.3f} s; both {t_both:.3f} s; "
+        f"Numba floor {numba_floor:.3f} s"
+    )
     (peak, rss, nbytes), _ = subprocess_seconds(MEMORY_CODE.format(method="d2nt_v3"), 1)
     memory = {"tracemalloc_peak_bytes": peak, "rss_growth_bytes": rss, "output_bytes": nbytes}
     try:
@@ -521,13 +695,29 @@ def main():
     frame_threads = time_frame_threads(max(10, repeats // 3) if not args.quick else 3, args.quick)
     print("time per pixel against frame size:", flush=True)
     per_pixel = time_per_pixel(max(10, repeats // 3) if not args.quick else 3, args.quick)
-    record = {"about": __doc__.splitlines()[0], "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-              "machine": machine(), "repeats": repeats, "load_before": load_before,
-              "load_after": [round(x, 2) for x in os.getloadavg()], "frames": frames, "floor": floor, "baselines": baselines,
-              "startup": {"import_s": imp, "import_process_s": imp_wall, "first_call_s": t_first,
-                          "import_and_first_s": t_both, "numba_floor_s": numba_floor},
-              "memory": memory, "batch": batch, "default_method": default_method(), "frame_threads": frame_threads,
-              "per_pixel": per_pixel}
+    record = {
+        "about": __doc__.splitlines()[0],
+        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "machine": machine(),
+        "repeats": repeats,
+        "load_before": load_before,
+        "load_after": [round(x, 2) for x in os.getloadavg()],
+        "frames": frames,
+        "floor": floor,
+        "baselines": baselines,
+        "startup": {
+            "import_s": imp,
+            "import_process_s": imp_wall,
+            "first_call_s": t_first,
+            "import_and_first_s": t_both,
+            "numba_floor_s": numba_floor,
+        },
+        "memory": memory,
+        "batch": batch,
+        "default_method": default_method(),
+        "frame_threads": frame_threads,
+        "per_pixel": per_pixel,
+    }
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     table = markdown(record)

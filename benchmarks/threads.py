@@ -51,8 +51,11 @@ def cpu_split(method, repeats):
     t1 = rows[1][0]
     for n, (total, main) in rows.items():
         bound = t1 / (main + (total - main) / n) if n > 1 else 1.0
-        print(f"  {method:11s} {n} thread(s): CPU {total * 1e3:7.2f} ms, of which calling thread {main * 1e3:6.2f} ms"
-              + (f", bands {(total - main) * 1e3:7.2f} ms -> bound {bound:4.2f}x" if n > 1 else ""), flush=True)
+        print(
+            f"  {method:11s} {n} thread(s): CPU {total * 1e3:7.2f} ms, of which calling thread {main * 1e3:6.2f} ms"
+            + (f", bands {(total - main) * 1e3:7.2f} ms -> bound {bound:4.2f}x" if n > 1 else ""),
+            flush=True,
+        )
     return rows
 
 
@@ -76,10 +79,15 @@ def main(argv=None) -> int:
         ups = [[r[j]["speed_up"][k] for r in rounds] for k in range(len(row["threads"]))]
         ms = [statistics.median(r[j]["ms"][k] for r in rounds) for k in range(len(row["threads"]))]
         same = all(r[j]["bit_identical"] for r in rounds)
-        print(f"  {row['method']:11s} " + ", ".join(
-            f"{n} thread(s) {m:7.2f} ms" + ("" if n == 1 else f" {statistics.median(u):4.2f}x "
-                                             f"(rounds {min(u):.2f}-{max(u):.2f})")
-            for n, m, u in zip(row["threads"], ms, ups)) + f"; bit-identical in every round: {same}")
+        print(
+            f"  {row['method']:11s} "
+            + ", ".join(
+                f"{n} thread(s) {m:7.2f} ms"
+                + ("" if n == 1 else f" {statistics.median(u):4.2f}x (rounds {min(u):.2f}-{max(u):.2f})")
+                for n, m, u in zip(row["threads"], ms, ups)
+            )
+            + f"; bit-identical in every round: {same}"
+        )
     if args.cpu:
         print("\nCPU time of one call (1280x960):")
         for method in speed.scaling_methods():

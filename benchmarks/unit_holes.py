@@ -33,7 +33,7 @@ def random_holes(shape, rng):
     for _ in range(12):
         s = int(rng.integers(4, 17))
         v, u = int(rng.integers(0, shape[0] - s)), int(rng.integers(0, shape[1] - s))
-        holes[v:v + s, u:u + s] = True
+        holes[v : v + s, u : u + s] = True
     return holes
 
 
@@ -69,11 +69,13 @@ def table(args, names, factor):
         ys, xs = np.nonzero(f.mask)
         v, u = int(np.median(ys)), int(np.median(xs))  # a 10x10 hole in the object
         square = np.zeros(mm.shape, bool)
-        square[v:v + 10, u:u + 10] = True
+        square[v : v + 10, u : u + 10] = True
         frames.append((f, mm, holes, square))
     depths = np.concatenate([mm[f.mask] for f, mm, _, _ in frames]) / 1000
-    print(f"\n{len(frames)} frames from {args.root}, depth unit = {factor:g} mm "
-          f"(object depth {depths.min():.2f} to {depths.max():.2f} m, median {np.median(depths):.2f} m)\n")
+    print(
+        f"\n{len(frames)} frames from {args.root}, depth unit = {factor:g} mm "
+        f"(object depth {depths.min():.2f} to {depths.max():.2f} m, median {np.median(depths):.2f} m)\n"
+    )
     print("| method | differing > 1e-4, no holes | with holes | 180-degree flips | far changes from one 10x10 hole |")
     print("|---|---|---|---|---|")
     for name in names:
@@ -88,16 +90,20 @@ def table(args, names, factor):
                 b = surfnorm.estimate(b_in, f.K, method=name, mask=f.mask, scale_invariant=True, fill=np.nan)
                 cells[row] += compare(a, b)
             plain = surfnorm.estimate(mm, f.K, method=name, mask=f.mask, scale_invariant=True, fill=np.nan)
-            holed = surfnorm.estimate(np.where(square, np.nan, mm), f.K, method=name, mask=f.mask,
-                                      scale_invariant=True, fill=np.nan)
+            holed = surfnorm.estimate(
+                np.where(square, np.nan, mm), f.K, method=name, mask=f.mask, scale_invariant=True, fill=np.nan
+            )
             far = cv2.dilate(square.astype(np.uint8), np.ones((21, 21), np.uint8)) == 0
             d = np.abs(np.nan_to_num(holed - plain, nan=2.0)).max(-1)
             have = ~np.isnan(plain[..., 0]) | ~np.isnan(holed[..., 0])
             far_changes += int((far & have & (d > 1e-4)).sum())
             far_total += int((far & ~np.isnan(plain[..., 0])).sum())
         share = lambda c: f"{c[0]}/{c[2]} = {100 * c[0] / max(c[2], 1):.4f} %"
-        print(f"| {name} | {share(cells[0])} | {share(cells[1])} | {cells[0, 1] + cells[1, 1]} | "
-              f"{far_changes}/{far_total} |", flush=True)
+        print(
+            f"| {name} | {share(cells[0])} | {share(cells[1])} | {cells[0, 1] + cells[1, 1]} | "
+            f"{far_changes}/{far_total} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -49,7 +49,9 @@ def main(argv=None):
             f = read_frame(args.root, n)
             mm = np.rint(f.depth.astype(np.float64) * 1000).astype(np.float32)  # integers, exact in float32
             frames.append((f.name, mm, (mm.astype(np.float64) / 1000).astype(np.float32), f.K, f.mask))
-    print("| method | test frame: differing / with normal (max diff) | 12 sample frames: differing / with normal (max diff) |")
+    print(
+        "| method | test frame: differing / with normal (max diff) | 12 sample frames: differing / with normal (max diff) |"
+    )
     print("|---|---|---|")
     for name in names:
         cells = {}

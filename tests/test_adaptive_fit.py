@@ -9,10 +9,10 @@ import pytest
 
 import surfnorm
 from surfnorm import InputError
-from surfnorm.kernels.adaptive_fit import noise_profile
-from surfnorm.kernels.auto import choose
 from surfnorm.camera import Intrinsics
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+from surfnorm.kernels.adaptive_fit import noise_profile
+from surfnorm.kernels.auto import choose
 
 from . import naive_adaptive_fit as naive
 from .surfaces import camera, plane, sphere
@@ -96,13 +96,13 @@ def test_step_edges_keep_their_side():
     H, W = 40, 60
     K = camera(W, H)
     z = np.full((H, W), 1.0)
-    z[:, W // 2:] = 1.1
+    z[:, W // 2 :] = 1.1
     rng = np.random.default_rng(0)
     z = np.round((z + rng.normal(0, 0.0005, z.shape)) / 0.001) * 0.001
     got = surfnorm.estimate(z.astype(np.float32), K, method="adaptive_fit")
     err = angles_deg(got, np.broadcast_to([0.0, 0.0, -1.0], got.shape))
     assert np.percentile(err, 95) < 3.0
-    assert err[:, W // 2 - 3:W // 2 + 3].mean() < 5.0
+    assert err[:, W // 2 - 3 : W // 2 + 3].mean() < 5.0
 
 
 def test_sparse_depth_gets_normals():
@@ -171,8 +171,8 @@ def test_auto_tau_is_checked():
 
 def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     """Between CLEAN_FLOOR and NOISY_FLOOR auto is the normalised weighted mean of both estimators' normals."""
-    from surfnorm.kernels.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
     from surfnorm.kernels.adaptive_fit import NoiseProfile
+    from surfnorm.kernels.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
 
     one = np.ones(1)
     assert adaptive_weight(NoiseProfile(one, one, CLEAN_FLOOR)) == 0.0
@@ -194,7 +194,6 @@ def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     else:
         pytest.fail("no noise level put the floor inside the band")
 
-
     t = adaptive_weight(noise_profile(z, z > 0, float(K[0, 0])))
     a = surfnorm.estimate(z, K, method="d2nt_v3", fill=np.nan)
     b = surfnorm.estimate(z, K, method="adaptive_fit", fill=np.nan)
@@ -213,8 +212,14 @@ def test_window_ties_go_the_same_way_in_every_unit():
         f = read_frame(sample_root(), name)
         mm = np.rint(f.depth.astype(np.float64) * 10).astype(np.float32)
         a = surfnorm.estimate(mm, f.K, method="adaptive_fit", mask=f.mask, scale_invariant=True, fill=np.nan)
-        b = surfnorm.estimate((mm.astype(np.float64) / 1000).astype(np.float32), f.K, method="adaptive_fit",
-                              mask=f.mask, scale_invariant=True, fill=np.nan)
+        b = surfnorm.estimate(
+            (mm.astype(np.float64) / 1000).astype(np.float32),
+            f.K,
+            method="adaptive_fit",
+            mask=f.mask,
+            scale_invariant=True,
+            fill=np.nan,
+        )
         have = ~np.isnan(a[..., 0]) | ~np.isnan(b[..., 0])
         differing += int((have & (np.abs(np.nan_to_num(b - a, nan=2.0)).max(-1) > 1e-4)).sum())
         total += int(have.sum())

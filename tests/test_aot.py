@@ -81,8 +81,11 @@ def built(tmp_path_factory):
     if shutil.which(os.environ.get("CC", "cc")) is None and shutil.which("gcc") is None:
         pytest.skip("no C compiler: Numba's AOT compiler needs one to link its runtime")
     root = tmp_path_factory.mktemp("aot")
-    shutil.copytree(PACKAGE, root / "surfnorm", ignore=shutil.ignore_patterns(
-        "__pycache__", "*.nbi", "*.nbc", "data", "_aot_*.so", "_aot_*.pyd", _aot.INDEX))
+    shutil.copytree(
+        PACKAGE,
+        root / "surfnorm",
+        ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc", "data", "_aot_*.so", "_aot_*.pyd", _aot.INDEX),
+    )
     _run(BUILD, root, root / "build-cache", str(root / "surfnorm"), *KERNELS)
     return root
 
@@ -144,7 +147,9 @@ def test_kernel_runs_the_aot_code_for_exported_types_only(monkeypatch):
 
     exported = str((typeof(x), typeof(out)))
     monkeypatch.setitem(_aot._state, "loaded", True)
-    monkeypatch.setitem(_aot._state, "module", (type("M", (), {"k0": staticmethod(fake)}), {kernel.name: [["k0", exported]]}))
+    monkeypatch.setitem(
+        _aot._state, "module", (type("M", (), {"k0": staticmethod(fake)}), {kernel.name: [["k0", exported]]})
+    )
     kernel(x, out)
     assert calls == ["aot"] and not dispatcher.signatures
     kernel(x.astype(np.float32), out)  # not exported: the JIT compiles it

@@ -7,6 +7,7 @@ import pytest
 
 import surfnorm
 from surfnorm import InputError
+
 from .surfaces import camera, scene
 
 K = np.array([[100.0, 0, 15.5], [0, 100.0, 11.5], [0, 0, 1]])
@@ -114,15 +115,30 @@ def _batch_z_components(stack):
 
 
 BAD_DEPTH = [
-    (np.zeros((4, 5, 6, 2)), "depth: expected a 2-D array (H, W) or a stack (N, H, W), got an array of shape (4, 5, 6, 2)"),
+    (
+        np.zeros((4, 5, 6, 2)),
+        "depth: expected a 2-D array (H, W) or a stack (N, H, W), got an array of shape (4, 5, 6, 2)",
+    ),
     (np.zeros(7), "depth: expected a 2-D array (H, W) or a stack (N, H, W), got an array of shape (7,)"),
     (np.zeros((0, 0)), "depth: expected at least 3x3 pixels, got shape (0, 0)"),
     (np.zeros((2, 2)), "depth: expected at least 3x3 pixels, got shape (2, 2)"),
     (np.zeros((1, 9)), "depth: expected at least 3x3 pixels, got shape (1, 9)"),
-    (np.zeros((4, 4), bool), "depth: expected real-valued depth (float or integer), got an array of shape (4, 4) and dtype bool"),
-    (np.zeros((4, 4), complex), "depth: expected real-valued depth (float or integer), got an array of shape (4, 4) and dtype complex128"),
-    (np.array([["a", "b", "c"]] * 3), "depth: expected real-valued depth (float or integer), got an array of shape (3, 3) and dtype <U1"),
-    (np.empty((3, 3), object), "depth: expected real-valued depth (float or integer), got an array of shape (3, 3) and dtype object"),
+    (
+        np.zeros((4, 4), bool),
+        "depth: expected real-valued depth (float or integer), got an array of shape (4, 4) and dtype bool",
+    ),
+    (
+        np.zeros((4, 4), complex),
+        "depth: expected real-valued depth (float or integer), got an array of shape (4, 4) and dtype complex128",
+    ),
+    (
+        np.array([["a", "b", "c"]] * 3),
+        "depth: expected real-valued depth (float or integer), got an array of shape (3, 3) and dtype <U1",
+    ),
+    (
+        np.empty((3, 3), object),
+        "depth: expected real-valued depth (float or integer), got an array of shape (3, 3) and dtype object",
+    ),
     (None, "depth: expected a 2-D array of depth values, got None"),
 ]
 
@@ -154,7 +170,9 @@ def test_bad_K(K_, message):
 
 
 def test_bad_K_stack():
-    with pytest.raises(InputError, match=r"K: expected shape \(3, 3\) or \(2, 3, 3\) for 2 frames, got shape \(3, 3, 3\)"):
+    with pytest.raises(
+        InputError, match=r"K: expected shape \(3, 3\) or \(2, 3, 3\) for 2 frames, got shape \(3, 3, 3\)"
+    ):
         surfnorm.estimate(np.ones((2, 5, 5)), np.stack([K] * 3))
 
 
@@ -168,7 +186,10 @@ def test_bad_intrinsics_object():
 def test_bad_mask():
     with pytest.raises(InputError, match=r"mask: expected shape \(24, 32\) to match depth, got shape \(24, 31\)"):
         surfnorm.estimate(wall(), K, mask=np.ones((24, 31), bool))
-    with pytest.raises(InputError, match=r"mask: expected a boolean array \(True where depth is usable\), got an array of shape \(24, 32\) and dtype <U1"):
+    with pytest.raises(
+        InputError,
+        match=r"mask: expected a boolean array \(True where depth is usable\), got an array of shape \(24, 32\) and dtype <U1",
+    ):
         surfnorm.estimate(wall(), K, mask=np.full((24, 32), "y"))
 
 
@@ -179,25 +200,44 @@ def test_bad_out():
     depth_and_room = np.ones((4, 24, 32), np.float32)  # depth in plane 0, and room that a wrong out= could reuse
     cases = [
         ([], r"out: expected a float32 NumPy array of shape \(24, 32, 3\) to write the normals into, got list"),
-        (np.empty(shape), r"out: expected a float32 array of shape \(24, 32, 3\), got an array of shape \(24, 32, 3\) and dtype float64"),
-        (np.empty((2,) + shape, np.float32), r"out: expected a float32 array of shape \(24, 32, 3\), got an array of shape \(2, 24, 32, 3\)"),
-        (np.empty((24, 32, 4), np.float32)[..., :3], r"out: expected a C-contiguous array \(written in place\), got a non-contiguous view"),
+        (
+            np.empty(shape),
+            r"out: expected a float32 array of shape \(24, 32, 3\), got an array of shape \(24, 32, 3\) and dtype float64",
+        ),
+        (
+            np.empty((2,) + shape, np.float32),
+            r"out: expected a float32 array of shape \(24, 32, 3\), got an array of shape \(2, 24, 32, 3\)",
+        ),
+        (
+            np.empty((24, 32, 4), np.float32)[..., :3],
+            r"out: expected a C-contiguous array \(written in place\), got a non-contiguous view",
+        ),
         (read_only, r"out: expected a writeable array, got a read-only one"),
-        (depth_and_room.reshape(-1)[:24 * 32 * 3].reshape(shape), r"out: expected an array apart from depth, got one that shares memory with it"),
+        (
+            depth_and_room.reshape(-1)[: 24 * 32 * 3].reshape(shape),
+            r"out: expected an array apart from depth, got one that shares memory with it",
+        ),
     ]
     for out, message in cases:
         with pytest.raises(InputError, match=message):
             surfnorm.estimate(depth_and_room[0], K, out=out)
-    with pytest.raises(InputError, match=r"out: expected a float32 array of shape \(2, 24, 32, 3\), got an array of shape \(24, 32, 3\)"):
+    with pytest.raises(
+        InputError,
+        match=r"out: expected a float32 array of shape \(2, 24, 32, 3\), got an array of shape \(24, 32, 3\)",
+    ):
         surfnorm.estimate(np.stack([wall(), wall()]), K, out=np.empty(shape, np.float32))
 
 
 def test_unknown_method_and_options():
-    with pytest.raises(InputError, match=r"method: expected one of d2nt_basic, .* \(optionally followed by '\+mnr'\), got 'd2nt_v9'"):
+    with pytest.raises(
+        InputError, match=r"method: expected one of d2nt_basic, .* \(optionally followed by '\+mnr'\), got 'd2nt_v9'"
+    ):
         surfnorm.estimate(wall(), K, method="d2nt_v9")
     with pytest.raises(InputError, match=r"method: expected a method name \(str\), got int 3"):
         surfnorm.estimate(wall(), K, method=3)
-    with pytest.raises(InputError, match=r"options of method 'd2nt_basic': expected some of border, fill, got unknown option\(s\) dlf"):
+    with pytest.raises(
+        InputError, match=r"options of method 'd2nt_basic': expected some of border, fill, got unknown option\(s\) dlf"
+    ):
         surfnorm.estimate(wall(), K, method="d2nt_basic", dlf="alpha")
     with pytest.raises(InputError, match=r"dlf: expected one of '1d', 'alpha', 'beta', 'gamma', got 'delta'"):
         surfnorm.estimate(wall(), K, method="d2nt_v2", dlf="delta")
@@ -220,7 +260,10 @@ def test_refine_errors_and_identity_on_plane():
     np.testing.assert_array_equal(surfnorm.refine(n, wall()), n)
     with pytest.raises(InputError, match=r"normals: expected shape \(24, 32, 3\) to match depth, got shape \(24, 32\)"):
         surfnorm.refine(n[..., 0], wall())
-    with pytest.raises(InputError, match=r"normals: expected a float array of shape \(24, 32, 3\), got an array of shape \(24, 32, 3\) and dtype int64"):
+    with pytest.raises(
+        InputError,
+        match=r"normals: expected a float array of shape \(24, 32, 3\), got an array of shape \(24, 32, 3\) and dtype int64",
+    ):
         surfnorm.refine(n.astype(np.int64), wall())
     with pytest.raises(InputError, match=r"dlf: expected one of"):
         surfnorm.refine(n, wall(), dlf="sobel")
@@ -242,7 +285,6 @@ def test_methods_registry():
 SCENE_K = camera(64, 48)
 
 
-
 @pytest.mark.parametrize("method", ["d2nt_v3", "3f2n_median", "plane_pca", "sda_sne", "angle_weighted+mnr"])
 def test_masked_arrays_mask_pixels(method):
     z = scene()
@@ -250,14 +292,19 @@ def test_masked_arrays_mask_pixels(method):
     hidden = rng.random(z.shape) < 0.1
     garbage = np.where(hidden, rng.uniform(0.1, 50, z.shape), z).astype(np.float32)
     expected = surfnorm.estimate(z, SCENE_K, method=method, mask=~hidden)
-    np.testing.assert_array_equal(surfnorm.estimate(np.ma.masked_array(garbage, hidden), SCENE_K, method=method), expected)
+    np.testing.assert_array_equal(
+        surfnorm.estimate(np.ma.masked_array(garbage, hidden), SCENE_K, method=method), expected
+    )
     # the mask argument as a masked array: masked entries are unusable; both masks combine
     other = rng.random(z.shape) < 0.05
     m = np.ma.masked_array(np.ones(z.shape, bool), other)
-    np.testing.assert_array_equal(surfnorm.estimate(np.ma.masked_array(garbage, hidden), SCENE_K, method=method, mask=m),
-                                  surfnorm.estimate(z, SCENE_K, method=method, mask=~hidden & ~other))
-    stack = surfnorm.estimate(np.ma.masked_array(np.stack([garbage, garbage]), np.stack([hidden, hidden])), SCENE_K,
-                              method=method)
+    np.testing.assert_array_equal(
+        surfnorm.estimate(np.ma.masked_array(garbage, hidden), SCENE_K, method=method, mask=m),
+        surfnorm.estimate(z, SCENE_K, method=method, mask=~hidden & ~other),
+    )
+    stack = surfnorm.estimate(
+        np.ma.masked_array(np.stack([garbage, garbage]), np.stack([hidden, hidden])), SCENE_K, method=method
+    )
     np.testing.assert_array_equal(stack[1], expected)
 
 

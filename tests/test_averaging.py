@@ -7,8 +7,8 @@ import pytest
 
 import surfnorm
 from surfnorm import _api
-from surfnorm.kernels.averaging import RING
 from surfnorm.errors import InputError
+from surfnorm.kernels.averaging import RING
 
 from . import surfaces
 from .naive_averaging import averaging as naive_averaging
@@ -79,7 +79,9 @@ def test_triangle_needs_both_neighbours(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("normal", [(0, 0, -1), (0.3, -0.2, -0.9), (-0.7, 0.1, -0.5), (0.0, 0.8, -0.3), (0.5, 0.5, -0.2)])
+@pytest.mark.parametrize(
+    "normal", [(0, 0, -1), (0.3, -0.2, -0.9), (-0.7, 0.1, -0.5), (0.0, 0.8, -0.3), (0.5, 0.5, -0.2)]
+)
 def test_exact_on_planes(method, normal):
     depth, n_true, hit = surfaces.plane(K, H, W, normal, 2.0)
     out = surfnorm.estimate(depth, K, method=method)
@@ -121,7 +123,9 @@ def test_registered_with_category_and_reference():
 
 
 def test_window_option_is_refused():
-    with pytest.raises(InputError, match=r"options of method 'angle_weighted': expected some of fill, got unknown option\(s\) window"):
+    with pytest.raises(
+        InputError, match=r"options of method 'angle_weighted': expected some of fill, got unknown option\(s\) window"
+    ):
         surfnorm.estimate(smooth_depth(0), K, method="angle_weighted", window=5)
 
 

@@ -59,8 +59,7 @@ def interleaved_bands(parts):
 
 SHAPES = [(37, 53), (64, 45), (9, 71)]
 # Band edges next to the image border, next to each other (one-row bands) and in the middle.
-PARTS = [[(0, 1), (1, 2), (2, 5), (5, 6), (6, 20), (20, 35), (35, 36), (36, 10**6)],
-         [(0, 13), (13, 10**6)]]
+PARTS = [[(0, 1), (1, 2), (2, 5), (5, 6), (6, 20), (20, 35), (35, 36), (36, 10**6)], [(0, 13), (13, 10**6)]]
 
 
 @pytest.mark.parametrize("name", list(surfnorm.methods()))
@@ -77,10 +76,20 @@ def test_bands_same_bits_as_one_sweep(name):
                     valid = _api._valid(z, user_mask)
                     one = _api._run(method, refined, dict(clean), z, valid, cam)
                     for parts in PARTS:
-                        banded = _api._run(method, refined, dict(clean), z, _api._valid(z, user_mask),
-                                           cam, bands=interleaved_bands(parts))
-                        np.testing.assert_array_equal(banded.view(np.uint32), one.view(np.uint32),
-                                                      err_msg=f"{name}{suffix} {options} {(h, w)} {parts}")
+                        banded = _api._run(
+                            method,
+                            refined,
+                            dict(clean),
+                            z,
+                            _api._valid(z, user_mask),
+                            cam,
+                            bands=interleaved_bands(parts),
+                        )
+                        np.testing.assert_array_equal(
+                            banded.view(np.uint32),
+                            one.view(np.uint32),
+                            err_msg=f"{name}{suffix} {options} {(h, w)} {parts}",
+                        )
 
 
 @pytest.mark.parametrize("name", list(surfnorm.methods()))
@@ -95,8 +104,11 @@ def test_threads_same_bits_as_one_thread(name, monkeypatch):
                 one = surfnorm.estimate(z, K, method=name + suffix, threads=1, **kwargs, **options)
                 for threads in (2, 3, 7):
                     many = surfnorm.estimate(z, K, method=name + suffix, threads=threads, **kwargs, **options)
-                    np.testing.assert_array_equal(many.view(np.uint32), one.view(np.uint32),
-                                                  err_msg=f"{name}{suffix} {options} {kwargs} threads={threads}")
+                    np.testing.assert_array_equal(
+                        many.view(np.uint32),
+                        one.view(np.uint32),
+                        err_msg=f"{name}{suffix} {options} {kwargs} threads={threads}",
+                    )
 
 
 def test_bands_really_split_one_frame(monkeypatch):

@@ -18,8 +18,8 @@ from typer.testing import CliRunner
 
 import surfnorm
 from surfnorm import Intrinsics
-from surfnorm.cli import app
 from surfnorm.batch import ConvertSettings, ConvertTask, FileResult, convert, convert_file, plan_tasks
+from surfnorm.cli import app
 from surfnorm.errors import InputError
 from surfnorm.io import read_depth, read_normals
 
@@ -92,7 +92,10 @@ def test_plan_glob_and_list(tmp_path):
         p.write_bytes(b"x")
     tasks = plan_tasks(str(tmp_path / "s*" / "depth" / "*.png"), tmp_path / "out")
     assert [t.output.relative_to(tmp_path / "out") for t in tasks] == [
-        Path("s1/depth/0001.npy"), Path("s1/depth/0002.npy"), Path("s2/depth/0001.npy")]
+        Path("s1/depth/0001.npy"),
+        Path("s1/depth/0002.npy"),
+        Path("s2/depth/0001.npy"),
+    ]
     listed = plan_tasks([tmp_path / "s1/depth/0002.png", str(tmp_path / "s1/depth/0001.png")], tmp_path / "out")
     assert [t.output.name for t in listed] == ["0002.npy", "0001.npy"]
     with pytest.raises(InputError, match=r"inputs: .*0001.png and .*0001.png would both be written to .*0001.npy"):
@@ -103,13 +106,19 @@ def test_plan_errors(tmp_path):
     (tmp_path / "a.npy").write_bytes(b"x")
     with pytest.raises(InputError, match=r"output_dir: writing .*a.npy would replace its input"):
         plan_tasks([tmp_path / "a.npy"], tmp_path, "npy")
-    with pytest.raises(InputError, match=r"output_dir: expected a folder other than the input folder .*, got .*; "
-                                         r"its outputs would be read as inputs by the next run"):
+    with pytest.raises(
+        InputError,
+        match=r"output_dir: expected a folder other than the input folder .*, got .*; "
+        r"its outputs would be read as inputs by the next run",
+    ):
         plan_tasks(tmp_path, tmp_path, "png16")
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match=r"inputs: expected at least one depth file, found none in .*empty"):
         plan_tasks(tmp_path / "empty", tmp_path / "out")
-    with pytest.raises(InputError, match=r"inputs: expected a depth file, a folder or a glob pattern, got '.*nope', which does not exist"):
+    with pytest.raises(
+        InputError,
+        match=r"inputs: expected a depth file, a folder or a glob pattern, got '.*nope', which does not exist",
+    ):
         plan_tasks(tmp_path / "nope", tmp_path / "out")
     with pytest.raises(InputError, match=r"inputs: expected paths in the list, got int 3"):
         plan_tasks([3], tmp_path / "out")
@@ -148,8 +157,12 @@ def test_convert_file_statuses_and_determinism(tmp_path):
     b = convert_file(ConvertTask(src, tmp_path / "b" / "d.png"), settings)
     assert (a.status, b.status) == ("written", "written")
     assert (tmp_path / "a/d.png").read_bytes() == (tmp_path / "b/d.png").read_bytes()
-    assert convert_file(ConvertTask(src, tmp_path / "a" / "d.png"), settings) == FileResult(src, tmp_path / "a/d.png", "skipped", "output exists")
-    again = convert_file(ConvertTask(src, tmp_path / "a" / "d.png"), ConvertSettings(**{**settings.__dict__, "overwrite": True}))
+    assert convert_file(ConvertTask(src, tmp_path / "a" / "d.png"), settings) == FileResult(
+        src, tmp_path / "a/d.png", "skipped", "output exists"
+    )
+    again = convert_file(
+        ConvertTask(src, tmp_path / "a" / "d.png"), ConvertSettings(**{**settings.__dict__, "overwrite": True})
+    )
     assert again.status == "written"
     back = read_normals(tmp_path / "a/d.png", fill=0.0)
     n = expected_normals(src)
@@ -189,8 +202,9 @@ def test_3f2n_files_use_their_params(tmp_path):
     summary = convert(str(sample_root() / "Easy" / "*" / "depth" / "*"), tmp_path, method="d2nt_v2")
     assert summary.written == 1 and summary.ok
     frame = read_frame(sample_root(), "Easy/android/000001")
-    np.testing.assert_array_equal(np.load(tmp_path / "android/depth/000001.npy"),
-                                  surfnorm.estimate(frame.depth, frame.K, method="d2nt_v2"))
+    np.testing.assert_array_equal(
+        np.load(tmp_path / "android/depth/000001.npy"), surfnorm.estimate(frame.depth, frame.K, method="d2nt_v2")
+    )
 
 
 def test_convert_arguments_are_checked_once(tmp_path):
@@ -203,7 +217,10 @@ def test_convert_arguments_are_checked_once(tmp_path):
         convert(tmp_path, tmp_path / "o", intrinsics=CAM, jobs=0)
     with pytest.raises(InputError, match=r"depth_scale: expected a positive finite number, got -1"):
         convert(tmp_path, tmp_path / "o", intrinsics=CAM, depth_scale=-1)
-    with pytest.raises(InputError, match=r"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy \(no 3F2N params.txt beside .*d.png\)"):
+    with pytest.raises(
+        InputError,
+        match=r"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy \(no 3F2N params.txt beside .*d.png\)",
+    ):
         convert(tmp_path, tmp_path / "o")
     (tmp_path / "file").write_text("x")
     with pytest.raises(InputError, match=r"output_dir: expected a folder, got the file .*file"):
@@ -212,10 +229,20 @@ def test_convert_arguments_are_checked_once(tmp_path):
 
 def test_options_reach_the_estimator(tmp_path):
     src = depth_png(tmp_path / "d.png", 2)
-    convert([src], tmp_path / "o", method="d2nt_v2", intrinsics=CAM.matrix, depth_scale=1000, dlf="gamma", fill=np.nan,
-            scale_invariant=True)
-    np.testing.assert_array_equal(np.load(tmp_path / "o/d.npy"),
-                                  expected_normals(src, method="d2nt_v2", dlf="gamma", fill=np.nan, scale_invariant=True))
+    convert(
+        [src],
+        tmp_path / "o",
+        method="d2nt_v2",
+        intrinsics=CAM.matrix,
+        depth_scale=1000,
+        dlf="gamma",
+        fill=np.nan,
+        scale_invariant=True,
+    )
+    np.testing.assert_array_equal(
+        np.load(tmp_path / "o/d.npy"),
+        expected_normals(src, method="d2nt_v2", dlf="gamma", fill=np.nan, scale_invariant=True),
+    )
 
 
 def test_front_door_function():
@@ -234,8 +261,9 @@ def test_dask_client_is_handed_the_tasks(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "surfnorm.batch.cluster", types.SimpleNamespace(run_on_dask=run_on_dask))
     seen = []
     client = types.SimpleNamespace(submit=lambda *a, **k: None, nthreads=lambda: {})  # what convert checks a client has
-    summary = convert(srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client=client, progress=seen.append,
-                      shard_size=5)
+    summary = convert(
+        srcs, tmp_path / "o", intrinsics=CAM, depth_scale=1000, client=client, progress=seen.append, shard_size=5
+    )
     assert calls[0][2] is client and len(calls[0][0]) == 3 and calls[0][1].depth_scale == 1000
     assert calls[0][3] == 5
     assert [r.status for r in summary.results] == ["written", "written", "error"]
@@ -278,12 +306,16 @@ def test_200_pngs_with_5_corrupt(batch, tmp_path):
     assert all(str(r.input) in r.message for r in summary.errors)
     # a re-run skips the 195 and names the 5 again
     again = cli("convert", folder, out, *CAM_ARGS, "--depth-scale", "1000")
-    assert again.exit_code == 1 and "0 written, 195 skipped (output existed), 5 failed" in again.output.replace("\n", " ")
+    assert again.exit_code == 1 and "0 written, 195 skipped (output existed), 5 failed" in again.output.replace(
+        "\n", " "
+    )
 
 
 def _interrupt(command, env, out: Path, at_least: int, sig) -> subprocess.CompletedProcess:
     """Start the CLI, send ``sig`` to it and its workers once ``at_least`` outputs exist, wait for it."""
-    proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None:
@@ -305,8 +337,21 @@ def test_interrupted_and_killed_mid_run_then_restarted_finishes_every_output(tmp
     for i in range(300):
         depth_png(folder / f"{i:03d}.png", i)
     out = tmp_path / "out"
-    command = [sys.executable, "-c", "import sys; from surfnorm.cli import app; sys.argv[0] = 'surfnorm'; app()",
-               "convert", str(folder), str(out), *CAM_ARGS, "--depth-scale", "1000", "--jobs", "2", "--format", "png16"]
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from surfnorm.cli import app; sys.argv[0] = 'surfnorm'; app()",
+        "convert",
+        str(folder),
+        str(out),
+        *CAM_ARGS,
+        "--depth-scale",
+        "1000",
+        "--jobs",
+        "2",
+        "--format",
+        "png16",
+    ]
     env = {**os.environ, "PYTHONPATH": SRC}
 
     def finished():
@@ -347,8 +392,20 @@ def test_cli_estimate_writes_what_the_library_computes(tmp_path):
     (tmp_path / "cam.json").write_text(json.dumps({"fx": 60, "fy": 60, "cx": 31.5, "cy": 23.5}))
     mask = (np.arange(48 * 64).reshape(48, 64) % 5 != 0).astype(np.uint8) * 255
     cv2.imwrite(str(tmp_path / "mask.png"), mask)
-    r = cli("estimate", src, tmp_path / "n", "--intrinsics", tmp_path / "cam.json", "--depth-scale", "1000",
-            "--mask", tmp_path / "mask.png", "--scale-invariant", "--method", "d2nt_v2")
+    r = cli(
+        "estimate",
+        src,
+        tmp_path / "n",
+        "--intrinsics",
+        tmp_path / "cam.json",
+        "--depth-scale",
+        "1000",
+        "--mask",
+        tmp_path / "mask.png",
+        "--scale-invariant",
+        "--method",
+        "d2nt_v2",
+    )
     assert r.exit_code == 0, r.output
     expected = expected_normals(src, method="d2nt_v2", mask=mask > 0, scale_invariant=True)
     np.testing.assert_array_equal(np.load(tmp_path / "n.npy"), expected)
@@ -375,7 +432,9 @@ def test_cli_convert_with_intrinsics_file_and_png8(tmp_path):
     for i in range(3):
         depth_png(tmp_path / "in" / f"{i}.png", i)
     (tmp_path / "cam.json").write_text(json.dumps({"K": CAM.matrix.tolist()}))
-    r = cli("convert", tmp_path / "in", tmp_path / "out", "-k", tmp_path / "cam.json", "--depth-scale", "1000", "-f", "png8")
+    r = cli(
+        "convert", tmp_path / "in", tmp_path / "out", "-k", tmp_path / "cam.json", "--depth-scale", "1000", "-f", "png8"
+    )
     assert r.exit_code == 0, r.output
     assert "3 written, 0 skipped (output existed), 0 failed" in r.output.replace("\n", " ")
     pic = cv2.imread(str(tmp_path / "out" / "1.png"), cv2.IMREAD_UNCHANGED)

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 import surfnorm
-from surfnorm.camera import Intrinsics
 from surfnorm.batch import ConvertSettings, convert, plan_tasks
+from surfnorm.camera import Intrinsics
 from surfnorm.errors import InputError, MissingDependencyError
 
 try:
@@ -29,7 +29,9 @@ try:
 except ImportError:  # pragma: no cover - the shared venv has it
     distributed = None
 
-needs_dask = pytest.mark.skipif(distributed is None, reason='dask.distributed is not installed (pip install "surfnorm[dask]")')
+needs_dask = pytest.mark.skipif(
+    distributed is None, reason='dask.distributed is not installed (pip install "surfnorm[dask]")'
+)
 
 H, W = 48, 64
 N_FILES = 100
@@ -69,6 +71,7 @@ def expected_names(inputs) -> list[str]:
 
 
 # --- worker-side misbehaviour, installed with a WorkerPlugin ---------------------------------------
+
 
 class PatchConvertFile(distributed.WorkerPlugin if distributed is not None else object):
     """Worker plugin: wrap ``surfnorm.batch.tasks.convert_file`` in each worker process with ``wrapper(real, task, settings)``."""
@@ -127,6 +130,7 @@ def wait_for_marker(real, task, settings, *, victim, marker, seconds):
 
 # --- fixtures ---------------------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def client():
     if distributed is None:  # pragma: no cover
@@ -184,6 +188,7 @@ def assert_same_bytes(out: Path, reference: Path, inputs):
 
 # --- acceptance 1: a 2-worker LocalCluster writes what the local path writes ----------------------
 
+
 @needs_dask
 def test_cluster_outputs_identical_to_local(client, inputs, local_outputs, tmp_path):
     seen = []
@@ -238,6 +243,7 @@ def test_results_stream_back_as_shards_finish(client, inputs, patched, tmp_path)
 
 # --- acceptance 2: a worker killed mid-shard loses nothing -----------------------------------------
 
+
 @needs_dask
 def test_worker_killed_mid_write_loses_nothing(client, inputs, local_outputs, patched, tmp_path):
     marker = tmp_path / "killed-once"
@@ -287,12 +293,15 @@ def test_exception_escaping_convert_file_is_that_files_error(client, inputs, loc
     status = [r.status for r in results]
     # the shard d005..d009 raised after writing d005; its files were run again one per task
     assert status == ["written"] * 5 + ["skipped", "error"] + ["written"] * 3
-    assert results[6].message == f"{inputs[6]}: failed on a worker: RuntimeError: simulated failure outside convert_file"
+    assert (
+        results[6].message == f"{inputs[6]}: failed on a worker: RuntimeError: simulated failure outside convert_file"
+    )
     rest = [p for p in inputs[:10] if p.name != "d006.png"]
     assert_same_bytes(out, local_outputs, rest)
 
 
 # --- shard size, temporaries, errors ---------------------------------------------------------------
+
 
 def test_default_shard_size():
     from surfnorm.batch.cluster import MAX_SHARD, MIN_SHARD, default_shard_size
@@ -361,6 +370,7 @@ def test_cluster_client_unreachable_address():
 
 # --- the command line -------------------------------------------------------------------------------
 
+
 def cli(*args):
     from typer.testing import CliRunner
 
@@ -378,8 +388,16 @@ CAMERA_FLAGS = ["--depth-scale", "1000", "--fx", CAM.fx, "--fy", CAM.fy, "--cx",
 @needs_dask
 def test_cli_cluster_address(client, inputs, local_outputs, tmp_path):
     out = tmp_path / "out"
-    result = cli("convert", inputs[0].parent / "d00*.png", out, *CAMERA_FLAGS,
-                 "--cluster", client.scheduler.address, "--shard-size", 3)
+    result = cli(
+        "convert",
+        inputs[0].parent / "d00*.png",
+        out,
+        *CAMERA_FLAGS,
+        "--cluster",
+        client.scheduler.address,
+        "--shard-size",
+        3,
+    )
     assert result.exit_code == 0, result.output
     assert "10 written, 0 skipped (output existed), 0 failed" in result.stdout
     assert_same_bytes(out, local_outputs, inputs[:10])
@@ -393,13 +411,19 @@ def test_cli_local_cluster(inputs, local_outputs, tmp_path):
     assert_same_bytes(out, local_outputs, inputs[10:20])
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--cluster", "tcp://127.0.0.1:9", "--local-cluster", 2], "--cluster and --local-cluster: expected one of them, got both"),
-    (["--local-cluster", 2, "--jobs", 2], "--jobs: a local process pool and a Dask cluster are alternatives"),
-    (["--shard-size", 8], "--shard-size: applies to a Dask run; add --cluster ADDRESS or --local-cluster N"),
-    (["--local-cluster", 2, "--shard-size", 0], "--shard-size: expected a positive integer, got 0"),
-    (["--local-cluster", 0], "local_workers: expected a positive whole number, got 0"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["--cluster", "tcp://127.0.0.1:9", "--local-cluster", 2],
+            "--cluster and --local-cluster: expected one of them, got both",
+        ),
+        (["--local-cluster", 2, "--jobs", 2], "--jobs: a local process pool and a Dask cluster are alternatives"),
+        (["--shard-size", 8], "--shard-size: applies to a Dask run; add --cluster ADDRESS or --local-cluster N"),
+        (["--local-cluster", 2, "--shard-size", 0], "--shard-size: expected a positive integer, got 0"),
+        (["--local-cluster", 0], "local_workers: expected a positive whole number, got 0"),
+    ],
+)
 def test_cli_usage_errors(inputs, tmp_path, args, message):
     result = cli("convert", inputs[0], tmp_path / "out", *CAMERA_FLAGS, *args)
     assert result.exit_code == 2

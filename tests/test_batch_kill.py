@@ -83,7 +83,9 @@ def _kill_at_random(command, out: Path, rng: random.Random) -> tuple[int, list[s
     before = len(_outputs(out))
     target = rng.randint(before, before + (N_FILES - before) // 3)  # early enough that the run is still going
     env = {**os.environ, "PYTHONPATH": SRC}
-    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     try:
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline and proc.poll() is None and len(_outputs(out)) < target:
@@ -120,8 +122,16 @@ def test_killed_at_random_moments_then_rerun_gives_the_clean_bytes(dataset, tmp_
     folder, clean = dataset
     extra, kills = MODES[mode]
     out = tmp_path / "out"
-    command = [sys.executable, "-c", "import sys; from surfnorm.cli import app; sys.argv[0] = 'surfnorm'; app()",
-               "convert", str(folder), str(out), *CAM_ARGS, *extra]
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from surfnorm.cli import app; sys.argv[0] = 'surfnorm'; app()",
+        "convert",
+        str(folder),
+        str(out),
+        *CAM_ARGS,
+        *extra,
+    ]
     rng = random.Random(f"surfnorm-kill-{mode}")
     for trial in range(kills):
         at_kill, left = _kill_at_random(command, out, rng)

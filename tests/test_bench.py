@@ -26,8 +26,15 @@ FAST = ["d2nt_basic", "cp2tv"]  # fast estimators for a small bench
 
 def small(tmp_path, **kw) -> BenchConfig:
     """One frame (Easy), two fast methods, no peers, Table III only, one timed call."""
-    base = dict(root=sample_root(), out=tmp_path / "report", methods=FAST, peers=[], levels=("Easy",),
-                repeats=1, tables=("table3",))
+    base = dict(
+        root=sample_root(),
+        out=tmp_path / "report",
+        methods=FAST,
+        peers=[],
+        levels=("Easy",),
+        repeats=1,
+        tables=("table3",),
+    )
     base.update(kw)
     return BenchConfig(**base)
 
@@ -42,11 +49,30 @@ def d2nt_importable() -> bool:
 
 # ---------------------------------------------------------------------------- CLI, report structure
 
+
 class TestCli:
     def test_small_bench_with_the_d2nt_peer(self, tmp_path):
         out = tmp_path / "rep"
-        res = CliRunner().invoke(app, ["bench", "--out", str(out), "--levels", "Easy", "--methods", "d2nt_basic,cp2tv",
-                                       "--peers", "d2nt", "--tables", "table3", "--repeats", "1", "--jobs", "1"])
+        res = CliRunner().invoke(
+            app,
+            [
+                "bench",
+                "--out",
+                str(out),
+                "--levels",
+                "Easy",
+                "--methods",
+                "d2nt_basic,cp2tv",
+                "--peers",
+                "d2nt",
+                "--tables",
+                "table3",
+                "--repeats",
+                "1",
+                "--jobs",
+                "1",
+            ],
+        )
         assert res.exit_code == 0, res.output
         text = (out / "report.md").read_text()
         assert "## Table III: speed, accuracy and trade-off" in text
@@ -70,22 +96,42 @@ class TestCli:
 
     def test_without_peers(self, tmp_path):
         out = tmp_path / "rep"
-        res = CliRunner().invoke(app, ["bench", str(sample_root()), "--out", str(out), "--levels", "Easy",
-                                       "--methods", "cp2tv", "--peers", "none", "--tables", "table3", "--repeats", "1"])
+        res = CliRunner().invoke(
+            app,
+            [
+                "bench",
+                str(sample_root()),
+                "--out",
+                str(out),
+                "--levels",
+                "Easy",
+                "--methods",
+                "cp2tv",
+                "--peers",
+                "none",
+                "--tables",
+                "table3",
+                "--repeats",
+                "1",
+            ],
+        )
         assert res.exit_code == 0, res.output
         doc = json.loads((out / "results.json").read_text())
         assert [r["method"] for r in doc["table3"]] == ["cp2tv"]
         assert not any("peer" in k for k in doc["skipped"])
 
-    @pytest.mark.parametrize("args, message", [
-        (["--methods", "nope"], "methods: expected names from"),
-        (["--peers", "matlab"], "peers: expected some of d2nt, kornia, open3d, opencv, got 'matlab'"),
-        (["--levels", "Extreme"], "levels: expected some of Easy, Medium, Hard, got 'Extreme'"),
-        (["--tables", "table9"], "tables: expected some of table2, table3, table4, noise, fig4, got 'table9'"),
-        (["--jobs", "0"], "jobs: expected a positive integer, got 0"),
-        (["--repeats", "0"], "repeats: expected a positive integer, got 0"),
-        (["--frames-per-object", "0"], "frames_per_object: expected a positive integer, got 0"),
-    ])
+    @pytest.mark.parametrize(
+        "args, message",
+        [
+            (["--methods", "nope"], "methods: expected names from"),
+            (["--peers", "matlab"], "peers: expected some of d2nt, kornia, open3d, opencv, got 'matlab'"),
+            (["--levels", "Extreme"], "levels: expected some of Easy, Medium, Hard, got 'Extreme'"),
+            (["--tables", "table9"], "tables: expected some of table2, table3, table4, noise, fig4, got 'table9'"),
+            (["--jobs", "0"], "jobs: expected a positive integer, got 0"),
+            (["--repeats", "0"], "repeats: expected a positive integer, got 0"),
+            (["--frames-per-object", "0"], "frames_per_object: expected a positive integer, got 0"),
+        ],
+    )
     def test_usage_errors_exit_2(self, tmp_path, args, message):
         res = CliRunner().invoke(app, ["bench", "--out", str(tmp_path / "r"), *args])
         assert res.exit_code == 2
@@ -99,13 +145,19 @@ class TestCli:
 
 # ---------------------------------------------------------------------------- all experiments
 
+
 def test_every_table_and_figure_on_one_frame(tmp_path):
     cfg = small(tmp_path, methods=["d2nt_basic"], tables=runner.TABLES, noise_std=(0.0, 0.001))
     result = run_bench(cfg)
     paths = write_report(result, cfg.out)
     text = paths["report"].read_text()
-    for section in ("## Table III", "## Table II: the four discrete Laplace filters", "## Table IV: MNR after 3F2N and CP2TV",
-                    "## Fig. 3: robustness to Gaussian noise", "## Figures"):
+    for section in (
+        "## Table III",
+        "## Table II: the four discrete Laplace filters",
+        "## Table IV: MNR after 3F2N and CP2TV",
+        "## Fig. 3: robustness to Gaussian noise",
+        "## Figures",
+    ):
         assert section in text
     # the paper's numbers sit beside ours
     assert "[1.19]" in text and "[0.79]" in text  # Table II
@@ -125,7 +177,10 @@ def test_every_table_and_figure_on_one_frame(tmp_path):
     clean = summary[result.experiments["noise"]["d2nt_basic/0"]]["e_a"]["Easy"]
     assert noisy > clean  # noise hurts
     # Table II's D2NT+DAG with the 1D DLF is d2nt_v2 with its defaults: the same number as the noise study's sigma 0
-    assert summary[result.experiments["table2"]["D2NT+DAG/1d"]]["e_a"] == summary[result.experiments["noise"]["d2nt_v2/0"]]["e_a"]
+    assert (
+        summary[result.experiments["table2"]["D2NT+DAG/1d"]]["e_a"]
+        == summary[result.experiments["noise"]["d2nt_v2/0"]]["e_a"]
+    )
 
 
 def test_d2nt_family_equals_estimate(tmp_path):
@@ -140,6 +195,7 @@ def test_d2nt_family_equals_estimate(tmp_path):
 
 
 # ---------------------------------------------------------------------------- resuming, failures
+
 
 def test_rerun_reuses_cached_results(tmp_path, monkeypatch):
     cfg = small(tmp_path)
@@ -176,7 +232,9 @@ def test_failing_method_and_missing_peer_are_reported(tmp_path, monkeypatch):
     def broken(z, valid, cam, out, *, fill):
         raise RuntimeError("kernel exploded")
 
-    monkeypatch.setitem(_REGISTRY, "bench_test_broken", Method("bench_test_broken", "depth-to-normal", "test", "fails", broken))
+    monkeypatch.setitem(
+        _REGISTRY, "bench_test_broken", Method("bench_test_broken", "depth-to-normal", "test", "fails", broken)
+    )
 
     def absent():
         raise ImportError("No module named 'nosuchlib'")
@@ -208,8 +266,13 @@ def test_layout_with_more_frames_broken_and_missing_ones(tmp_path):
     (hard / "normal" / "000001.png").write_bytes(b"not a png")  # unreadable ground truth
     cfg = small(tmp_path, root=root, levels=("Easy", "Medium", "Hard"))
     result = run_bench(cfg)
-    assert result.frames == ["Easy/android/000001", "Easy/android/000002", "Easy/android/000003",
-                             "Medium/Trex/000001", "Hard/batman/000001"]
+    assert result.frames == [
+        "Easy/android/000001",
+        "Easy/android/000002",
+        "Easy/android/000003",
+        "Medium/Trex/000001",
+        "Hard/batman/000001",
+    ]
     assert set(result.unreadable) == {"Easy/android/000003", "Easy/android/000004", "Hard/batman/000001"}
     assert "expected 1228800 bytes" in result.unreadable["Easy/android/000003"]
     assert "missing depth file" in result.unreadable["Easy/android/000004"]
@@ -225,11 +288,14 @@ def test_layout_with_more_frames_broken_and_missing_ones(tmp_path):
 def test_jobs_give_the_same_numbers(tmp_path):
     root = _copy_sample(tmp_path / "3f2n")
     one = run_bench(small(tmp_path, root=root, out=tmp_path / "a", methods=["d2nt_basic"], levels=("Easy", "Medium")))
-    two = run_bench(small(tmp_path, root=root, out=tmp_path / "b", methods=["d2nt_basic"], levels=("Easy", "Medium"), jobs=2))
+    two = run_bench(
+        small(tmp_path, root=root, out=tmp_path / "b", methods=["d2nt_basic"], levels=("Easy", "Medium"), jobs=2)
+    )
     assert [r["e_a"] for r in one.accuracy] == [r["e_a"] for r in two.accuracy]
 
 
 # ---------------------------------------------------------------------------- protocol pieces
+
 
 def test_timing_interleaves_and_takes_the_median():
     frame = read_frame(sample_root(), "Easy/android/000001")
@@ -238,7 +304,7 @@ def test_timing_interleaves_and_takes_the_median():
     specs = [runner.Spec("peer", n) for n in runs]
     out = runner._time_one_frame(frame, specs, runs, repeats=4)
     assert calls[:6] == ["a", "a", "b", "b", "c", "c"]  # warm-up: two calls each
-    rounds = [calls[6 + 3 * i: 9 + 3 * i] for i in range(3)]  # the second call counts as the first timing
+    rounds = [calls[6 + 3 * i : 9 + 3 * i] for i in range(3)]  # the second call counts as the first timing
     assert rounds == [["a", "b", "c"], ["b", "c", "a"], ["c", "a", "b"]]  # rotating order
     assert all(out[s.key]["calls"] == 4 for s in specs)
 
@@ -268,9 +334,12 @@ def test_paper_tables_are_consistent():
     # Slips in the paper, transcribed as printed: pi = 3.05 for D2NT on Easy, but 1.54 x 1.82 = 2.80 (its Medium
     # and Hard pi use t = 1.82); D2NT V2's three pi imply t = 7.1 ms, while its t column says 7.80.
     assert off == [("D2NT", "Easy"), ("D2NT V2", "Easy"), ("D2NT V2", "Medium"), ("D2NT V2", "Hard")]
-    off = [(name, lv) for name, cols in paper.TABLE_IV.items()
-           for lv, wo, w, imp in zip(paper.LEVELS, cols["w/o MNR"], cols["w/ MNR"], cols["improvement"])
-           if 100 * (wo - w) / wo != pytest.approx(imp, abs=0.2)]
+    off = [
+        (name, lv)
+        for name, cols in paper.TABLE_IV.items()
+        for lv, wo, w, imp in zip(paper.LEVELS, cols["w/o MNR"], cols["w/ MNR"], cols["improvement"])
+        if 100 * (wo - w) / wo != pytest.approx(imp, abs=0.2)
+    ]
     # The paper's CP2TV improvements (40.8, 15.0, 35.6 %) do not follow from its own e_A (46.2, 20.3, 28.7 %).
     assert off == [("CP2TV", "Easy"), ("CP2TV", "Medium"), ("CP2TV", "Hard")]
     assert set(paper.PAPER_NAME.values()) == set(paper.TABLE_III)

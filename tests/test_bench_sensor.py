@@ -12,7 +12,12 @@ from typer.testing import CliRunner
 from surfnorm.bench import peers as peers_mod
 from surfnorm.bench.peers import Peer
 from surfnorm.bench.sensor import (
-    find_sensor_frames, make_entries, read_sensor_frame, run_simulated, sensor_bench, sim_tables,
+    find_sensor_frames,
+    make_entries,
+    read_sensor_frame,
+    run_simulated,
+    sensor_bench,
+    sim_tables,
 )
 from surfnorm.cli import app
 from surfnorm.errors import DataFileError, InputError
@@ -44,14 +49,14 @@ def plane_scene(step: float = 0.0):
     offsets = np.array([-1.6, -2.0])
     masks = np.zeros((2, H, W), bool)
     masks[0, : H // 2] = True
-    masks[1, H // 2:] = True
+    masks[1, H // 2 :] = True
     z = np.zeros((H, W))
     for n, c, m in zip(normals, offsets, masks):
         z[m] = (c / (ray @ n))[m]
     if step:
         z = np.round(z / step) * step
     # the reference pixels: away from the border between the planes, as the sample's eroded pieces
-    masks[0, H // 2 - 3:] = False
+    masks[0, H // 2 - 3 :] = False
     masks[1, : H // 2 + 3] = False
     return z.astype(np.float32), normals, masks
 
@@ -76,8 +81,8 @@ def folder(tmp_path):
     write_frame(root / "b_steps", zq, planes=(n, m))
     gt = np.zeros((H, W, 3), np.float32)
     gt[: H // 2] = n[0]
-    gt[H // 2:] = n[1]
-    gt[H // 2 - 3: H // 2 + 3] = 0  # no ground truth where a stencil would straddle both planes
+    gt[H // 2 :] = n[1]
+    gt[H // 2 - 3 : H // 2 + 3] = 0  # no ground truth where a stencil would straddle both planes
     write_frame(root / "c_rendered", z, gt=gt)
     return root
 
@@ -116,13 +121,17 @@ class TestSensorBench:
         def broken():
             def run(depth, cam, mask, clean=True):
                 raise RuntimeError("boom")
+
             return run
 
-        fake = (Peer("nolib_peer", "nolib", "a library that is not installed", missing),
-                Peer("broken_peer", "opencv", "a peer that raises", broken))
+        fake = (
+            Peer("nolib_peer", "nolib", "a library that is not installed", missing),
+            Peer("broken_peer", "opencv", "a peer that raises", broken),
+        )
         monkeypatch.setattr(peers_mod, "SENSOR_PEERS", fake)
-        result, paths = sensor_bench(folder / "a_exact", tmp_path / "R", names=["d2nt_basic", "nolib_peer", "broken_peer"],
-                                     repeats=1)
+        result, paths = sensor_bench(
+            folder / "a_exact", tmp_path / "R", names=["d2nt_basic", "nolib_peer", "broken_peer"], repeats=1
+        )
         assert result["frames"] == ["a_exact"]  # a frame folder itself is a dataset of one frame
         assert "nolib_peer" in result["absent"] and "ImportError" in result["absent"]["nolib_peer"]
         assert result["errors"] == [{"frame": "a_exact", "entry": "broken_peer", "error": "RuntimeError: boom"}]
@@ -133,8 +142,9 @@ class TestSensorBench:
 
     def test_cli(self, folder, tmp_path):
         out = tmp_path / "R"
-        res = CliRunner().invoke(app, ["bench", "--sensor", str(folder), "--out", str(out), "--methods", "d2nt_basic",
-                                       "--repeats", "1"])
+        res = CliRunner().invoke(
+            app, ["bench", "--sensor", str(folder), "--out", str(out), "--methods", "d2nt_basic", "--repeats", "1"]
+        )
         assert res.exit_code == 0, res.output
         assert "| d2nt_basic |" in res.output
         assert {p.name for p in out.iterdir()} == {"report.md", "results.json", "sensor.png"}

@@ -11,8 +11,18 @@ FRAME = sample_root() / "Easy" / "android"
 
 def test_estimate_writes_npy_and_png(tmp_path):
     out = tmp_path / "android"
-    result = runner.invoke(app, ["estimate", str(FRAME / "depth" / "000001.bin.gz"), str(out),
-                                 "--params", str(FRAME / "params.txt"), "--method", "d2nt_basic"])
+    result = runner.invoke(
+        app,
+        [
+            "estimate",
+            str(FRAME / "depth" / "000001.bin.gz"),
+            str(out),
+            "--params",
+            str(FRAME / "params.txt"),
+            "--method",
+            "d2nt_basic",
+        ],
+    )
     assert result.exit_code == 0, result.output
     n = np.load(tmp_path / "android.npy")
     assert n.shape == (480, 640, 3) and n.dtype == np.float32
@@ -24,13 +34,37 @@ def test_usage_errors_exit_2_with_one_line(tmp_path):
     lone = tmp_path / "lone.bin.gz"  # a depth file with no 3F2N params.txt beside it
     lone.write_bytes((FRAME / "depth" / "000001.bin.gz").read_bytes())
     cases = [
-        ["estimate", str(FRAME / "depth" / "000001.bin.gz"), str(tmp_path / "x"), "--params", str(FRAME / "params.txt"), "--method", "nope"],
+        [
+            "estimate",
+            str(FRAME / "depth" / "000001.bin.gz"),
+            str(tmp_path / "x"),
+            "--params",
+            str(FRAME / "params.txt"),
+            "--method",
+            "nope",
+        ],
         ["estimate", str(tmp_path / "missing.bin"), str(tmp_path / "x"), "--params", str(FRAME / "params.txt")],
         ["estimate", str(lone), str(tmp_path / "x")],
-        ["estimate", str(FRAME / "depth" / "000001.bin.gz"), str(tmp_path / "x"), "--fx", "-1", "--fy", "1", "--cx", "1", "--cy", "1"],
+        [
+            "estimate",
+            str(FRAME / "depth" / "000001.bin.gz"),
+            str(tmp_path / "x"),
+            "--fx",
+            "-1",
+            "--fy",
+            "1",
+            "--cx",
+            "1",
+            "--cy",
+            "1",
+        ],
     ]
-    expected = ["method: expected one of", "missing.bin", "intrinsics",
-                "intrinsics.fx: expected a positive focal length"]
+    expected = [
+        "method: expected one of",
+        "missing.bin",
+        "intrinsics",
+        "intrinsics.fx: expected a positive focal length",
+    ]
     for args, text in zip(cases, expected):
         result = runner.invoke(app, args)
         assert result.exit_code == 2, (args, result.output)
@@ -59,6 +93,7 @@ def test_demo_table_and_pictures(tmp_path):
 
 # ---------------------------------------------------------------------------- issue 14: the one-line promise
 
+
 def _one_line_exit_2(args, needle):
     result = runner.invoke(app, [str(a) for a in args])
     assert result.exit_code == 2, (args, result.output)
@@ -77,8 +112,9 @@ def workdir(tmp_path, monkeypatch):
     (tmp_path / "empty").mkdir()
     (tmp_path / "afile").write_text("x")
     (tmp_path / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
-    (tmp_path / "bad.yaml").write_text("%YAML:1.0\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n"
-                                       "  data: [1, 0, 1, 0, 1, 1, 0, 0]\n")
+    (tmp_path / "bad.yaml").write_text(
+        "%YAML:1.0\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [1, 0, 1, 0, 1, 1, 0, 0]\n"
+    )
     monkeypatch.chdir(tmp_path)
     return tmp_path
 
@@ -98,7 +134,10 @@ USAGE_ERRORS = [
     (["estimate", "d.bin.gz", "o", "extra"], "unexpected extra argument"),
     (["estimate", "d.bin.gz", "o", "--method"], "Option '--method' requires an argument"),
     (["estimate", "missing.bin", "o", *CAMERA], "missing.bin: cannot read depth file"),
-    (["estimate", "d.bin.gz", "o", "-k", "bad.yaml"], "bad.yaml: expected 9 numbers (a 3x3 matrix) in camera_matrix.data, got 8"),
+    (
+        ["estimate", "d.bin.gz", "o", "-k", "bad.yaml"],
+        "bad.yaml: expected 9 numbers (a 3x3 matrix) in camera_matrix.data, got 8",
+    ),
     (["estimate", "d.bin.gz", "o", "-k", "deep.json"], "deep.json: expected lists and mappings at most 16 deep"),
     (["estimate", "d.bin.gz", "o", "--method", "nope", *CAMERA], "method: expected one of"),
     # convert
@@ -110,7 +149,10 @@ USAGE_ERRORS = [
     (["convert", "nothing", "out", *CAMERA], "inputs: expected a depth file, a folder or a glob pattern"),
     (["convert", "d.bin.gz", "out", "-k", "bad.yaml"], "bad.yaml: expected 9 numbers"),
     (["convert", "d.bin.gz", "out", "-k", "deep.json"], "deep.json: expected lists and mappings at most 16 deep"),
-    (["convert", "d.bin.gz", "out", *CAMERA, "--cluster", "not a url"], "cluster address: expected a Dask scheduler address"),
+    (
+        ["convert", "d.bin.gz", "out", *CAMERA, "--cluster", "not a url"],
+        "cluster address: expected a Dask scheduler address",
+    ),
     (["convert", "d.bin.gz", "afile", *CAMERA], "output_dir: expected a folder, got the file"),
     # bench
     (["bench", "--out", "rep", "--repeats", "x"], "Invalid value for '--repeats'"),

@@ -11,8 +11,15 @@ from typer.testing import CliRunner
 import surfnorm
 from surfnorm import demo
 from surfnorm.cli import app
-from surfnorm.demo import (CONTACT_SHEET, default_label, read_sensor_frame, run_demo, run_sensor_demo, sensor_root,
-                           write_contact_sheet)
+from surfnorm.demo import (
+    CONTACT_SHEET,
+    default_label,
+    read_sensor_frame,
+    run_demo,
+    run_sensor_demo,
+    sensor_root,
+    write_contact_sheet,
+)
 
 SENSOR_SAMPLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "sensor-sample" / "d435_080"
 HAS_RGBD_NORMALS = hasattr(cv2, "RgbdNormals") and hasattr(cv2, "depthTo3d")
@@ -20,7 +27,14 @@ HAS_RGBD_NORMALS = hasattr(cv2, "RgbdNormals") and hasattr(cv2, "depthTo3d")
 
 def test_shipped_frame_files_and_notice():
     root = sensor_root()
-    assert sorted(p.name for p in root.iterdir()) == ["K.json", "LICENSE", "NOTICE", "depth.png", "meta.json", "planes.npz"]
+    assert sorted(p.name for p in root.iterdir()) == [
+        "K.json",
+        "LICENSE",
+        "NOTICE",
+        "depth.png",
+        "meta.json",
+        "planes.npz",
+    ]
     assert sum(p.stat().st_size for p in root.iterdir()) < 1_000_000
     # the License's full text beside the frame: its title, all nine sections, the end of the terms, the appendix
     license_text = (root / "LICENSE").read_text()
@@ -66,7 +80,9 @@ def test_sensor_demo_default_beside_opencv(tmp_path):
     default = rows[0]
     assert default.estimator == default_label()
     # the table's figure is the plane metric of what surfnorm.estimate(depth, K) returns
-    expected = surfnorm.metrics.plane_error(surfnorm.estimate(frame.depth, frame.K), frame.plane_normals, frame.plane_masks)
+    expected = surfnorm.metrics.plane_error(
+        surfnorm.estimate(frame.depth, frame.K), frame.plane_normals, frame.plane_masks
+    )
     assert default.plane_error == pytest.approx(expected[0], abs=1e-5) and default.coverage == expected[1]
     assert 0 < default.plane_error < 45 and default.coverage > 0.9 and default.ms > 0
     if HAS_RGBD_NORMALS:
@@ -142,16 +158,17 @@ def test_contact_sheet_shows_every_frame_and_method(tmp_path):
     boxes = list(sheet.tiles.values()) + [sheet.scale]
     for i, (t, l, h, w) in enumerate(boxes):  # inside the picture, and no two overlap
         assert 0 <= t and t + h <= written.shape[0] and 0 <= l and l + w <= written.shape[1]
-        for t2, l2, h2, w2 in boxes[i + 1:]:
+        for t2, l2, h2, w2 in boxes[i + 1 :]:
             assert t + h <= t2 or t2 + h2 <= t or l + w <= l2 or l2 + w2 <= l
     for (frame, method, kind), (t, l, h, w) in sheet.tiles.items():
         stem = frame.replace("/", "_")
         file = f"{stem}_{kind}.png" if not method else f"{stem}_{method}_{kind}.png"
         full = _rgb(tmp_path / file)
         assert (h, w) == (full.shape[0] // 2, full.shape[1] // 2)
-        np.testing.assert_array_equal(written[t:t + h, l:l + w],
-                                      cv2.resize(full, (w, h), interpolation=cv2.INTER_AREA))
-        assert (written[t:t + h, l:l + w] != 255).any()  # not an empty tile
+        np.testing.assert_array_equal(
+            written[t : t + h, l : l + w], cv2.resize(full, (w, h), interpolation=cv2.INTER_AREA)
+        )
+        assert (written[t : t + h, l : l + w] != 255).any()  # not an empty tile
     for r in rows:
         caption = sheet.captions[(r.frame, r.method, "error")]
         assert f"e_A {r.e_a:.3f} deg" in caption

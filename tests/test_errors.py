@@ -13,11 +13,11 @@ import pytest
 from typer.testing import CliRunner
 
 import surfnorm
+from surfnorm import Intrinsics
+from surfnorm.batch import plan_tasks
 from surfnorm.cli import app
 from surfnorm.errors import DataFileError, InputError
 from surfnorm.io.depth import read_depth, read_mask
-from surfnorm import Intrinsics
-from surfnorm.batch import plan_tasks
 from surfnorm.io.intrinsics import read_intrinsics
 from surfnorm.io.normals import read_normals
 from surfnorm.io.threef2n import read_frame, read_normal_png, read_params, sample_root
@@ -44,15 +44,35 @@ def ramp(h=48, w=64):
         (np.ones((2, 2)), r"depth: expected at least 3x3 pixels, got shape \(2, 2\)"),
         (np.ones((48, 64, 3)), r"depth: expected one depth channel.*got shape \(48, 64, 3\).*3 channel"),
         (np.ones((48, 64, 1)), r"depth: expected one depth channel.*got shape \(48, 64, 1\)"),
-        (np.ones((2, 48, 64, 1)), r"depth: expected a 2-D array \(H, W\) or a stack \(N, H, W\), got .*shape \(2, 48, 64, 1\)"),
+        (
+            np.ones((2, 48, 64, 1)),
+            r"depth: expected a 2-D array \(H, W\) or a stack \(N, H, W\), got .*shape \(2, 48, 64, 1\)",
+        ),
         (np.ones(5), r"depth: expected a 2-D array \(H, W\) or a stack \(N, H, W\), got .*shape \(5,\)"),
         (np.ones((48, 64), dtype=bool), r"depth: expected real-valued depth.*dtype bool.*pass it as mask="),
         (np.ones((48, 64), dtype=complex), r"depth: expected real-valued depth \(float or integer\), got .*complex128"),
-        (np.ones((48, 64), dtype=object), r"depth: expected real-valued depth \(float or integer\), got .*dtype object"),
+        (
+            np.ones((48, 64), dtype=object),
+            r"depth: expected real-valued depth \(float or integer\), got .*dtype object",
+        ),
         (None, r"depth: expected a 2-D array of depth values, got None"),
         (np.zeros((0, 48, 64)), r"depth: expected at least one frame in the stack"),
     ],
-    ids=["empty", "1xN", "Nx1", "2x2", "HxWx3", "HxWx1", "4-D", "1-D", "bool", "complex", "object", "None", "empty-stack"],
+    ids=[
+        "empty",
+        "1xN",
+        "Nx1",
+        "2x2",
+        "HxWx3",
+        "HxWx1",
+        "4-D",
+        "1-D",
+        "bool",
+        "complex",
+        "object",
+        "None",
+        "empty-stack",
+    ],
 )
 def test_bad_depth_arrays_are_named(depth, pattern):
     with pytest.raises(InputError, match=pattern):
@@ -176,7 +196,10 @@ def files(tmp_path):
         ("garbage.tif", r"garbage.tif: cannot decode as an image"),
         ("truncated.npy", r"truncated.npy: cannot read as NumPy .npy depth \(truncated or corrupt"),
         ("corrupt.npy", r"corrupt.npy: cannot read as NumPy .npy depth"),
-        ("two.npz", r"two.npz: expected an array named 'depth' or a single array in the .npz archive, got 2 arrays \(a, b\)"),
+        (
+            "two.npz",
+            r"two.npz: expected an array named 'depth' or a single array in the .npz archive, got 2 arrays \(a, b\)",
+        ),
         ("truncated.npz", r"truncated.npz: cannot read as NumPy .npz depth"),
         ("short.bin", r"short.bin: expected 1228800 bytes of float32 depth \(480x640\), got 1000"),
         ("truncated.bin.gz", r"truncated.bin.gz: truncated or corrupt gzip stream"),
@@ -203,7 +226,9 @@ def test_a_directory_is_not_a_depth_file(files):
 def test_good_files_read(files):
     z = read_depth(files / "good.png", depth_scale=1000)
     assert z.dtype == np.float32 and z.shape == (48, 64) and abs(z[0, 0] - 1.0) < 1e-6
-    np.testing.assert_array_equal(read_depth(files / "good.tif"), (np.asarray(read_depth(files / "good.png")) / 1000).astype(np.float32))
+    np.testing.assert_array_equal(
+        read_depth(files / "good.tif"), (np.asarray(read_depth(files / "good.png")) / 1000).astype(np.float32)
+    )
     np.testing.assert_array_equal(read_depth(files / "good.npy"), read_depth(files / "good.png"))
 
 
@@ -260,14 +285,23 @@ CAM = ["--fx", 60, "--fy", 60, "--cx", 31.5, "--cy", 23.5]
         (["truncated.bin.gz", "out"] + CAM, r"truncated or corrupt gzip stream"),
         (["good.png", "out"], r"intrinsics: expected --intrinsics FILE or all of --fx --fy --cx --cy"),
         (["good.png", "out", "--fx", 60], r"intrinsics: expected all of fx, fy, cx, cy, got fx without fy, cx, cy"),
-        (["good.png", "out", "--fx", 0, "--fy", 60, "--cx", 1, "--cy", 1], r"intrinsics.fx: expected a positive focal length"),
-        (["good.png", "out", "--fx", "nan", "--fy", 60, "--cx", 1, "--cy", 1], r"intrinsics.fx: expected a finite number"),
+        (
+            ["good.png", "out", "--fx", 0, "--fy", 60, "--cx", 1, "--cy", 1],
+            r"intrinsics.fx: expected a positive focal length",
+        ),
+        (
+            ["good.png", "out", "--fx", "nan", "--fy", 60, "--cx", 1, "--cy", 1],
+            r"intrinsics.fx: expected a finite number",
+        ),
         (["good.png", "out", "--intrinsics", "missing.json"], r"missing.json: cannot read intrinsics file"),
         (["good.png", "out", "--depth-scale", 0] + CAM, r"depth_scale: expected a positive finite number, got 0.0"),
         (["good.png", "out", "--method", "nope"] + CAM, r"method: expected one of .*got 'nope'"),
         (["good.png", "out", "--format", "jpg"] + CAM, r"--format: expected one of npy, png16, png8, got 'jpg'"),
         (["good.png", "out", "--mask", "truncated.png"] + CAM, r"truncated.png: cannot decode as an image"),
-        (["good.png", "out", "--mask", "colour.png"] + CAM, r"mask: expected shape \(48, 64\) to match depth, got shape \(8, 8\)"),
+        (
+            ["good.png", "out", "--mask", "colour.png"] + CAM,
+            r"mask: expected shape \(48, 64\) to match depth, got shape \(8, 8\)",
+        ),
         (["good.png", "."] + CAM, r"output: expected a file prefix, got the directory"),
     ],
 )
@@ -283,7 +317,10 @@ def test_cli_convert_usage_errors_exit_2(files, monkeypatch):
     (files / "afile").write_text("x")
     cases = [
         (["good.png", "afile"] + CAM, r"output_dir: expected a folder, got the file afile"),
-        (["nothing-here/", "out"] + CAM, r"inputs: expected a depth file, a folder or a glob pattern, got 'nothing-here/'"),
+        (
+            ["nothing-here/", "out"] + CAM,
+            r"inputs: expected a depth file, a folder or a glob pattern, got 'nothing-here/'",
+        ),
         (["nothing*.png", "out"] + CAM, r"inputs: expected at least one depth file, found none in nothing\*.png"),
         (["good.png", "out", "--jobs", 0] + CAM, r"--jobs: expected a positive integer, got 0"),
         (["good.png", "out"], r"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy"),
@@ -306,8 +343,6 @@ def test_cli_typer_usage_errors_exit_2(files):
 
 from pathlib import Path  # noqa: E402
 
-
-
 # (reader, positional argument, keyword arguments, message). 13 cases.
 READER_ARGUMENTS = [
     (read_depth, None, {}, r"path: expected a file path \(str or os.PathLike\), got NoneType None"),
@@ -317,8 +352,18 @@ READER_ARGUMENTS = [
     (read_depth, "", {}, r"path: expected a file path, got an empty one"),
     (read_mask, None, {}, r"path: expected a file path \(str or os.PathLike\), got NoneType None"),
     (read_mask, 7, {}, r"path: expected a file path .*got int 7"),
-    (read_depth, "x.bin", {"shape": (-480, -640)}, r"shape: expected \(rows, cols\), two positive integers, got \(-480, -640\)"),
-    (read_depth, "x.bin", {"shape": (0, 640)}, r"shape: expected \(rows, cols\), two positive integers, got \(0, 640\)"),
+    (
+        read_depth,
+        "x.bin",
+        {"shape": (-480, -640)},
+        r"shape: expected \(rows, cols\), two positive integers, got \(-480, -640\)",
+    ),
+    (
+        read_depth,
+        "x.bin",
+        {"shape": (0, 640)},
+        r"shape: expected \(rows, cols\), two positive integers, got \(0, 640\)",
+    ),
     (read_depth, "x.bin", {"shape": (480,)}, r"shape: expected \(rows, cols\), two positive integers, got \(480,\)"),
     (read_depth, "x.bin", {"shape": (480.5, 640)}, r"shape: expected \(rows, cols\).*got \(480.5, 640\)"),
     (read_depth, "x.bin", {"shape": (True, 640)}, r"shape: expected \(rows, cols\).*got \(True, 640\)"),
@@ -366,7 +411,10 @@ def test_gzip_bomb_is_refused_while_decompressing(tmp_path):
     assert bomb.stat().st_size < 300_000
     tracemalloc.start()
     try:
-        with pytest.raises(DataFileError, match=r"bomb.bin.gz: expected 1228800 bytes of float32 depth \(480x640\) once decompressed, got more"):
+        with pytest.raises(
+            DataFileError,
+            match=r"bomb.bin.gz: expected 1228800 bytes of float32 depth \(480x640\) once decompressed, got more",
+        ):
             read_depth(bomb)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
@@ -401,8 +449,11 @@ def test_outputs_get_the_mode_of_an_ordinary_write(tmp_path, umask):
     old = os.umask(umask)
     try:
         (tmp_path / "plain").write_bytes(b"x")  # what open(..., "w") gives
-        written = [write_normals(tmp_path / "n.npy", n), write_normals(tmp_path / "n.png", n, fmt="png16"),
-                   write_rgb8(tmp_path / "p.png", np.zeros((4, 4, 3), np.uint8))]
+        written = [
+            write_normals(tmp_path / "n.npy", n),
+            write_normals(tmp_path / "n.png", n, fmt="png16"),
+            write_rgb8(tmp_path / "p.png", np.zeros((4, 4, 3), np.uint8)),
+        ]
     finally:
         os.umask(old)
     plain = (tmp_path / "plain").stat().st_mode & 0o777
@@ -416,6 +467,7 @@ def test_outputs_get_the_mode_of_an_ordinary_write(tmp_path, umask):
 
 
 # --- error paths that the other module tests do not reach -----------------------------------------------------
+
 
 def test_intrinsics_need_real_numbers():
     with pytest.raises(InputError, match=r"intrinsics.fx: expected a real number, got str 'a'"):
@@ -444,8 +496,11 @@ def test_depth_and_mask_files(tmp_path):
     with pytest.raises(DataFileError, match=r"m.npy: expected a 2-D mask, got an array of shape \(4, 4, 2\)"):
         read_mask(tmp_path / "m.npy")
     np.savez(tmp_path / "two.npz", a=np.ones((2, 2)), b=np.ones((2, 2)))
-    with pytest.raises(DataFileError, match=r"two.npz: expected an array named 'mask' or a single array in the .npz "
-                                            r"archive, got 2 arrays \(a, b\)"):
+    with pytest.raises(
+        DataFileError,
+        match=r"two.npz: expected an array named 'mask' or a single array in the .npz "
+        r"archive, got 2 arrays \(a, b\)",
+    ):
         read_mask(tmp_path / "two.npz")
     (tmp_path / "cut.npy").write_bytes((tmp_path / "m.npy").read_bytes()[:60])
     with pytest.raises(DataFileError, match=r"cut.npy: cannot read as NumPy .npy mask \(truncated or corrupt"):

@@ -12,10 +12,12 @@ import sys
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 import surfnorm
-from .surfaces import camera
-from .surfaces import has_normal, scene
+
+from .surfaces import camera, has_normal, scene
 
 
 def test_softmin_exp_is_correctly_rounded():
@@ -25,8 +27,14 @@ def test_softmin_exp_is_correctly_rounded():
     from surfnorm.kernels.gradients import softmin_row
 
     rng = np.random.default_rng(0)
-    x = np.concatenate([-rng.random(200_000) * 110, -rng.random(100_000) * 1e-3, -rng.exponential(1.0, 100_000),
-                        [0.0, -0.0, -1e-45, -87.33655, -103.27893, -103.97208, -104.0, -200.0, 88.0, 88.7228, 89.0, 1e3]])
+    x = np.concatenate(
+        [
+            -rng.random(200_000) * 110,
+            -rng.random(100_000) * 1e-3,
+            -rng.exponential(1.0, 100_000),
+            [0.0, -0.0, -1e-45, -87.33655, -103.27893, -103.97208, -104.0, -200.0, 88.0, 88.7228, 89.0, 1e3],
+        ]
+    )
     x = x.astype(np.float32)
     for tau in (1.0, 0.37):
         out = np.empty_like(x)
@@ -41,8 +49,10 @@ def test_softmin_exp_is_correctly_rounded():
 
 
 def test_importing_the_kernels_leaves_the_decimal_context_alone():
-    code = ("import decimal; decimal.getcontext().prec = 7; import surfnorm.kernels.gradients; "
-            "assert decimal.getcontext().prec == 7, decimal.getcontext().prec")
+    code = (
+        "import decimal; decimal.getcontext().prec = 7; import surfnorm.kernels.gradients; "
+        "assert decimal.getcontext().prec == 7, decimal.getcontext().prec"
+    )
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
@@ -62,7 +72,6 @@ def test_exp32_constants_are_ln2_split_exactly():
 SCENE_K = camera(64, 48)
 
 
-
 TAUS = [1.0, 0.3, 0.0014, 0.001, 1e-30, 1e-45, 1e-300, 5e-324, 1e30, 1e300, 1.7e308]
 
 
@@ -71,8 +80,9 @@ TAUS = [1.0, 0.3, 0.0014, 0.001, 1e-30, 1e-45, 1e-300, 5e-324, 1e30, 1e300, 1.7e
 @pytest.mark.parametrize("tau", TAUS)
 def test_every_accepted_tau_gives_unit_normals(method, truncate, tau):
     # tau <= 0.0014 with truncate=True raised OverflowError, 1e-300 ZeroDivisionError
-    n = surfnorm.estimate(np.full((8, 8), 2.0), [[500, 0, 3.5], [0, 500, 3.5], [0, 0, 1]], method=method, tau=tau,
-                          truncate=truncate)
+    n = surfnorm.estimate(
+        np.full((8, 8), 2.0), [[500, 0, 3.5], [0, 500, 3.5], [0, 0, 1]], method=method, tau=tau, truncate=truncate
+    )
     np.testing.assert_array_equal(n[1:-1, 1:-1], np.broadcast_to(np.float32([0, 0, -1]), (6, 6, 3)))
     z = scene()
     n = surfnorm.estimate(z, SCENE_K, method=method, tau=tau, truncate=truncate, fill=np.nan)
@@ -86,14 +96,16 @@ def test_every_accepted_tau_gives_unit_normals(method, truncate, tau):
 def test_small_tau_truncation_can_not_fire(log_tau):
     """Two regularised softmin weights never differ by more than about 1e8 = e^18.4, so for tau < 1/18.5 the
     truncated softmin equals the plain one: the overflowing threshold e^(1/tau) may be +inf."""
-    tau = 10.0 ** log_tau
+    tau = 10.0**log_tau
     if tau == 0.0:
         return
     z = scene()
     a = surfnorm.estimate(z, SCENE_K, method="d2nt_v2", tau=tau, truncate=True, fill=np.nan)
     assert np.isfinite(a[has_normal(a)]).all()
     if tau < 1 / 18.5:
-        np.testing.assert_array_equal(a, surfnorm.estimate(z, SCENE_K, method="d2nt_v2", tau=tau, truncate=False, fill=np.nan))
+        np.testing.assert_array_equal(
+            a, surfnorm.estimate(z, SCENE_K, method="d2nt_v2", tau=tau, truncate=False, fill=np.nan)
+        )
 
 
 @pytest.mark.parametrize("tau", [0.001, 1e-300, 1e300])

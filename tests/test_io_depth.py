@@ -28,6 +28,7 @@ def sensor_frame(name: str) -> Path:
 
 # ---------------------------------------------------------------------------- OpenEXR
 
+
 def write_exr(path: Path, channels: dict, parts=None) -> Path:
     OpenEXR = pytest.importorskip("OpenEXR")
     if parts is not None:
@@ -66,9 +67,13 @@ class TestExr:
     def test_blender_layer_names_pick_the_depth_pass(self, tmp_path):
         z = depth_with_holes(np.float32, seed=3)
         colour = np.random.default_rng(4).random(z.shape).astype(np.float32)
-        chans = {"ViewLayer.Combined.R": colour, "ViewLayer.Combined.G": colour * 0.5,
-                 "ViewLayer.Combined.B": colour * 0.25, "ViewLayer.Combined.A": np.ones_like(colour),
-                 "ViewLayer.Depth.Z": z}
+        chans = {
+            "ViewLayer.Combined.R": colour,
+            "ViewLayer.Combined.G": colour * 0.5,
+            "ViewLayer.Combined.B": colour * 0.25,
+            "ViewLayer.Combined.A": np.ones_like(colour),
+            "ViewLayer.Depth.Z": z,
+        }
         np.testing.assert_array_equal(read_depth(write_exr(tmp_path / "d.exr", chans)), z)
 
     def test_luminance_channel(self, tmp_path):
@@ -79,8 +84,9 @@ class TestExr:
     def test_multi_part_file(self, tmp_path):
         z = depth_with_holes(np.float32, seed=6)
         rgb = np.random.default_rng(7).random(z.shape).astype(np.float32)
-        path = write_exr(tmp_path / "d.exr", None, parts={"beauty": {"R": rgb, "G": rgb * 2, "B": rgb * 3},
-                                                          "depth": {"Z": z}})
+        path = write_exr(
+            tmp_path / "d.exr", None, parts={"beauty": {"R": rgb, "G": rgb * 2, "B": rgb * 3}, "depth": {"Z": z}}
+        )
         np.testing.assert_array_equal(read_depth(path), z)
 
     def test_depth_scale_applies(self, tmp_path):
@@ -90,26 +96,36 @@ class TestExr:
     def test_colour_image_is_not_depth(self, tmp_path):
         rgb = np.random.default_rng(8).random((6, 7, 3)).astype(np.float32)
         path = write_exr(tmp_path / "c.exr", {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
-        with pytest.raises(DataFileError, match=r"c\.exr: expected one depth channel, got the colour channels .*differ"):
+        with pytest.raises(
+            DataFileError, match=r"c\.exr: expected one depth channel, got the colour channels .*differ"
+        ):
             read_depth(path)
 
     def test_two_depth_channels(self, tmp_path):
         z = depth_with_holes()
         path = write_exr(tmp_path / "two.exr", {"Z": z, "depth": z * 2})
-        with pytest.raises(DataFileError, match=r"two\.exr: expected one depth channel, got 2 \(Z, depth\)|"
-                                                r"two\.exr: expected one depth channel, got 2 \(depth, Z\)"):
+        with pytest.raises(
+            DataFileError,
+            match=r"two\.exr: expected one depth channel, got 2 \(Z, depth\)|"
+            r"two\.exr: expected one depth channel, got 2 \(depth, Z\)",
+        ):
             read_depth(path)
 
     def test_no_depth_channel(self, tmp_path):
         z = depth_with_holes()
         path = write_exr(tmp_path / "uv.exr", {"U": z, "V": z})
-        with pytest.raises(DataFileError, match=r"uv\.exr: expected one depth channel \(named Z, depth.*got channels U, V"):
+        with pytest.raises(
+            DataFileError, match=r"uv\.exr: expected one depth channel \(named Z, depth.*got channels U, V"
+        ):
             read_depth(path)
 
     def test_integer_channel_is_refused(self, tmp_path):
         path = write_exr(tmp_path / "u.exr", {"Z": np.arange(20, dtype=np.uint32).reshape(4, 5)})
-        with pytest.raises(DataFileError, match=r"u\.exr: expected a float16 \(HALF\) or float32 \(FLOAT\) depth channel, "
-                                                r"got channel 'Z' of dtype uint32"):
+        with pytest.raises(
+            DataFileError,
+            match=r"u\.exr: expected a float16 \(HALF\) or float32 \(FLOAT\) depth channel, "
+            r"got channel 'Z' of dtype uint32",
+        ):
             read_depth(path)
 
     @pytest.mark.parametrize("keep", [0.999, 0.9, 0.5, 0.2])
@@ -129,8 +145,11 @@ class TestExr:
         (tmp_path / "fake.exr").write_bytes(b"P5 2 2 65535\n" + bytes(8))
         (tmp_path / "empty.exr").write_bytes(b"")
         for name in ("fake.exr", "empty.exr"):
-            with pytest.raises(DataFileError, match=rf"{name.replace('.', r'[.]')}: cannot read as OpenEXR depth "
-                                                    r"\(empty, or not an OpenEXR file\)"):
+            with pytest.raises(
+                DataFileError,
+                match=rf"{name.replace('.', r'[.]')}: cannot read as OpenEXR depth "
+                r"\(empty, or not an OpenEXR file\)",
+            ):
                 read_depth(tmp_path / name)
 
     def test_missing_file(self, tmp_path):
@@ -141,8 +160,11 @@ class TestExr:
     def test_without_the_openexr_package_names_the_extra(self, tmp_path, monkeypatch):
         (tmp_path / "d.exr").write_bytes(b"\x76\x2f\x31\x01" + bytes(100))
         monkeypatch.setitem(sys.modules, "OpenEXR", None)  # import OpenEXR now raises ImportError
-        with pytest.raises(MissingDependencyError, match=r"d\.exr: reading OpenEXR depth needs the OpenEXR package: "
-                                                         r"pip install 'surfnorm\[exr\]'"):
+        with pytest.raises(
+            MissingDependencyError,
+            match=r"d\.exr: reading OpenEXR depth needs the OpenEXR package: "
+            r"pip install 'surfnorm\[exr\]'",
+        ):
             read_depth(tmp_path / "d.exr")
 
     @pytest.mark.parametrize("name", ["d435_080", "d435_123", "cgsyn_002"])
@@ -157,6 +179,7 @@ class TestExr:
 
 
 # ---------------------------------------------------------------------------- 16-bit PGM
+
 
 def pgm_bytes(values: np.ndarray, maxval: int = 65535, *, little: bool = False, comment: bool = True) -> bytes:
     """A binary (P5) graymap as the netpbm specification defines it; ``little`` writes libfreenect's byte order."""
@@ -191,12 +214,16 @@ class TestPgm:
     def test_truncated(self, tmp_path):
         raw = pgm_bytes(np.arange(64, dtype=np.uint16).reshape(8, 8))
         (tmp_path / "cut.pgm").write_bytes(raw[:-5])
-        with pytest.raises(DataFileError, match=r"cut\.pgm: cannot decode as depth image|cut\.pgm: cannot decode as an image"):
+        with pytest.raises(
+            DataFileError, match=r"cut\.pgm: cannot decode as depth image|cut\.pgm: cannot decode as an image"
+        ):
             read_depth(tmp_path / "cut.pgm")
 
     def test_eight_bit_graymap_is_a_picture(self, tmp_path):
         (tmp_path / "g.pgm").write_bytes(b"P5\n3 2\n255\n" + bytes(range(6)))
-        with pytest.raises(DataFileError, match=r"g\.pgm: expected 16-bit integer or 32-bit float depth, got an 8-bit image"):
+        with pytest.raises(
+            DataFileError, match=r"g\.pgm: expected 16-bit integer or 32-bit float depth, got an 8-bit image"
+        ):
             read_depth(tmp_path / "g.pgm")
 
     def test_colour_pixmap_is_refused(self, tmp_path):
@@ -206,7 +233,9 @@ class TestPgm:
 
     def test_byte_order_only_for_pgm(self, tmp_path):
         np.save(tmp_path / "d.npy", np.ones((2, 2), np.float32))
-        with pytest.raises(InputError, match=r"byte_order: applies to 16-bit \.pgm files, got byte_order='little' for a \.npy file"):
+        with pytest.raises(
+            InputError, match=r"byte_order: applies to 16-bit \.pgm files, got byte_order='little' for a \.npy file"
+        ):
             read_depth(tmp_path / "d.npy", byte_order="little")
 
     def test_bad_byte_order(self, tmp_path):
@@ -216,6 +245,7 @@ class TestPgm:
 
 
 # ---------------------------------------------------------------------------- Kinect v1 disparity
+
 
 class TestKinectDisparity:
     def test_nyu_toolbox_formula(self):
@@ -231,7 +261,9 @@ class TestKinectDisparity:
         z = kinect_disparity_to_depth(d)
         np.testing.assert_array_equal(z[0, :6], 0.0)
         assert z[0, 6] == pytest.approx(351.3 / 42.5, rel=1e-6)  # 8.27 m stays
-        assert kinect_disparity_to_depth(np.array([[1060.0]]), max_depth=None)[0, 0] == pytest.approx(351.3 / 32.5, rel=1e-6)
+        assert kinect_disparity_to_depth(np.array([[1060.0]]), max_depth=None)[0, 0] == pytest.approx(
+            351.3 / 32.5, rel=1e-6
+        )
 
     def test_other_constants(self):
         z = kinect_disparity_to_depth(np.array([[100.0]]), a=300.0, b=1000.0)
@@ -253,9 +285,12 @@ class TestKinectDisparity:
     def test_swapped_bytes_are_detected(self, tmp_path):
         d = np.full((4, 4), 800, dtype=np.uint16)
         (tmp_path / "d.pgm").write_bytes(pgm_bytes(d, little=True))
-        with pytest.raises(DataFileError, match=r"d\.pgm: expected Kinect v1 raw disparity \(11 bits, 0 to 2047\), "
-                                                r"got values up to 8195; with the bytes swapped they are: "
-                                                r"pass byte_order='little'"):
+        with pytest.raises(
+            DataFileError,
+            match=r"d\.pgm: expected Kinect v1 raw disparity \(11 bits, 0 to 2047\), "
+            r"got values up to 8195; with the bytes swapped they are: "
+            r"pass byte_order='little'",
+        ):
             read_depth(tmp_path / "d.pgm", kinect_disparity=True)
 
     def test_from_other_containers(self, tmp_path):
@@ -289,7 +324,10 @@ class TestKinectDisparity:
 
 # ---------------------------------------------------------------------------- the sample's PNG frames
 
-@pytest.mark.parametrize("name, scale", [("nyu_sync_00100", 1000.0), ("redwood_00000", 1000.0), ("kitti_0000000005", 256.0)])
+
+@pytest.mark.parametrize(
+    "name, scale", [("nyu_sync_00100", 1000.0), ("redwood_00000", 1000.0), ("kitti_0000000005", 256.0)]
+)
 def test_real_png_frames_match_the_sample_depth(name, scale):
     folder = sensor_frame(name)
     out = read_depth(folder / "raw.png", depth_scale=scale)
@@ -298,6 +336,7 @@ def test_real_png_frames_match_the_sample_depth(name, scale):
 
 
 # ---------------------------------------------------------------------------- the command line
+
 
 def _plane_disparity(H=48, W=64) -> np.ndarray:
     v, u = np.mgrid[0:H, 0:W]
@@ -316,8 +355,9 @@ def test_cli_estimate_reads_exr_and_nyu_pgm(tmp_path):
     runner = CliRunner()
     pgm = tmp_path / "d-1.pgm"
     pgm.write_bytes(pgm_bytes(_plane_disparity(), little=True))
-    result = runner.invoke(app, ["estimate", str(pgm), str(tmp_path / "nyu"), "--kinect-disparity",
-                                 "--byte-order", "little", *CAMERA])
+    result = runner.invoke(
+        app, ["estimate", str(pgm), str(tmp_path / "nyu"), "--kinect-disparity", "--byte-order", "little", *CAMERA]
+    )
     assert result.exit_code == 0, result.output
     n = np.load(tmp_path / "nyu.npy")
     assert n.shape == (48, 64, 3) and np.isfinite(n).all() and (n[..., 2] < 0).mean() > 0.9
@@ -338,10 +378,16 @@ def test_cli_raw_options_misused_exit_2(tmp_path):
     runner = CliRunner()
     np.save(tmp_path / "d.npy", np.ones((8, 8), np.float32))
     (tmp_path / "big.pgm").write_bytes(pgm_bytes(_plane_disparity(), little=True))
-    cases = [(["estimate", str(tmp_path / "d.npy"), str(tmp_path / "x"), "--byte-order", "little", *CAMERA],
-              "byte_order: applies to 16-bit .pgm files"),
-             (["estimate", str(tmp_path / "big.pgm"), str(tmp_path / "x"), "--kinect-disparity", *CAMERA],
-              "pass byte_order='little'")]
+    cases = [
+        (
+            ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "x"), "--byte-order", "little", *CAMERA],
+            "byte_order: applies to 16-bit .pgm files",
+        ),
+        (
+            ["estimate", str(tmp_path / "big.pgm"), str(tmp_path / "x"), "--kinect-disparity", *CAMERA],
+            "pass byte_order='little'",
+        ),
+    ]
     for args, text in cases:
         result = runner.invoke(app, args)
         assert result.exit_code == 2, result.output

@@ -30,17 +30,24 @@ def write(tmp_path, name, text):
         ("a.json", json.dumps({"fx": 525, "fy": 520.5, "cx": 319.5, "cy": 239.25, "width": 640})),
         ("b.json", json.dumps({"K": [K9[0:3], K9[3:6], K9[6:9]]})),
         ("c.json", json.dumps({"camera_matrix": K9})),
-        ("open3d.json", json.dumps({"width": 640, "height": 480, "intrinsic_matrix": list(np.reshape(K9, (3, 3)).T.ravel())})),
+        (
+            "open3d.json",
+            json.dumps({"width": 640, "height": 480, "intrinsic_matrix": list(np.reshape(K9, (3, 3)).T.ravel())}),
+        ),
         ("a.yaml", "fx: 525\nfy: 520.5\ncx: 319.5\ncy: 239.25\n"),
         ("b.yml", "K: [525.0, 0.0, 319.5, 0.0, 520.5, 239.25, 0.0, 0.0, 1.0]\n"),
-        ("ros_calibration.yaml",
-         "image_width: 640\nimage_height: 480\ncamera_name: depth\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
-         "  data: [525.0, 0.0, 319.5, 0.0, 520.5, 239.25, 0.0, 0.0, 1.0]\ndistortion_model: plumb_bob\n"
-         "distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0, 0, 0, 0, 0]\n"),
-        ("ros2_camera_info.yaml",
-         "header:\n  frame_id: camera\nheight: 480\nwidth: 640\ndistortion_model: plumb_bob\nd: [0.0, 0.0, 0.0, 0.0, 0.0]\n"
-         "k: [525.0, 0.0, 319.5, 0.0, 520.5, 239.25, 0.0, 0.0, 1.0]\nr: [1, 0, 0, 0, 1, 0, 0, 0, 1]\n"
-         "p: [525.0, 0.0, 319.5, 0.0, 0.0, 520.5, 239.25, 0.0, 0.0, 0.0, 1.0, 0.0]\n"),
+        (
+            "ros_calibration.yaml",
+            "image_width: 640\nimage_height: 480\ncamera_name: depth\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
+            "  data: [525.0, 0.0, 319.5, 0.0, 520.5, 239.25, 0.0, 0.0, 1.0]\ndistortion_model: plumb_bob\n"
+            "distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0, 0, 0, 0, 0]\n",
+        ),
+        (
+            "ros2_camera_info.yaml",
+            "header:\n  frame_id: camera\nheight: 480\nwidth: 640\ndistortion_model: plumb_bob\nd: [0.0, 0.0, 0.0, 0.0, 0.0]\n"
+            "k: [525.0, 0.0, 319.5, 0.0, 520.5, 239.25, 0.0, 0.0, 1.0]\nr: [1, 0, 0, 0, 1, 0, 0, 0, 1]\n"
+            "p: [525.0, 0.0, 319.5, 0.0, 0.0, 520.5, 239.25, 0.0, 0.0, 0.0, 1.0, 0.0]\n",
+        ),
         ("K.txt", "525 0 319.5\n0 520.5 239.25\n0 0 1\n"),
         ("intrinsic_depth.txt", "525 0 319.5 0\n0 520.5 239.25 0\n0 0 1 0\n0 0 0 1\n"),
         ("params.txt", "525 520.5 320.5 240.25 100"),
@@ -58,11 +65,19 @@ def test_opencv_filestorage_yaml(tmp_path):
     fs.release()
     assert "!!opencv-matrix" in path.read_text()
     assert read_intrinsics(path) == CAM
-    old = write(tmp_path, "old.yml", "%YAML:1.0\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
-                "   data: [ 525., 0., 319.5, 0., 520.5, 239.25, 0., 0., 1. ]\n")
+    old = write(
+        tmp_path,
+        "old.yml",
+        "%YAML:1.0\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+        "   data: [ 525., 0., 319.5, 0., 520.5, 239.25, 0., 0., 1. ]\n",
+    )
     assert read_intrinsics(old) == CAM
-    other = write(tmp_path, "other.yml", "%YAML:1.0\nR: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ 1. ]\n")
-    with pytest.raises(DataFileError, match=r"other.yml: expected an OpenCV matrix named camera_matrix, K or cameraMatrix"):
+    other = write(
+        tmp_path, "other.yml", "%YAML:1.0\nR: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ 1. ]\n"
+    )
+    with pytest.raises(
+        DataFileError, match=r"other.yml: expected an OpenCV matrix named camera_matrix, K or cameraMatrix"
+    ):
         read_intrinsics(other)
 
 
@@ -75,19 +90,43 @@ def test_3f2n_params_match_the_dataset_reader():
     "name, text, pattern",
     [
         ("bad.json", "{fx: 1", r"bad.json: cannot parse as JSON \(Expecting property name"),
-        ("partial.json", '{"fx": 1, "fy": 2}', r"partial.json: expected all of fx, fy, cx, cy, got fx, fy without cx, cy"),
+        (
+            "partial.json",
+            '{"fx": 1, "fy": 2}',
+            r"partial.json: expected all of fx, fy, cx, cy, got fx, fy without cx, cy",
+        ),
         ("other.json", '{"focal": 1}', r"other.json: expected fx, fy, cx, cy, or a 3x3 matrix K .*got keys focal"),
         ("list.json", "[1, 2, 3]", r"list.json: expected a mapping with fx, fy, cx, cy.*got list"),
-        ("nan.json", '{"fx": NaN, "fy": 1, "cx": 0, "cy": 0}', r"nan.json: intrinsics.fx: expected a finite number, got nan"),
-        ("zero.json", '{"fx": 0, "fy": 1, "cx": 0, "cy": 0}', r"zero.json: intrinsics.fx: expected a positive focal length"),
+        (
+            "nan.json",
+            '{"fx": NaN, "fy": 1, "cx": 0, "cy": 0}',
+            r"nan.json: intrinsics.fx: expected a finite number, got nan",
+        ),
+        (
+            "zero.json",
+            '{"fx": 0, "fy": 1, "cx": 0, "cy": 0}',
+            r"zero.json: intrinsics.fx: expected a positive focal length",
+        ),
         ("text.json", '{"fx": "a", "fy": 1, "cx": 0, "cy": 0}', r"text.json: expected numbers for fx, fy, cx, cy"),
         ("k8.json", '{"K": [1, 0, 0, 0, 1, 0, 0, 0]}', r"k8.json: expected 9 numbers \(a 3x3 matrix\) for 'K', got 8"),
-        ("kneg.json", json.dumps({"K": [-5, 0, 1, 0, 5, 1, 0, 0, 1]}), r"kneg.json: K: expected positive focal lengths.*fx=-5"),
+        (
+            "kneg.json",
+            json.dumps({"K": [-5, 0, 1, 0, 5, 1, 0, 0, 1]}),
+            r"kneg.json: K: expected positive focal lengths.*fx=-5",
+        ),
         ("kinf.json", '{"K": [Infinity, 0, 1, 0, 5, 1, 0, 0, 1]}', r"kinf.json: K: expected finite entries"),
-        ("skew.json", json.dumps({"K": [5, 1, 1, 0, 5, 1, 0, 0, 1]}), r"skew.json: K: expected \[\[fx, 0, cx\], \[0, fy, cy\], \[0, 0, 1\]\] \(no skew\)"),
+        (
+            "skew.json",
+            json.dumps({"K": [5, 1, 1, 0, 5, 1, 0, 0, 1]}),
+            r"skew.json: K: expected \[\[fx, 0, cx\], \[0, fy, cy\], \[0, 0, 1\]\] \(no skew\)",
+        ),
         ("bad.yaml", "fx: [1\n", r"bad.yaml: cannot parse as YAML"),
         ("empty.yaml", "", r"empty.yaml: expected a mapping with fx, fy, cx, cy.*got NoneType"),
-        ("few.txt", "1 2 3", r"few.txt: expected 4 or 5 numbers \(3F2N 'fx fy u0 v0 count'\), 9 \(a 3x3 K\) or 16 \(a 4x4 matrix\), got 3 numbers"),
+        (
+            "few.txt",
+            "1 2 3",
+            r"few.txt: expected 4 or 5 numbers \(3F2N 'fx fy u0 v0 count'\), 9 \(a 3x3 K\) or 16 \(a 4x4 matrix\), got 3 numbers",
+        ),
         ("words.txt", "fx=1", r"words.txt: expected whitespace-separated numbers"),
         ("zero.txt", "0 1 2 3 4", r"zero.txt: intrinsics.fx: expected a positive focal length"),
         ("cam.ini", "[camera]", r"cam.ini: unknown intrinsics file type '.ini'; expected .json, .yaml, .yml or .txt"),
@@ -117,7 +156,9 @@ def test_resolve_intrinsics_sources(tmp_path):
     assert resolve_intrinsics(str(write(tmp_path, "k.json", json.dumps({"K": K9})))) == CAM
     with pytest.raises(InputError, match=r"intrinsics: expected all of fx, fy, cx, cy, got fx, cy without fy, cx"):
         resolve_intrinsics(fx=1, cy=2)
-    with pytest.raises(InputError, match=r"intrinsics: expected a file/matrix or --fx --fy --cx --cy, not both \(got fx too\)"):
+    with pytest.raises(
+        InputError, match=r"intrinsics: expected a file/matrix or --fx --fy --cx --cy, not both \(got fx too\)"
+    ):
         resolve_intrinsics(CAM, fx=1)
 
 
@@ -136,18 +177,41 @@ def _alias_bomb(levels=10):
 
 # (file name, content, words of the message after the file name). 24 cases.
 HOSTILE = [
-    ("ocv_8.yaml", OPENCV.format(rows=3, cols=3, dt="d", data=NINE.rsplit(",", 1)[0]),
-     r"expected 9 numbers \(a 3x3 matrix\) in camera_matrix.data, got 8 values"),
+    (
+        "ocv_8.yaml",
+        OPENCV.format(rows=3, cols=3, dt="d", data=NINE.rsplit(",", 1)[0]),
+        r"expected 9 numbers \(a 3x3 matrix\) in camera_matrix.data, got 8 values",
+    ),
     ("ocv_10.yaml", OPENCV.format(rows=3, cols=3, dt="d", data=NINE + ", 1."), r"in camera_matrix.data, got 10 values"),
-    ("ocv_rows.yaml", OPENCV.format(rows=-3, cols=3, dt="d", data=NINE), r"expected rows: 3 and cols: 3 for 'camera_matrix', got rows: -3"),
-    ("ocv_rows_huge.yaml", OPENCV.format(rows=100000, cols=100000, dt="d", data=NINE), r"got rows: 100000, cols: 100000"),
+    (
+        "ocv_rows.yaml",
+        OPENCV.format(rows=-3, cols=3, dt="d", data=NINE),
+        r"expected rows: 3 and cols: 3 for 'camera_matrix', got rows: -3",
+    ),
+    (
+        "ocv_rows_huge.yaml",
+        OPENCV.format(rows=100000, cols=100000, dt="d", data=NINE),
+        r"got rows: 100000, cols: 100000",
+    ),
     ("ocv_rows_text.yaml", OPENCV.format(rows="three", cols=3, dt="d", data=NINE), r"got rows: not an integer"),
-    ("ocv_dt.yaml", OPENCV.format(rows=3, cols=3, dt="q", data=NINE), r"expected camera_matrix.dt to be one of u, c, w, s, i, f, d, h, got 'q'"),
+    (
+        "ocv_dt.yaml",
+        OPENCV.format(rows=3, cols=3, dt="q", data=NINE),
+        r"expected camera_matrix.dt to be one of u, c, w, s, i, f, d, h, got 'q'",
+    ),
     ("ocv_dt_none.yaml", OPENCV.format(rows=3, cols=3, dt=7, data=NINE), r"expected camera_matrix.dt to be one of"),
-    ("ocv_text.yaml", OPENCV.format(rows=3, cols=3, dt="d", data=NINE.replace("525.", "abc")), r"expected numbers in camera_matrix.data"),
+    (
+        "ocv_text.yaml",
+        OPENCV.format(rows=3, cols=3, dt="d", data=NINE.replace("525.", "abc")),
+        r"expected numbers in camera_matrix.data",
+    ),
     ("ocv_scalar.yaml", "%YAML:1.0\ncamera_matrix: 5\n", r"expected 'camera_matrix' to be an opencv-matrix"),
     ("ocv_unterminated.yaml", "%YAML:1.0\ncamera_matrix: [[[\n", r"cannot parse as OpenCV YAML \(line 2"),
-    ("ocv_deep.yaml", "%YAML:1.0\ncamera_matrix: " + "[" * 100_000 + "]" * 100_000 + "\n", r"expected lists and mappings at most 16 deep"),
+    (
+        "ocv_deep.yaml",
+        "%YAML:1.0\ncamera_matrix: " + "[" * 100_000 + "]" * 100_000 + "\n",
+        r"expected lists and mappings at most 16 deep",
+    ),
     ("unterminated.yaml", "K: [[[\n", r"cannot parse as YAML"),
     ("deep.json", "[" * 100_000 + "]" * 100_000, r"expected lists and mappings at most 16 deep"),
     ("deep_k.json", '{"K": ' + "[" * 100_000 + "]" * 100_000 + "}", r"expected lists and mappings at most 16 deep"),
@@ -155,13 +219,28 @@ HOSTILE = [
     ("deep.yaml", "K: " + "[" * 5000 + "]" * 5000 + "\n", r"line 1: expected lists and mappings at most 16 deep"),
     ("deep_block.yaml", "".join(" " * i + f"k{i}:\n" for i in range(40)) + " " * 40 + "x: 1\n", r"at most 16 deep"),
     ("bomb.yaml", _alias_bomb(), r"line 2: expected plain values, got the YAML alias \*a0"),
-    ("true.json", '{"fx": true, "fy": 500, "cx": 1, "cy": 1}', r"expected numbers for fx, fy, cx, cy, got fx: true \(a boolean\)"),
+    (
+        "true.json",
+        '{"fx": true, "fy": 500, "cx": 1, "cy": 1}',
+        r"expected numbers for fx, fy, cx, cy, got fx: true \(a boolean\)",
+    ),
     ("string.json", '{"fx": 500, "fy": "500", "cx": 1, "cy": 1}', r"got fy: '500' \(a string\)"),
-    ("k_bool.json", '{"K": [[true, 0, 1], [0, 1, 1], [0, 0, 1]]}', r"expected numbers for 'K', got true \(a boolean\) at K\[0\]\[0\]"),
-    ("k_str.yaml", 'K: ["525", 0, 1, 0, 5, 1, 0, 0, 1]\n', r"expected numbers for 'K', got '525' \(a string\) at K\[0\]"),
+    (
+        "k_bool.json",
+        '{"K": [[true, 0, 1], [0, 1, 1], [0, 0, 1]]}',
+        r"expected numbers for 'K', got true \(a boolean\) at K\[0\]\[0\]",
+    ),
+    (
+        "k_str.yaml",
+        'K: ["525", 0, 1, 0, 5, 1, 0, 0, 1]\n',
+        r"expected numbers for 'K', got '525' \(a string\) at K\[0\]",
+    ),
     ("k_map.yaml", "K: {a: 1}\n", r"expected numbers for 'K', got a mapping of 1"),
-    ("ros_rows.yaml", "camera_matrix: {rows: 30, cols: 3, data: [1, 0, 1, 0, 1, 1, 0, 0, 1]}\n",
-     r"expected rows: 3 and cols: 3 for 'camera_matrix', got rows: 30"),
+    (
+        "ros_rows.yaml",
+        "camera_matrix: {rows: 30, cols: 3, data: [1, 0, 1, 0, 1, 1, 0, 0, 1]}\n",
+        r"expected rows: 3 and cols: 3 for 'camera_matrix', got rows: 30",
+    ),
 ]
 
 

@@ -43,7 +43,9 @@ def test_png16_round_trip_within_quantisation(tmp_path):
     img = cv2.imread(str(tmp_path / "n.png"), cv2.IMREAD_UNCHANGED)
     assert img.dtype == np.uint16 and img.shape == (20, 30, 3)
     # RGB order in the file, 3F2N encoding png = (1 - n) * 65535 / 2
-    np.testing.assert_array_equal(img[5, 7, ::-1], np.rint((1 - n[5, 7].astype(np.float64)) * 65535 / 2).astype(np.uint16))
+    np.testing.assert_array_equal(
+        img[5, 7, ::-1], np.rint((1 - n[5, 7].astype(np.float64)) * 65535 / 2).astype(np.uint16)
+    )
     assert (img[0, 0] == 65535).all()
 
 
@@ -111,13 +113,17 @@ def test_bad_normal_files_and_arguments(tmp_path):
     with pytest.raises(DataFileError, match=r"t.png: cannot decode as PNG"):
         read_normals(tmp_path / "t.png")
     np.save(tmp_path / "flat.npy", np.zeros((4, 4)))
-    with pytest.raises(DataFileError, match=r"flat.npy: expected a float array of shape \(H, W, 3\), got shape \(4, 4\)"):
+    with pytest.raises(
+        DataFileError, match=r"flat.npy: expected a float array of shape \(H, W, 3\), got shape \(4, 4\)"
+    ):
         read_normals(tmp_path / "flat.npy")
     (tmp_path / "c.npy").write_bytes(b"junk")
     with pytest.raises(DataFileError, match=r"c.npy: cannot read as a NumPy normal map"):
         read_normals(tmp_path / "c.npy")
     cv2.imwrite(str(tmp_path / "grey.png"), np.zeros((4, 4), np.uint8))
-    with pytest.raises(DataFileError, match=r"grey.png: expected an 8- or 16-bit RGB PNG normal map, got shape \(4, 4\)"):
+    with pytest.raises(
+        DataFileError, match=r"grey.png: expected an 8- or 16-bit RGB PNG normal map, got shape \(4, 4\)"
+    ):
         read_normals(tmp_path / "grey.png")
     with pytest.raises(DataFileError, match=r"n.tif: unknown normal file type '.tif'"):
         (tmp_path / "n.tif").write_bytes(b"x")

@@ -32,7 +32,9 @@ def test_matches_uncompressed_original(shared_sample):
     sums = dict(line.split()[::-1] for line in (shared_sample / "SHA256SUMS").read_text().splitlines())
     assert len(sums) == 12 and len(find_frames(shared_sample)) == 12
     for path, digest in sums.items():
-        assert hashlib.sha256(gzip.decompress((shared_sample / (path + ".gz")).read_bytes())).hexdigest() == digest, path
+        assert hashlib.sha256(gzip.decompress((shared_sample / (path + ".gz")).read_bytes())).hexdigest() == digest, (
+            path
+        )
     f = read_frame(sample_root(), "Easy/android/000001")
     np.testing.assert_array_equal(f.depth, read_frame(shared_sample, "Easy/android/000001").depth)
 

@@ -121,8 +121,11 @@ def assert_same_or_mnr_candidate(method, got, expected, raw, atol, cam=None):
     H, W = got.shape[:2]
     off = np.abs(np.nan_to_num(got - expected)).max(-1) > atol
     for v, u in zip(*np.nonzero(off)):
-        candidates = [raw[q] for q in ((v, u), (v, u - 1), (v, u + 1), (v - 1, u), (v + 1, u))
-                      if 0 <= q[0] < H and 0 <= q[1] < W and not np.isnan(raw[q]).any()]
+        candidates = [
+            raw[q]
+            for q in ((v, u), (v, u - 1), (v, u + 1), (v - 1, u), (v + 1, u))
+            if 0 <= q[0] < H and 0 <= q[1] < W and not np.isnan(raw[q]).any()
+        ]
         assert any(np.abs(got[v, u] - c).max() <= atol for c in candidates), (v, u, got[v, u], expected[v, u])
 
 
@@ -146,7 +149,7 @@ def test_outputs_are_fill_or_unit_and_invalid_pixels_are_fill(method, scene, fil
     inner = valid[1:-1, 1:-1].copy()
     for dv in (-1, 0, 1):
         for du in (-1, 0, 1):
-            inner &= valid[1 + dv: valid.shape[0] - 1 + dv, 1 + du: valid.shape[1] - 1 + du]
+            inner &= valid[1 + dv : valid.shape[0] - 1 + dv, 1 + du : valid.shape[1] - 1 + du]
     assert got[1:-1, 1:-1][inner].all(), "a pixel with full support got no normal"
 
 
@@ -187,8 +190,12 @@ def test_scale_invariant_mode_ignores_the_unit(method, scene, factor):
     m = surfnorm.estimate(scaled, cam, method=method, mask=mask, scale_invariant=True, fill=np.nan)
     assert_same_or_mnr_candidate(method, m, n, raw_normals(method, z, mask, cam, True), 2e-3, cam)
     if mnr_recipe(method):  # before MNR, the same to float precision
-        np.testing.assert_allclose(raw_normals(method, scaled, mask, cam, True), raw_normals(method, z, mask, cam, True),
-                                   atol=1e-3, equal_nan=True)
+        np.testing.assert_allclose(
+            raw_normals(method, scaled, mask, cam, True),
+            raw_normals(method, z, mask, cam, True),
+            atol=1e-3,
+            equal_nan=True,
+        )
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -202,6 +209,7 @@ def test_scale_invariant_mode_is_exact_for_powers_of_two(method, scene, power):
 
 
 # --- the registry: one hop from a name to its kernel ----------------------------------------------------------------
+
 
 def test_every_method_names_where_its_kernel_lives():
     import importlib
@@ -235,6 +243,8 @@ def test_each_run_calls_the_kernel_it_names(name, monkeypatch):
 
 
 def test_the_registry_is_filled_without_importing_a_kernel():
-    code = ("import sys, surfnorm; names = list(surfnorm.methods()); "
-            "assert len(names) >= 14 and not any(m.startswith('surfnorm.kernels') for m in sys.modules), sorted(sys.modules)")
+    code = (
+        "import sys, surfnorm; names = list(surfnorm.methods()); "
+        "assert len(names) >= 14 and not any(m.startswith('surfnorm.kernels') for m in sys.modules), sorted(sys.modules)"
+    )
     subprocess.run([sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(SRC)})

@@ -26,7 +26,11 @@ def test_e_a_e_p_coverage_and_pi():
     mask = np.array([[True, True], [False, True]])
     assert metrics.mean_angular_error(est, gt, mask) == pytest.approx(5.0)
     assert metrics.coverage(est, mask) == pytest.approx(2 / 3)
-    assert metrics.proportion_below(est, gt, thresholds=(5, 11.25, 50)) == {5.0: pytest.approx(1 / 3), 11.25: pytest.approx(2 / 3), 50.0: 1.0}
+    assert metrics.proportion_below(est, gt, thresholds=(5, 11.25, 50)) == {
+        5.0: pytest.approx(1 / 3),
+        11.25: pytest.approx(2 / 3),
+        50.0: 1.0,
+    }
     assert metrics.tradeoff(1.54, 1.82) == pytest.approx(2.8028)
     assert np.isnan(metrics.mean_angular_error(est, gt, np.zeros((2, 2), bool)))
 
@@ -61,11 +65,23 @@ def test_plane_error_no_normal_at_all():
     assert np.isnan(mean) and cover == 0.0
 
 
-@pytest.mark.parametrize("args, message", [
-    ((np.zeros((2, 2)), [[0, 0, -1.0]], np.ones((1, 2, 2), bool)), r"normals: expected shape \(H, W, 3\), got shape \(2, 2\)"),
-    ((np.zeros((2, 2, 3)), [0, 0, -1.0], np.ones((1, 2, 2), bool)), r"plane_normals: expected shape \(P, 3\), got shape \(3,\)"),
-    ((np.zeros((2, 2, 3)), [[0, 0, -1.0]], np.ones((2, 2), bool)), r"plane_masks: expected shape \(1, 2, 2\), got shape \(2, 2\)"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            (np.zeros((2, 2)), [[0, 0, -1.0]], np.ones((1, 2, 2), bool)),
+            r"normals: expected shape \(H, W, 3\), got shape \(2, 2\)",
+        ),
+        (
+            (np.zeros((2, 2, 3)), [0, 0, -1.0], np.ones((1, 2, 2), bool)),
+            r"plane_normals: expected shape \(P, 3\), got shape \(3,\)",
+        ),
+        (
+            (np.zeros((2, 2, 3)), [[0, 0, -1.0]], np.ones((2, 2), bool)),
+            r"plane_masks: expected shape \(1, 2, 2\), got shape \(2, 2\)",
+        ),
+    ],
+)
 def test_plane_error_bad_input(args, message):
     with pytest.raises(InputError, match=message):
         metrics.plane_error(*args)

@@ -29,8 +29,8 @@ def test_refine_equals_naive_mnr_on_any_normals():
 
 def test_mnr_near_tie_tolerance_equals_naive():
     """The scale-invariant mode's MNR rule (a candidate must be smoother by more than tie_tol * z): kernel = reference."""
-    from surfnorm.kernels.mnr import mnr
     from surfnorm.kernels.d2nt_v3 import d2nt_v3
+    from surfnorm.kernels.mnr import mnr
 
     rng = np.random.default_rng(7)
     v, u = np.mgrid[0:41, 0:53]
@@ -42,9 +42,15 @@ def test_mnr_near_tie_tolerance_equals_naive():
     raw = naive.d2nt_dag(z, ok, cam)
     for tie_tol in (0.0, 1.5e-6, 1e-3):
         for dlf in ("1d", "alpha"):
-            check(mnr(z, ok, raw, np.empty_like(raw), dlf=dlf, tie_tol=tie_tol),
-                  naive.mnr(z, ok, raw, dlf=dlf, tie_tol=tie_tol), f"mnr {dlf} {tie_tol}")
-        check(d2nt_v3(z, ok, cam, np.empty(z.shape + (3,), np.float32), tie_tol=tie_tol),
-              naive.d2nt_v3(z, ok, cam, tie_tol=tie_tol), f"d2nt_v3 {tie_tol}")
+            check(
+                mnr(z, ok, raw, np.empty_like(raw), dlf=dlf, tie_tol=tie_tol),
+                naive.mnr(z, ok, raw, dlf=dlf, tie_tol=tie_tol),
+                f"mnr {dlf} {tie_tol}",
+            )
+        check(
+            d2nt_v3(z, ok, cam, np.empty(z.shape + (3,), np.float32), tie_tol=tie_tol),
+            naive.d2nt_v3(z, ok, cam, tie_tol=tie_tol),
+            f"d2nt_v3 {tie_tol}",
+        )
     # and the tolerance changes choices (otherwise the comparison above would prove nothing)
     assert not np.array_equal(naive.mnr(z, ok, raw, tie_tol=1e-3), naive.mnr(z, ok, raw))

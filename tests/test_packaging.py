@@ -28,5 +28,4 @@ def test_license_is_the_declared_mit():
     assert 'license = "MIT"' in (ROOT / "pyproject.toml").read_text()
     text = (ROOT / "LICENSE").read_text()
     assert text.startswith("MIT License\n") and "Copyright (c) 2026 the surfnorm authors" in text
-    assert "THE SOFTWARE IS PROVIDED \"AS IS\", WITHOUT WARRANTY OF ANY KIND" in text
-
+    assert 'THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND' in text

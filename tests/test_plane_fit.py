@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import surfnorm
 from surfnorm import _api
@@ -12,7 +14,6 @@ from surfnorm.errors import InputError
 from . import surfaces
 from .naive_plane_fit import plane_fit as naive_plane_fit
 from .naive_plane_fit import points
-from hypothesis import HealthCheck, given, settings, strategies as st
 from .surfaces import camera
 
 METHODS = ("plane_svd", "plane_pca", "vector_svd")
@@ -38,8 +39,8 @@ def rough_depth(seed):
     """Smooth depth with steps, holes (0, NaN, -1, inf) and a user mask."""
     rng = np.random.default_rng(seed)
     depth = smooth_depth(seed)
-    depth[:, W // 3:] += 0.7  # a depth step
-    depth[H // 2:, : W // 2] -= 0.4  # another
+    depth[:, W // 3 :] += 0.7  # a depth step
+    depth[H // 2 :, : W // 2] -= 0.4  # another
     depth += rng.normal(0, 0.002, depth.shape)  # sensor noise
     holes = rng.random(depth.shape) < 0.12
     depth[holes] = rng.choice([0.0, np.nan, -1.0, np.inf], size=holes.sum())
@@ -111,7 +112,9 @@ def test_fill_value_where_support_is_too_small(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("normal", [(0, 0, -1), (0.3, -0.2, -0.9), (-0.7, 0.1, -0.5), (0.0, 0.8, -0.3), (0.5, 0.5, -0.2)])
+@pytest.mark.parametrize(
+    "normal", [(0, 0, -1), (0.3, -0.2, -0.9), (-0.7, 0.1, -0.5), (0.0, 0.8, -0.3), (0.5, 0.5, -0.2)]
+)
 @pytest.mark.parametrize("window", [3, 5])
 def test_exact_on_planes(method, normal, window):
     depth, n_true, hit = surfaces.plane(K, H, W, normal, 2.0)
@@ -163,8 +166,9 @@ def test_mnr_and_batches(method):
     assert refined.shape == (H, W, 3) and refined.dtype == np.float32
     # (surfnorm.refine is shadowed by the submodule surfnorm.refine once that is imported: use _api's)
     assert np.array_equal(refined, _api.refine(raw, depth, mask=mask))
-    stack = surfnorm.estimate(np.stack([depth, depth[::-1]]), K, method=method, mask=np.stack([mask, mask[::-1]]),
-                              window=5, threads=2)
+    stack = surfnorm.estimate(
+        np.stack([depth, depth[::-1]]), K, method=method, mask=np.stack([mask, mask[::-1]]), window=5, threads=2
+    )
     assert np.array_equal(stack[0], raw)
 
 
@@ -186,7 +190,9 @@ def test_bad_window_is_refused(window):
 
 
 def test_averaging_option_on_plane_fit_is_refused():
-    with pytest.raises(InputError, match=r"options of method 'plane_svd': expected some of fill, window, got unknown option\(s\) dlf"):
+    with pytest.raises(
+        InputError, match=r"options of method 'plane_svd': expected some of fill, window, got unknown option\(s\) dlf"
+    ):
         surfnorm.estimate(smooth_depth(0), K, method="plane_svd", dlf="1d")
 
 
@@ -221,7 +227,6 @@ def test_plane_svd_eigenvalue_is_smallest_of_the_4x4():
 PLANE_FITS = ("plane_svd", "plane_pca", "vector_svd")
 
 
-
 @pytest.mark.parametrize("method", PLANE_FITS)
 def test_plane_fit_of_one_image_row_gets_the_fill_value(method):
     z = np.zeros((3, 3), np.float32)
@@ -238,10 +243,12 @@ def line_windows(draw):
     z = np.zeros((h, w), np.float32)
     kind = draw(st.sampled_from(["row", "column", "diagonal", "anti-diagonal"]))
     k = min(h, w)
-    idx = {"row": (np.full(w, draw(st.integers(0, h - 1))), np.arange(w)),
-           "column": (np.arange(h), np.full(h, draw(st.integers(0, w - 1)))),
-           "diagonal": (np.arange(k), np.arange(k)),
-           "anti-diagonal": (np.arange(k), k - 1 - np.arange(k))}[kind]
+    idx = {
+        "row": (np.full(w, draw(st.integers(0, h - 1))), np.arange(w)),
+        "column": (np.arange(h), np.full(h, draw(st.integers(0, w - 1)))),
+        "diagonal": (np.arange(k), np.arange(k)),
+        "anti-diagonal": (np.arange(k), k - 1 - np.arange(k)),
+    }[kind]
     z[idx] = rng.uniform(0.5, 5.0, len(idx[0]))
     return z, draw(st.sampled_from([3, 5]))
 

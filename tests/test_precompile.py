@@ -75,13 +75,25 @@ def test_read_only_install_precompiles_into_the_user_cache():
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
     env.update(PYTHONPATH=str(site), HOME=str(home), XDG_CACHE_HOME=str(home / "cache"), PYTHONDONTWRITEBYTECODE="1")
     try:
-        run = subprocess.run(prefix + [sys.executable, "-m", "surfnorm.precompile", "--quiet", "cp2tv"], env=env,
-                             cwd=tmp_path, capture_output=True, text=True, timeout=900)
+        run = subprocess.run(
+            prefix + [sys.executable, "-m", "surfnorm.precompile", "--quiet", "cp2tv"],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         assert run.returncode == 0, run.stderr
         assert not list(site.rglob("*.nbi")), "nothing may be written into a read-only package"
         assert list((home / "cache" / "numba").rglob("*.nbi")), "the user-wide cache holds the compiled kernels"
-        first = subprocess.run(prefix + [sys.executable, "-c", FIRST_CALL], env=env, cwd=tmp_path,
-                               capture_output=True, text=True, timeout=900)
+        first = subprocess.run(
+            prefix + [sys.executable, "-c", FIRST_CALL],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         assert first.returncode == 0, first.stderr
         assert first.stdout.split()[-1] == "0", "after precompiling, the first call compiles nothing"
     finally:
@@ -108,8 +120,14 @@ def test_nowhere_writable_but_the_temp_directory():
     call = FIRST_CALL.replace('("cp2tv", "cp2tv+mnr")', '("d2nt_basic",)')
     try:
         for expected in ("compiled", "0"):
-            run = subprocess.run(prefix + [sys.executable, "-c", call], env=env, cwd=tmp_path, capture_output=True,
-                                 text=True, timeout=900)
+            run = subprocess.run(
+                prefix + [sys.executable, "-c", call],
+                env=env,
+                cwd=tmp_path,
+                capture_output=True,
+                text=True,
+                timeout=900,
+            )
             assert run.returncode == 0, run.stderr[-2000:]
             assert (run.stdout.split()[-1] == "0") == (expected == "0"), run.stdout
         cache = [p for p in tmp.iterdir() if p.name.startswith("surfnorm-numba-")]

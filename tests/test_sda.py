@@ -8,14 +8,13 @@ import pytest
 
 import surfnorm
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
-from surfnorm.metrics import mean_angular_error
-from surfnorm.reference import official_figures
 from surfnorm.kernels import sda
 from surfnorm.kernels.sda import MAX_ITERATIONS, sda_gradients
+from surfnorm.metrics import mean_angular_error
+from surfnorm.reference import official_figures
 from surfnorm.units import TIE_TOLERANCE
 
-from . import naive_sda, naive_three_filters
-from . import surfaces
+from . import naive_sda, naive_three_filters, surfaces
 from .conftest import SHARED_REFERENCE
 from .test_three_filters import assert_agrees, random_depth
 
@@ -75,9 +74,14 @@ def test_exact_comparisons_are_a_tolerance_of_zero(monkeypatch):
 
     def run():
         z = np.where(valid, depth, 0.0).astype(np.float64)
-        return (sda_gradients(z, valid, iterations=None),
-                [surfnorm.estimate(depth, K, method="sda_sne", base=base, border=border, iterations=None)
-                 for base in ("cp2tv", "3f2n") for border in ("one-sided", "reflect")])
+        return (
+            sda_gradients(z, valid, iterations=None),
+            [
+                surfnorm.estimate(depth, K, method="sda_sne", base=base, border=border, iterations=None)
+                for base in ("cp2tv", "3f2n")
+                for border in ("one-sided", "reflect")
+            ],
+        )
 
     exact = run()
     monkeypatch.setattr(sda, "_kernel_tol", lambda tie_tol: float(tie_tol))
@@ -108,7 +112,9 @@ def test_invalid_depth_is_never_read():
         z = np.where(valid, depth, garbage)
         mask = valid if garbage in (1e30, 2.0) else None
         for base in ("cp2tv", "3f2n"):
-            results.append(surfnorm.estimate(z, K, method="sda_sne", mask=mask, base=base, iterations=None, fill=np.nan))
+            results.append(
+                surfnorm.estimate(z, K, method="sda_sne", mask=mask, base=base, iterations=None, fill=np.nan)
+            )
     for i, r in enumerate(results[2:]):
         np.testing.assert_array_equal(r, results[i % 2])
     assert np.all(np.isnan(results[0][~valid]))
@@ -163,7 +169,10 @@ def test_registered_with_category_reference_and_options():
 
 @pytest.mark.parametrize("value", [-1, 1.5, True, "3", np.float64(2.0)])
 def test_bad_iterations_are_named(value):
-    with pytest.raises(ValueError, match=r"iterations: expected a non-negative integer number of passes, or None to run until stable, got "):
+    with pytest.raises(
+        ValueError,
+        match=r"iterations: expected a non-negative integer number of passes, or None to run until stable, got ",
+    ):
         surfnorm.estimate(np.ones((4, 4)), surfaces.camera(4, 4), method="sda_sne", iterations=value)
 
 
@@ -181,9 +190,20 @@ def test_with_mnr():
 
 # Passes the authors' demo makes until its stop test fires (the pass that finds nothing to change is not
 # counted), as measured with the demo on the 12 frames; planar scenes (cube 228, room 162) take longest.
-DEMO_PASSES = {"Easy/android": 18, "Easy/cube": 228, "Easy/torus": 6, "Easy/torusknot": 9, "Medium/Trex": 8,
-               "Medium/bunny": 7, "Medium/chair": 8, "Medium/penguin": 9, "Hard/batman": 16, "Hard/room": 162,
-               "Hard/temple": 12, "Hard/tree": 10}
+DEMO_PASSES = {
+    "Easy/android": 18,
+    "Easy/cube": 228,
+    "Easy/torus": 6,
+    "Easy/torusknot": 9,
+    "Medium/Trex": 8,
+    "Medium/bunny": 7,
+    "Medium/chair": 8,
+    "Medium/penguin": 9,
+    "Hard/batman": 16,
+    "Hard/room": 162,
+    "Hard/temple": 12,
+    "Hard/tree": 10,
+}
 #: The converged variant is checked only on frames that stabilise within this many passes (all but cube and
 #: room), to keep the suite fast; their per-level figures are covered by the report's table.
 FAST_CONVERGING = 30

@@ -6,6 +6,8 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import surfnorm
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
@@ -15,7 +17,6 @@ from surfnorm.reference import official_figures
 from . import naive_three_filters as naive
 from . import surfaces
 from .conftest import SHARED_REFERENCE
-from hypothesis import HealthCheck, given, settings, strategies as st
 from .surfaces import has_normal
 
 METHODS = ["3f2n_mean", "3f2n_median", "sne_roadseg"]
@@ -213,9 +214,16 @@ def test_faithful_on_all_twelve_frames(shared_sample):
 # --- one orientation rule (surfnorm.kernels._rows.facing_sign) -----------------------------------------------------
 
 
-
-TIE_DEPTH = np.array([[3125, 3151, 3150, 3132, 3131], [3123, 3124, 3132, 3123, 3123], [3123, 3123, 3132, 3123, 3123],
-                      [3123] * 5, [3123] * 5], np.float32)
+TIE_DEPTH = np.array(
+    [
+        [3125, 3151, 3150, 3132, 3131],
+        [3123, 3124, 3132, 3123, 3123],
+        [3123, 3123, 3132, 3123, 3123],
+        [3123] * 5,
+        [3123] * 5,
+    ],
+    np.float32,
+)
 
 
 TIE_K = np.array([[518.8579, 0, -55.41755], [0, 519.46961, 209.73617], [0, 0, 1]])
@@ -260,8 +268,13 @@ def integer_frames(draw):
     base = draw(st.integers(400, 6000))
     z = base + rng.integers(-2, 3, (h, w)) * draw(st.sampled_from([0, 1, 2])) + rng.integers(-1, 2) * np.arange(w)
     z = z + 30 * (rng.random((h, w)) < 0.15)
-    cam = np.array([[draw(st.floats(200, 900)), 0, draw(st.floats(-60, w + 60))],
-                    [0, draw(st.floats(200, 900)), draw(st.floats(-60, h + 60))], [0, 0, 1]])
+    cam = np.array(
+        [
+            [draw(st.floats(200, 900)), 0, draw(st.floats(-60, w + 60))],
+            [0, draw(st.floats(200, 900)), draw(st.floats(-60, h + 60))],
+            [0, 0, 1],
+        ]
+    )
     return z.astype(np.float32), cam
 
 

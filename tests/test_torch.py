@@ -44,8 +44,12 @@ def variants(name):
     opts = st.methods()[name]
     out = [(name, {}), (name + "+mnr", {})]
     if "dlf" in opts:
-        out += [(name, {"dlf": "alpha", "tau": 0.5}), (name, {"dlf": "beta", "truncate": False}),
-                (name + "+mnr", {"dlf": "gamma", "mnr_dlf": "1d"}), (name + "+mnr", {"mnr_dlf": "beta"})]
+        out += [
+            (name, {"dlf": "alpha", "tau": 0.5}),
+            (name, {"dlf": "beta", "truncate": False}),
+            (name + "+mnr", {"dlf": "gamma", "mnr_dlf": "1d"}),
+            (name + "+mnr", {"mnr_dlf": "beta"}),
+        ]
     if "border" in opts:
         out += [(name, {"border": "reflect"})]
     if "mnr_dlf" in opts:
@@ -57,15 +61,25 @@ def variants(name):
     if "tau" in opts and "dlf" not in opts:  # auto: d2nt_v3's tau where it picks d2nt_v3
         out += [(name, {"tau": 0.5}), (name + "+mnr", {"mnr_dlf": "gamma", "fill": 1.0})]
     if "base" in opts:
-        out += [(name, {"base": "3f2n"}), (name, {"base": "3f2n", "border": "reflect", "iterations": 1}),
-                (name, {"iterations": None})]
+        out += [
+            (name, {"base": "3f2n"}),
+            (name, {"base": "3f2n", "border": "reflect", "iterations": 1}),
+            (name, {"iterations": None}),
+        ]
     return out
 
 
 def assert_parity(depth, masks, Ks, method, options, names):
     """The torch backend on a batch equals surfnorm.estimate frame by frame to TOL per component."""
-    got = nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method=method,
-                           mask=None if masks is None else torch.from_numpy(masks)[:, None], **options))
+    got = nchw(
+        st.estimate(
+            torch.from_numpy(depth)[:, None],
+            torch.from_numpy(Ks),
+            method=method,
+            mask=None if masks is None else torch.from_numpy(masks)[:, None],
+            **options,
+        )
+    )
     for i, name in enumerate(names):
         ref = surfnorm.estimate(depth[i], Ks[i], method=method, mask=None if masks is None else masks[i], **options)
         g = got[i]
@@ -102,8 +116,9 @@ class TestParity:
         Ks_crop[:, 0, 2] -= 64
         crop = (slice(None), slice(0, 120), slice(64, 224))
         for method, options in variants(name)[2:]:
-            assert_parity(np.ascontiguousarray(depth[crop]), np.ascontiguousarray(masks[crop]), Ks_crop,
-                          method, options, names)
+            assert_parity(
+                np.ascontiguousarray(depth[crop]), np.ascontiguousarray(masks[crop]), Ks_crop, method, options, names
+            )
 
     @pytest.mark.parametrize("name", TORCH_METHODS)
     def test_twelve_frames(self, shared_sample, name):
@@ -134,12 +149,29 @@ class TestParity:
         from surfnorm.kernels import adaptive_fit, auto
         from surfnorm.torch import _adaptive
 
-        for name in ("ALPHA", "KAPPA", "RHO_FLOOR", "RADII", "N_WIDEN", "MIN_POINTS", "N_BINS", "MIN_SAMPLES",
-                     "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS", "_CLIP_ROUNDS", "_TABLE", "TIE"):
+        for name in (
+            "ALPHA",
+            "KAPPA",
+            "RHO_FLOOR",
+            "RADII",
+            "N_WIDEN",
+            "MIN_POINTS",
+            "N_BINS",
+            "MIN_SAMPLES",
+            "_NOISE_SAMPLES",
+            "_MAX_GAP",
+            "_MAX_SPREAD",
+            "_CLIP_SIGMAS",
+            "_CLIP_ROUNDS",
+            "_TABLE",
+            "TIE",
+        ):
             assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name
         assert _adaptive._SHIFTS == tuple(map(tuple, adaptive_fit._SHIFTS.tolist()))
         assert (_adaptive.CLEAN_FLOOR, _adaptive.NOISY_FLOOR) == (auto.CLEAN_FLOOR, auto.NOISY_FLOOR)
-        assert _adaptive.MAX_WINDOW == adaptive_fit.MAX_WINDOW == surfnorm.methods()["adaptive_fit"].options["max_window"]
+        assert (
+            _adaptive.MAX_WINDOW == adaptive_fit.MAX_WINDOW == surfnorm.methods()["adaptive_fit"].options["max_window"]
+        )
         for r_max in (1, 3, 7, 15, 20, 63):
             widen, grow = _adaptive._ladder_tables(r_max)
             np.testing.assert_array_equal(widen, adaptive_fit.widen_table(r_max))
@@ -160,13 +192,17 @@ def scene_with_holes(h=40, w=52, seed=0):
 
 
 SENSOR_SAMPLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "sensor-sample"
-SENSOR_FRAMES = sorted(p.name for p in SENSOR_SAMPLE.iterdir() if (p / "depth.npy").is_file()) if SENSOR_SAMPLE.is_dir() else []
+SENSOR_FRAMES = (
+    sorted(p.name for p in SENSOR_SAMPLE.iterdir() if (p / "depth.npy").is_file()) if SENSOR_SAMPLE.is_dir() else []
+)
 
 
 def read_sensor(name):
     """A frame of the sensor sample: float32 depth (0 where invalid) and K."""
     k = json.loads((SENSOR_SAMPLE / name / "K.json").read_text())
-    return np.load(SENSOR_SAMPLE / name / "depth.npy"), np.array([[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1]])
+    return np.load(SENSOR_SAMPLE / name / "depth.npy"), np.array(
+        [[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1]]
+    )
 
 
 def sensor_like(h=48, w=64, seed=0, step=0.008, sigma=0.01, holes=0.05):
@@ -177,7 +213,9 @@ def sensor_like(h=48, w=64, seed=0, step=0.008, sigma=0.01, holes=0.05):
     v, u = np.mgrid[0:h, 0:w]
     z = np.where(u < w // 2, 1.5 + 0.01 * u + 0.004 * v, 2.4 - 0.012 * v)
     ball = (u - 0.7 * w) ** 2 + (v - 0.5 * h) ** 2 < (0.2 * h) ** 2
-    z = np.where(ball, 1.2 - 0.2 * np.sqrt(np.clip(1 - ((u - 0.7 * w) ** 2 + (v - 0.5 * h) ** 2) / (0.2 * h) ** 2, 0, 1)), z)
+    z = np.where(
+        ball, 1.2 - 0.2 * np.sqrt(np.clip(1 - ((u - 0.7 * w) ** 2 + (v - 0.5 * h) ** 2) / (0.2 * h) ** 2, 0, 1)), z
+    )
     z = np.round((z + sigma * rng.standard_normal(z.shape)) / step) * step
     z[rng.random(z.shape) < holes] = 0.0
     z[3:7, 5:12] = 0.0
@@ -185,8 +223,15 @@ def sensor_like(h=48, w=64, seed=0, step=0.008, sigma=0.01, holes=0.05):
 
 
 def torch_normals(depth, Ks, method, masks=None, **options):
-    return nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method=method,
-                            mask=None if masks is None else torch.from_numpy(masks)[:, None], **options))
+    return nchw(
+        st.estimate(
+            torch.from_numpy(depth)[:, None],
+            torch.from_numpy(Ks),
+            method=method,
+            mask=None if masks is None else torch.from_numpy(masks)[:, None],
+            **options,
+        )
+    )
 
 
 class TestAdaptive:
@@ -229,10 +274,14 @@ class TestAdaptive:
                 profile, (z0, inv_step, radius, rho) = self.numpy_tables(depth, Kf, mask, window, max_window)
                 got = self.torch_tables(depth, Kf, mask, window, max_window)
                 msg = f"{label}, window {window}, max_window {max_window}"
-                assert (np.isnan(profile.floor) and np.isnan(got.floor.item())) or profile.floor == got.floor.item(), msg
+                assert (np.isnan(profile.floor) and np.isnan(got.floor.item())) or profile.floor == got.floor.item(), (
+                    msg
+                )
                 np.testing.assert_array_equal(got.radius[0].numpy(), radius, err_msg=msg)
                 np.testing.assert_allclose(got.rho[0].numpy(), rho, rtol=1e-13, atol=0, err_msg=msg)
-                np.testing.assert_allclose([got.z0.item(), got.inv_step.item()], [z0, inv_step], rtol=1e-13, err_msg=msg)
+                np.testing.assert_allclose(
+                    [got.z0.item(), got.inv_step.item()], [z0, inv_step], rtol=1e-13, err_msg=msg
+                )
 
     def test_choices_differ_across_the_scene(self):
         # the parity tests on sensor_like() scenes are only worth something if the scene exercises every choice
@@ -253,8 +302,14 @@ class TestAdaptive:
     def test_sensor_like_batch(self, method, seed):
         # a batch of four different frames: each gets its own noise profile and choice, as if run alone (auto:
         # adaptive_fit, d2nt_v3, adaptive_fit, and the blend of both: noise floors 0.55, 0.003, 0.5, 0.15)
-        depth = np.stack([sensor_like(seed=seed), sensor_like(seed=seed + 10, sigma=0.0, step=1e-6, holes=0.0),
-                          sensor_like(seed=seed + 20, holes=0.5), sensor_like(seed=seed + 30, sigma=0.003, step=0.004)])
+        depth = np.stack(
+            [
+                sensor_like(seed=seed),
+                sensor_like(seed=seed + 10, sigma=0.0, step=1e-6, holes=0.0),
+                sensor_like(seed=seed + 20, holes=0.5),
+                sensor_like(seed=seed + 30, sigma=0.003, step=0.004),
+            ]
+        )
         Ks = np.stack([K, K, K, K])
         names = ["noisy", "clean", "sparse", "between"]
         assert_parity(depth, None, Ks, method, {}, names)
@@ -288,8 +343,14 @@ class TestAdaptive:
         # other devices work on all pixels (and frames) with masks; the CPU on the ones concerned: same normals
         from surfnorm.torch import _adaptive
 
-        depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, sigma=0.0, step=1e-6), sensor_like(seed=7, holes=0.6),
-                          sensor_like(seed=8, sigma=0.003, step=0.004)])
+        depth = np.stack(
+            [
+                sensor_like(seed=5),
+                sensor_like(seed=6, sigma=0.0, step=1e-6),
+                sensor_like(seed=7, holes=0.6),
+                sensor_like(seed=8, sigma=0.003, step=0.004),
+            ]
+        )
         Ks = np.stack([K, K, K, K])
         for fill in (0.0, 1.0):
             gathered = torch_normals(depth, Ks, method, fill=fill)
@@ -306,7 +367,7 @@ class TestAdaptive:
         depth, Kf = read_sensor(name)
         assert_parity(depth[None], None, Kf[None], "adaptive_fit", {}, [name])
         H, W = depth.shape
-        crop = np.ascontiguousarray(depth[H // 4: H // 4 + H // 2, W // 4: W // 4 + W // 2])
+        crop = np.ascontiguousarray(depth[H // 4 : H // 4 + H // 2, W // 4 : W // 4 + W // 2])
         Kc = Kf.copy()
         Kc[0, 2] -= W // 4
         Kc[1, 2] -= H // 4
@@ -324,8 +385,9 @@ class TestAdaptiveGradients:
         # the window sums are differences of integral images, whose rounding (~1e-13 here) any depth moves: with
         # eps = 1e-6 that is 1e-7 in the numerical Jacobian, well inside gradcheck's tolerance. fast_mode checks
         # random projections of the Jacobian (the full one takes a minute on this 2-core machine class).
-        assert torch.autograd.gradcheck(lambda d: st.estimate(d, K, method="adaptive_fit"), (z,), eps=1e-6,
-                                        fast_mode=True)
+        assert torch.autograd.gradcheck(
+            lambda d: st.estimate(d, K, method="adaptive_fit"), (z,), eps=1e-6, fast_mode=True
+        )
 
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
     def test_same_normals_with_and_without_a_graph(self, method):
@@ -359,7 +421,10 @@ class TestAdaptiveGradients:
         grads = []
         for method in ("auto", expected):
             z = torch.from_numpy(depth).requires_grad_()
-            (st.estimate(z, K, method=method) * torch.linspace(0.5, 1.5, 3 * depth.size, dtype=torch.float64).view(1, 3, *depth.shape)).sum().backward()
+            (
+                st.estimate(z, K, method=method)
+                * torch.linspace(0.5, 1.5, 3 * depth.size, dtype=torch.float64).view(1, 3, *depth.shape)
+            ).sum().backward()
             grads.append(z.grad)
         torch.testing.assert_close(grads[0], grads[1], rtol=0, atol=0)
         assert (grads[0] != 0).sum() > depth.size // 2
@@ -379,8 +444,9 @@ class TestSDA:
         assert passes[0] < passes[1]  # otherwise the test shows nothing
         Ks = np.stack([K, K])
         for options in ({"iterations": None}, {"iterations": 4}, {"iterations": None, "base": "3f2n"}):
-            batch = nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method="sda_sne",
-                                     **options))
+            batch = nchw(
+                st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method="sda_sne", **options)
+            )
             for i in range(2):
                 ref = surfnorm.estimate(depth[i], K, method="sda_sne", **options)
                 np.testing.assert_allclose(batch[i], ref, rtol=0, atol=TOL, err_msg=str(options))
@@ -419,7 +485,7 @@ class TestThreeFilters:
         # decides it. That happens by construction where a gradient is one-sided or 0 (image border with
         # reflect, beside a gap) and the mean/median equals the candidate of that same neighbour:
         # n_z,q = -n_x (u - c_x) / f_x exactly, so n . P = 0. Compare up to sign there.
-        v, u = np.mgrid[0:depth.shape[0], 0:depth.shape[1]]
+        v, u = np.mgrid[0 : depth.shape[0], 0 : depth.shape[1]]
         ray = np.stack(((u - cx) / cam.fx, (v - cy) / cam.fy, np.ones(u.shape)), axis=-1)
         ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
         # Such normals, and every normal within ORIENTATION_TIE of edge-on, now get a fixed sign from the rule of
@@ -434,7 +500,9 @@ class TestThreeFilters:
         # well inside the band: the rule's sign (the first of n_z, n_y, n_x beyond the band made negative)
         inside = edge_on & (cos < 0.99 * ORIENTATION_TIE)
         t = ORIENTATION_TIE
-        key = np.where(np.abs(ref[..., 2]) > t, ref[..., 2], np.where(np.abs(ref[..., 1]) > t, ref[..., 1], ref[..., 0]))
+        key = np.where(
+            np.abs(ref[..., 2]) > t, ref[..., 2], np.where(np.abs(ref[..., 1]) > t, ref[..., 1], ref[..., 0])
+        )
         expected = np.where((key > 0)[..., None], -ref, ref)
         np.testing.assert_allclose(got[inside], expected[inside], atol=1e-6)
 
@@ -443,8 +511,11 @@ class TestThreeFilters:
         root = threef2n.sample_root()
         names = threef2n.find_frames(root)
         frames, depth, _, Ks = load(root, names)
-        got = nchw(st.estimate(torch.from_numpy(depth)[:, None], torch.from_numpy(Ks),
-                               method=f"3f2n_{third}", border="reflect"))
+        got = nchw(
+            st.estimate(
+                torch.from_numpy(depth)[:, None], torch.from_numpy(Ks), method=f"3f2n_{third}", border="reflect"
+            )
+        )
         for i, f in enumerate(frames):
             e_a = mean_angular_error(got[i], f.normals, f.mask)
             assert abs(e_a - official_figures(f.name)[f"3f2n_{third}"]) < 1e-4, f.name
@@ -476,13 +547,23 @@ def random_depth(h=6, w=7, seed=0):
 class TestGradients:
     """Issue 7, acceptance 2: gradcheck in float64 on small random depth for each method."""
 
-    @pytest.mark.parametrize("method,options", [v for name in TORCH_METHODS for v in variants(name)[:2]]
-                             + [("d2nt_v2", {"dlf": "beta", "truncate": False}), ("d2nt_v3", {"dlf": "alpha"}),
-                                ("cp2tv", {"border": "reflect"}), ("3f2n_mean", {"border": "reflect"}),
-                                ("sne_roadseg", {"border": "reflect"}), ("sda_sne", {"base": "3f2n"}),
-                                ("sda_sne", {"iterations": None}),
-                                ("sda_sne", {"border": "reflect"}), ("plane_svd", {"window": 5}),
-                                ("plane_pca", {"window": 5}), ("vector_svd", {"window": 5})])
+    @pytest.mark.parametrize(
+        "method,options",
+        [v for name in TORCH_METHODS for v in variants(name)[:2]]
+        + [
+            ("d2nt_v2", {"dlf": "beta", "truncate": False}),
+            ("d2nt_v3", {"dlf": "alpha"}),
+            ("cp2tv", {"border": "reflect"}),
+            ("3f2n_mean", {"border": "reflect"}),
+            ("sne_roadseg", {"border": "reflect"}),
+            ("sda_sne", {"base": "3f2n"}),
+            ("sda_sne", {"iterations": None}),
+            ("sda_sne", {"border": "reflect"}),
+            ("plane_svd", {"window": 5}),
+            ("plane_pca", {"window": 5}),
+            ("vector_svd", {"window": 5}),
+        ],
+    )
     def test_gradcheck(self, method, options):
         z = random_depth()
         Kt = torch.tensor(K, dtype=torch.float64)
@@ -492,7 +573,9 @@ class TestGradients:
         # with border="reflect" a step of 1e-6 (gradcheck's default) flips one choice at pixel (0, 3) of this
         # input, where 1e-8 finds the analytical Jacobian to 6e-8
         eps = 1e-8 if method.startswith("sda_sne") else 1e-6
-        assert torch.autograd.gradcheck(lambda d: st.estimate(d, Kt, method=method, mask=mask, **options), (z,), eps=eps)
+        assert torch.autograd.gradcheck(
+            lambda d: st.estimate(d, Kt, method=method, mask=mask, **options), (z,), eps=eps
+        )
 
     def test_truncated_softmin_passes_gradient_to_the_chosen_side_only(self):
         # a step: right of column 3 the depth jumps; the truncated softmin takes the left difference at (2, 3)
@@ -547,14 +630,25 @@ class TestGradients:
 
 
 class TestModule:
-    @pytest.mark.parametrize("method,options", [("d2nt_v3", {}), ("d2nt_v2", {"dlf": "alpha", "fill": float("nan")}),
-                                                ("3f2n_mean+mnr", {"border": "reflect"})])
+    @pytest.mark.parametrize(
+        "method,options",
+        [
+            ("d2nt_v3", {}),
+            ("d2nt_v2", {"dlf": "alpha", "fill": float("nan")}),
+            ("3f2n_mean+mnr", {"border": "reflect"}),
+        ],
+    )
     def test_function_and_module_identical(self, method, options):
         z = random_depth(12, 15).detach()[None, None].float()
         mask = torch.rand(12, 15, generator=torch.Generator().manual_seed(1)) > 0.1
         layer = st.DepthToNormal(method=method, **options)
-        torch.testing.assert_close(layer(z, K, mask=mask), st.estimate(z, K, method=method, mask=mask, **options),
-                                   rtol=0, atol=0, equal_nan=True)
+        torch.testing.assert_close(
+            layer(z, K, mask=mask),
+            st.estimate(z, K, method=method, mask=mask, **options),
+            rtol=0,
+            atol=0,
+            equal_nan=True,
+        )
 
     def test_module_only_stores_options(self):
         layer = st.DepthToNormal(method="d2nt_v2", tau=0.5)
@@ -676,8 +770,9 @@ class TestCompile:
         # fullgraph=True fails on any graph break, e.g. a Python branch on a tensor value or .item();
         # the aot_eager backend traces forward and backward without compiling C++ (seconds, not minutes)
         torch._dynamo.reset()
-        fn = torch.compile(lambda z, k: st.estimate(z, k, method=method), fullgraph=True, dynamic=False,
-                           backend="aot_eager")
+        fn = torch.compile(
+            lambda z, k: st.estimate(z, k, method=method), fullgraph=True, dynamic=False, backend="aot_eager"
+        )
         z = random_depth(8, 9).detach()[None, None].float().requires_grad_()
         Kt = torch.tensor(K, dtype=torch.float32)
         out = fn(z, Kt)
@@ -698,21 +793,32 @@ class TestCompile:
 
 class TestErrors:
     def test_method(self):
-        with pytest.raises(InputError, match=r"method: expected one of d2nt_basic, .*angle_weighted, adaptive_fit, auto \(optionally followed by '\+mnr'\) in the torch backend, got 'plane_fit'"):
+        with pytest.raises(
+            InputError,
+            match=r"method: expected one of d2nt_basic, .*angle_weighted, adaptive_fit, auto \(optionally followed by '\+mnr'\) in the torch backend, got 'plane_fit'",
+        ):
             st.estimate(torch.ones(5, 5), K, method="plane_fit")
         with pytest.raises(InputError, match="method: expected a method name"):
             st.estimate(torch.ones(5, 5), K, method=3)
 
     def test_options(self):
-        with pytest.raises(InputError, match=r"options of method 'd2nt_basic': expected some of border, fill, got unknown option\(s\) tau"):
+        with pytest.raises(
+            InputError,
+            match=r"options of method 'd2nt_basic': expected some of border, fill, got unknown option\(s\) tau",
+        ):
             st.estimate(torch.ones(5, 5), K, method="d2nt_basic", tau=1.0)
         with pytest.raises(InputError, match="dlf: expected one of"):
             st.estimate(torch.ones(5, 5), K, method="d2nt_v2", dlf="delta")
 
     def test_depth(self):
-        with pytest.raises(InputError, match="depth: expected a tensor of shape \\(B, 1, H, W\\) or \\(H, W\\), got None"):
+        with pytest.raises(
+            InputError, match="depth: expected a tensor of shape \\(B, 1, H, W\\) or \\(H, W\\), got None"
+        ):
             st.estimate(None, K)
-        with pytest.raises(InputError, match=r"depth: expected a tensor of shape \(B, 1, H, W\) or \(H, W\), got a tensor of shape \(2, 5, 5\)"):
+        with pytest.raises(
+            InputError,
+            match=r"depth: expected a tensor of shape \(B, 1, H, W\) or \(H, W\), got a tensor of shape \(2, 5, 5\)",
+        ):
             st.estimate(torch.ones(2, 5, 5), K)
         with pytest.raises(InputError, match=r"got a tensor of shape \(1, 2, 5, 5\)"):
             st.estimate(torch.ones(1, 2, 5, 5), K)
@@ -728,7 +834,9 @@ class TestErrors:
             st.estimate(object(), K)
 
     def test_mask(self):
-        with pytest.raises(InputError, match=r"mask: expected shape \(H, W\) = \(5, 6\) to match depth, got a tensor of shape \(6, 5\)"):
+        with pytest.raises(
+            InputError, match=r"mask: expected shape \(H, W\) = \(5, 6\) to match depth, got a tensor of shape \(6, 5\)"
+        ):
             st.estimate(torch.ones(5, 6), K, mask=torch.ones(6, 5, dtype=torch.bool))
         with pytest.raises(InputError, match=r"mask: expected shape \(2, 1, 5, 6\) or \(5, 6\) to match depth"):
             st.estimate(torch.ones(2, 1, 5, 6), K, mask=torch.ones(3, 1, 5, 6, dtype=torch.bool))
@@ -736,7 +844,10 @@ class TestErrors:
             st.estimate(torch.ones(5, 6), K, mask=torch.ones(5, 6, dtype=torch.complex64))
 
     def test_K(self):
-        with pytest.raises(InputError, match=r"K: expected shape \(3, 3\) or \(2, 3, 3\) for 2 frame\(s\), got a tensor of shape \(3, 3, 3\)"):
+        with pytest.raises(
+            InputError,
+            match=r"K: expected shape \(3, 3\) or \(2, 3, 3\) for 2 frame\(s\), got a tensor of shape \(3, 3, 3\)",
+        ):
             st.estimate(torch.ones(2, 1, 5, 5), torch.ones(3, 3, 3))
         with pytest.raises(InputError, match="K: expected positive focal lengths"):
             st.estimate(torch.ones(5, 5), [[-1.0, 0, 2], [0, 1, 2], [0, 0, 1]])

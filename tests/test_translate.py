@@ -8,7 +8,6 @@ negative and infinite values (mostly the general path), with a mask, with ``bord
 NaN fill values, and for stacks.
 """
 
-
 import numpy as np
 import pytest
 
@@ -65,7 +64,7 @@ def test_d2nt_equals_cross_product_of_tangents():
     for _ in range(50):
         u, v = rng.uniform(0, 64), rng.uniform(0, 48)
         a, b, c, e = rng.normal(size=4) * [1e-2, 1e-2, 1e-4, 1e-4]
-        z = 2 + a * u + b * v + c * u * u + e * u * v      # any smooth depth
+        z = 2 + a * u + b * v + c * u * u + e * u * v  # any smooth depth
         z_u = a + 2 * c * u + e * v
         z_v = b + e * u
         # P(u, v) = z(u, v) * [(u - cx) / fx, (v - cy) / fy, 1]; its partial derivatives:
@@ -129,8 +128,9 @@ def test_v3_is_v2_refined():
     K = surfaces.camera(40, 30)
     v2 = surfnorm.estimate(depth, K, method="d2nt_v2")
     np.testing.assert_array_equal(surfnorm.estimate(depth, K, method="d2nt_v3"), surfnorm.refine(v2, depth))
-    np.testing.assert_array_equal(surfnorm.estimate(depth, K, method="d2nt_v2+mnr", mnr_dlf="beta"),
-                                  surfnorm.refine(v2, depth, dlf="beta"))
+    np.testing.assert_array_equal(
+        surfnorm.estimate(depth, K, method="d2nt_v2+mnr", mnr_dlf="beta"), surfnorm.refine(v2, depth, dlf="beta")
+    )
 
 
 def test_mirroring_flips_n_x():
@@ -161,20 +161,51 @@ def test_dag_threshold_is_in_depth_units():
 # (method, options, reference)
 CASES = [
     ("d2nt_basic", {}, lambda z, ok, cam, fill: naive.d2nt_basic(z, ok, cam, fill=fill)),
-    ("d2nt_basic", {"border": "reflect"}, lambda z, ok, cam, fill: naive.d2nt_basic(z, ok, cam, border="reflect", fill=fill)),
+    (
+        "d2nt_basic",
+        {"border": "reflect"},
+        lambda z, ok, cam, fill: naive.d2nt_basic(z, ok, cam, border="reflect", fill=fill),
+    ),
     ("d2nt_v2", {}, lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, fill=fill)),
-    ("d2nt_v2", {"dlf": "alpha", "truncate": False}, lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, dlf="alpha", truncate=False, fill=fill)),
-    ("d2nt_v2", {"dlf": "beta", "tau": 0.5}, lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, dlf="beta", tau=0.5, fill=fill)),
-    ("d2nt_v2", {"dlf": "gamma", "tau": 2.0}, lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, dlf="gamma", tau=2.0, fill=fill)),
+    (
+        "d2nt_v2",
+        {"dlf": "alpha", "truncate": False},
+        lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, dlf="alpha", truncate=False, fill=fill),
+    ),
+    (
+        "d2nt_v2",
+        {"dlf": "beta", "tau": 0.5},
+        lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, dlf="beta", tau=0.5, fill=fill),
+    ),
+    (
+        "d2nt_v2",
+        {"dlf": "gamma", "tau": 2.0},
+        lambda z, ok, cam, fill: naive.d2nt_dag(z, ok, cam, dlf="gamma", tau=2.0, fill=fill),
+    ),
     ("d2nt_v3", {}, lambda z, ok, cam, fill: naive.d2nt_v3(z, ok, cam, fill=fill)),
-    ("d2nt_v3", {"dlf": "alpha", "mnr_dlf": "1d"}, lambda z, ok, cam, fill: naive.d2nt_v3(z, ok, cam, dlf="alpha", mnr_dlf="1d", fill=fill)),
-    ("d2nt_v3", {"dlf": "beta", "mnr_dlf": "gamma", "truncate": False},
-     lambda z, ok, cam, fill: naive.d2nt_v3(z, ok, cam, dlf="beta", mnr_dlf="gamma", truncate=False, fill=fill)),
+    (
+        "d2nt_v3",
+        {"dlf": "alpha", "mnr_dlf": "1d"},
+        lambda z, ok, cam, fill: naive.d2nt_v3(z, ok, cam, dlf="alpha", mnr_dlf="1d", fill=fill),
+    ),
+    (
+        "d2nt_v3",
+        {"dlf": "beta", "mnr_dlf": "gamma", "truncate": False},
+        lambda z, ok, cam, fill: naive.d2nt_v3(z, ok, cam, dlf="beta", mnr_dlf="gamma", truncate=False, fill=fill),
+    ),
     ("d2nt_v3+mnr", {}, lambda z, ok, cam, fill: naive.mnr(z, ok, naive.d2nt_v3(z, ok, cam, fill=fill), fill=fill)),
     ("cp2tv", {}, lambda z, ok, cam, fill: naive.cp2tv(z, ok, cam, fill=fill)),
     ("cp2tv", {"border": "reflect"}, lambda z, ok, cam, fill: naive.cp2tv(z, ok, cam, border="reflect", fill=fill)),
-    ("cp2tv+mnr", {"mnr_dlf": "beta"}, lambda z, ok, cam, fill: naive.mnr(z, ok, naive.cp2tv(z, ok, cam, fill=fill), dlf="beta", fill=fill)),
-    ("d2nt_basic+mnr", {"mnr_dlf": "1d"}, lambda z, ok, cam, fill: naive.mnr(z, ok, naive.d2nt_basic(z, ok, cam, fill=fill), dlf="1d", fill=fill)),
+    (
+        "cp2tv+mnr",
+        {"mnr_dlf": "beta"},
+        lambda z, ok, cam, fill: naive.mnr(z, ok, naive.cp2tv(z, ok, cam, fill=fill), dlf="beta", fill=fill),
+    ),
+    (
+        "d2nt_basic+mnr",
+        {"mnr_dlf": "1d"},
+        lambda z, ok, cam, fill: naive.mnr(z, ok, naive.d2nt_basic(z, ok, cam, fill=fill), dlf="1d", fill=fill),
+    ),
 ]
 
 
@@ -202,8 +233,11 @@ def test_shipped_frames_equal_naive(frames, method, options, reference):
     assert len(frames) == 3
     for f in frames:
         ok = valid_pixels(f.depth, None)
-        check(surfnorm.estimate(f.depth, f.K, method=method, **options), reference(f.depth, ok, f.K, 0.0),
-              f"{f.name} {method} {options}")
+        check(
+            surfnorm.estimate(f.depth, f.K, method=method, **options),
+            reference(f.depth, ok, f.K, 0.0),
+            f"{f.name} {method} {options}",
+        )
 
 
 CAM = surfnorm.Intrinsics(60.0, 64.0, 25.5, 19.0)
@@ -215,8 +249,11 @@ def test_holes_and_fill_values_equal_naive(seed, method, options, reference):
     z = holey_depth(seed)
     ok = valid_pixels(z, None)
     for fill in (0.0, np.nan, 0.5):  # a non-zero finite fill counts as a normal for MNR
-        check(surfnorm.estimate(z, CAM, method=method, fill=fill, **options), reference(z, ok, CAM, fill),
-              f"seed {seed} fill {fill}")
+        check(
+            surfnorm.estimate(z, CAM, method=method, fill=fill, **options),
+            reference(z, ok, CAM, fill),
+            f"seed {seed} fill {fill}",
+        )
 
 
 @pytest.mark.parametrize("method, options, reference", CASES[::3], ids=IDS[::3])
@@ -225,8 +262,11 @@ def test_mask_equals_naive(method, options, reference):
     mask = np.ones(z.shape, bool)
     mask[20:30, 35:45] = False
     mask[::7, :] = False
-    check(surfnorm.estimate(z, CAM, method=method, mask=mask, **options), reference(z, valid_pixels(z, mask), CAM, 0.0),
-          "mask")
+    check(
+        surfnorm.estimate(z, CAM, method=method, mask=mask, **options),
+        reference(z, valid_pixels(z, mask), CAM, 0.0),
+        "mask",
+    )
 
 
 @pytest.mark.parametrize("method", ["d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv", "cp2tv+mnr"])

@@ -4,19 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import surfnorm
+import surfnorm.units
 from surfnorm.errors import InputError
 from surfnorm.io import disparity_to_depth
-from surfnorm.noise import SensorNoise, add_noise
-import surfnorm.units
-from surfnorm.methods import resolve
-from surfnorm.units import REFERENCE_DEPTH
-from tests.surfaces import angle_deg, camera, sphere
-from tests.test_methods import assert_same_or_mnr_candidate, mnr_recipe, raw_normals
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
-from tests.surfaces import has_normal, scene
+from surfnorm.methods import resolve
+from surfnorm.noise import SensorNoise, add_noise
+from surfnorm.units import REFERENCE_DEPTH
+from tests.surfaces import angle_deg, camera, has_normal, scene, sphere
+from tests.test_methods import assert_same_or_mnr_candidate, mnr_recipe, raw_normals
 
 METHODS = list(surfnorm.methods())
 K = camera(64, 48)
@@ -61,16 +61,22 @@ def test_the_two_modes_agree_but_for_relative_thresholds(monkeypatch):
     assert ties == ["d2nt_v3", "sda_sne", "auto"] and relative == ["d2nt_v2", "d2nt_v3", "plane_svd", "auto"]
     for method in METHODS + ["cp2tv+mnr"]:
         if method not in ties + relative and not method.endswith("+mnr"):
-            np.testing.assert_array_equal(surfnorm.estimate(z, K, method=method, scale_invariant=True),
-                                          surfnorm.estimate(z, K, method=method), err_msg=method)
+            np.testing.assert_array_equal(
+                surfnorm.estimate(z, K, method=method, scale_invariant=True),
+                surfnorm.estimate(z, K, method=method),
+                err_msg=method,
+            )
     # MNR and SDA-SNE differ only by the near-tie tolerance of the scale-invariant mode
     for method in ["sda_sne", "cp2tv+mnr"]:
         differs = surfnorm.estimate(z, K, method=method, scale_invariant=True) != surfnorm.estimate(z, K, method=method)
         assert differs.any(), method
     monkeypatch.setattr(surfnorm.units, "TIE_TOLERANCE", 0.0)
     for method in ["sda_sne", "cp2tv+mnr"]:
-        np.testing.assert_array_equal(surfnorm.estimate(z, K, method=method, scale_invariant=True),
-                                      surfnorm.estimate(z, K, method=method), err_msg=method)
+        np.testing.assert_array_equal(
+            surfnorm.estimate(z, K, method=method, scale_invariant=True),
+            surfnorm.estimate(z, K, method=method),
+            err_msg=method,
+        )
 
 
 @pytest.mark.parametrize("dlf", ["1d", "beta"])
@@ -121,10 +127,12 @@ def test_disparity_input(method):
     n = surfnorm.estimate(d, K, method=method, disparity=True, fill=np.nan)
     # the same as the metric depth in the scale-invariant mode, whatever the (unknown) baseline
     depth = disparity_to_depth(d, baseline, fx)
-    np.testing.assert_allclose(n, surfnorm.estimate(depth, K, method=method, scale_invariant=True, fill=np.nan),
-                               atol=1e-4, equal_nan=True)
-    np.testing.assert_allclose(n, surfnorm.estimate(d * 7.5, K, method=method, disparity=True, fill=np.nan),
-                               atol=1e-4, equal_nan=True)
+    np.testing.assert_allclose(
+        n, surfnorm.estimate(depth, K, method=method, scale_invariant=True, fill=np.nan), atol=1e-4, equal_nan=True
+    )
+    np.testing.assert_allclose(
+        n, surfnorm.estimate(d * 7.5, K, method=method, disparity=True, fill=np.nan), atol=1e-4, equal_nan=True
+    )
     inner = hit & (gt[..., 2] < -0.9)  # the part of the sphere that faces the camera
     assert inner.sum() > 100
     # a sanity check of the geometry (not inverted, not mirrored); on this 12-pixel-radius sphere the D2NT family
@@ -233,7 +241,6 @@ ALL_METHODS = list(surfnorm.methods())
 SCENE_K = camera(64, 48)
 
 
-
 def equivariant(method):
     from surfnorm.methods import resolve
 
@@ -246,7 +253,7 @@ def test_extreme_depth_gives_the_normals_of_ordinary_depth(method, exponent):
     z = scene()
     far = np.ldexp(z.astype(np.float64), exponent)  # float64: a power of two, exact
     n = surfnorm.estimate(far, SCENE_K, method=method, fill=np.nan)
-    tau = {"tau": 2.0 ** -exponent} if "tau" in surfnorm.methods()[method].options else {}
+    tau = {"tau": 2.0**-exponent} if "tau" in surfnorm.methods()[method].options else {}
     expected = surfnorm.estimate(z, SCENE_K, method=method, fill=np.nan, **tau)  # the same scene, tau in its unit
     if equivariant(method):
         np.testing.assert_array_equal(n, expected)  # a power of two, so the same bits
@@ -265,11 +272,14 @@ def test_extreme_float32_depth_is_never_silently_empty(method, scale):
     np.testing.assert_allclose(np.linalg.norm(n[ok], axis=-1), 1.0, atol=1e-5)
 
 
-@pytest.mark.parametrize("K_bad, pattern", [
-    ([[1e300, 0, 3.5], [0, 500, 3.5], [0, 0, 1]], r"K: expected focal lengths K\[0,0\] and K\[1,1\] between"),
-    ([[500, 0, 3.5], [0, 1e-9, 3.5], [0, 0, 1]], r"K: expected focal lengths K\[0,0\] and K\[1,1\] between"),
-    ([[500, 0, 1e300], [0, 500, 3.5], [0, 0, 1]], r"K: expected a principal point K\[0,2\], K\[1,2\] within"),
-])
+@pytest.mark.parametrize(
+    "K_bad, pattern",
+    [
+        ([[1e300, 0, 3.5], [0, 500, 3.5], [0, 0, 1]], r"K: expected focal lengths K\[0,0\] and K\[1,1\] between"),
+        ([[500, 0, 3.5], [0, 1e-9, 3.5], [0, 0, 1]], r"K: expected focal lengths K\[0,0\] and K\[1,1\] between"),
+        ([[500, 0, 1e300], [0, 500, 3.5], [0, 0, 1]], r"K: expected a principal point K\[0,2\], K\[1,2\] within"),
+    ],
+)
 def test_extreme_intrinsics_are_refused(K_bad, pattern):
     with pytest.raises(InputError, match=pattern):
         surfnorm.estimate(np.full((8, 8), 2.0), K_bad)
@@ -326,11 +336,12 @@ def test_a_hole_changes_no_normal_far_from_it_in_the_scale_invariant_mode(method
     square = np.zeros(mm.shape, bool)
     ys, xs = np.nonzero(f.mask)
     v, u = int(np.median(ys)), int(np.median(xs))  # in the object
-    square[v:v + 10, u:u + 10] = True
+    square[v : v + 10, u : u + 10] = True
     # (with the object's mask: the hole then moved the frame median that the mode used to rescale by)
     a = surfnorm.estimate(mm, f.K, method=method, mask=f.mask, scale_invariant=True, fill=np.nan)
-    b = surfnorm.estimate(np.where(square, np.nan, mm), f.K, method=method, mask=f.mask, scale_invariant=True,
-                          fill=np.nan)
+    b = surfnorm.estimate(
+        np.where(square, np.nan, mm), f.K, method=method, mask=f.mask, scale_invariant=True, fill=np.nan
+    )
     far = far_from(square, 10)
     changed = (has_normal(a) | has_normal(b)) & (np.abs(np.nan_to_num(b - a, nan=2.0)).max(-1) > 1e-4)
     assert not (changed & far).any(), int((changed & far).sum())
@@ -354,7 +365,7 @@ def test_metres_and_millimetres_agree_with_holes(method, factor):
         for _ in range(12):
             s = int(rng.integers(4, 17))
             v, u = int(rng.integers(0, mm.shape[0] - s)), int(rng.integers(0, mm.shape[1] - s))
-            holes[v:v + s, u:u + s] = True
+            holes[v : v + s, u : u + s] = True
         for hole in (None, holes):
             a_in, b_in = mm, (mm.astype(np.float64) / 1000).astype(np.float32)
             if hole is not None:

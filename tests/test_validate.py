@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 import surfnorm
+from surfnorm._validate import valid_map, valid_pixels
 from surfnorm.camera import Intrinsics
 from surfnorm.errors import InputError
-from surfnorm._validate import valid_map, valid_pixels
+
 from .surfaces import holey_depth
 
 K = np.array([[60.0, 0, 7.5], [0, 60.0, 5.5], [0, 0, 1]])
@@ -200,8 +201,12 @@ def test_torch_estimate_refuses_bad_arguments_by_name(changes, name):
     import surfnorm.torch
 
     kw = dict(depth=torch.from_numpy(Z), K=K)
-    kw.update({k: (torch.from_numpy(v) if isinstance(v, np.ndarray) and k in ("depth", "mask") else v)
-               for k, v in changes.items()})
+    kw.update(
+        {
+            k: (torch.from_numpy(v) if isinstance(v, np.ndarray) and k in ("depth", "mask") else v)
+            for k, v in changes.items()
+        }
+    )
     with pytest.raises(InputError) as exc:
         surfnorm.torch.estimate(kw.pop("depth"), kw.pop("K"), **kw)
     _assert_named(exc, name)
@@ -212,6 +217,7 @@ def test_the_battery_counts():
 
 
 # --- validity: valid_map (one Numba pass) and valid_pixels (NumPy) agree -----------------------------------------
+
 
 def test_valid_map_equals_numpy_rule():
     z = holey_depth(7)

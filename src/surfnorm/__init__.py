@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from . import metrics
 from ._api import estimate, refine
-from .camera import Intrinsics
 from .batch import convert
+from .camera import Intrinsics
 from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
 from .methods import methods
 

@@ -49,8 +49,10 @@ PACKAGE = Path(__file__).resolve().parent
 INDEX = "_aot_index.json"
 #: CPU levels, best first: (module name, LLVM CPU name, host features it needs). The last one needs nothing.
 LEVELS = {
-    "x86_64": [("_aot_x86_64_v3", "x86-64-v3", ("avx", "avx2", "bmi", "bmi2", "f16c", "fma", "lzcnt", "movbe")),
-               ("_aot_x86_64", "", ())],
+    "x86_64": [
+        ("_aot_x86_64_v3", "x86-64-v3", ("avx", "avx2", "bmi", "bmi2", "f16c", "fma", "lzcnt", "movbe")),
+        ("_aot_x86_64", "", ()),
+    ],
 }
 #: Every kernel decorated with :func:`ahead_of_time`: "module.qualname" -> Kernel.
 REGISTRY: dict[str, "Kernel"] = {}

@@ -42,8 +42,14 @@ def _warm_up():
     with jit_only():
         for z in (clean, noisy):
             z[5, 7] = 0.0
-            for kwargs in ({}, {"mask": z > 0}, {"threads": 2}, {"scale_invariant": True}, {"method": "d2nt_v3"},
-                           {"method": "adaptive_fit"}):
+            for kwargs in (
+                {},
+                {"mask": z > 0},
+                {"threads": 2},
+                {"scale_invariant": True},
+                {"method": "d2nt_v3"},
+                {"method": "adaptive_fit"},
+            ):
                 estimate(z, K, **kwargs)
             estimate(z.astype(np.float64), K)
             estimate(np.stack([z, z]), K, threads=2)
@@ -105,8 +111,13 @@ def build(package_dir: Path, verbose: bool = True, names=None, warm_up=None) -> 
         built.append(module)
         if verbose:
             print(f"surfnorm AOT: {module} ({cpu or 'baseline'}) {time.perf_counter() - t1:.1f} s", flush=True)
-    index = {"arch": arch, "modules": built, "source": _aot.source_hash(package_dir), "numba": numba.__version__,
-             "kernels": kernels}
+    index = {
+        "arch": arch,
+        "modules": built,
+        "source": _aot.source_hash(package_dir),
+        "numba": numba.__version__,
+        "kernels": kernels,
+    }
     (package_dir / _aot.INDEX).write_text(json.dumps(index, indent=1) + "\n")
     return index
 
@@ -122,8 +133,10 @@ def main(argv=None) -> int:
         import surfnorm
 
         if Path(surfnorm.__file__).resolve().parent != package_dir:
-            print(f"surfnorm._aot_build: the surfnorm imported ({surfnorm.__file__}) is not the one in {package_dir}",
-                  file=sys.stderr)
+            print(
+                f"surfnorm._aot_build: the surfnorm imported ({surfnorm.__file__}) is not the one in {package_dir}",
+                file=sys.stderr,
+            )
             return 2
         build(package_dir)
     return 0

@@ -7,11 +7,21 @@ import os
 import numpy as np
 
 from ._bands import map_threads, on_threads, whole
-from ._validate import (as_depth, as_mask, as_normals, as_output, check_bool, check_choice, check_fill, split_masked,
-                        valid_map, valid_pixels)
+from ._choices import DLF_NAMES
+from ._validate import (
+    as_depth,
+    as_mask,
+    as_normals,
+    as_output,
+    check_bool,
+    check_choice,
+    check_fill,
+    split_masked,
+    valid_map,
+    valid_pixels,
+)
 from .camera import Intrinsics
 from .errors import InputError
-from ._choices import DLF_NAMES
 from .methods import DEFAULT_METHOD, resolve
 
 __all__ = ["estimate", "refine"]
@@ -68,7 +78,7 @@ def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np
     if k == 0:
         return z, options
     if "tau" in options:
-        options = dict(options, tau=options["tau"] * 2.0 ** k)
+        options = dict(options, tau=options["tau"] * 2.0**k)
     return scaled_frame(src, k), options
 
 
@@ -88,9 +98,18 @@ def _workers(threads) -> int:
     return workers
 
 
-def estimate(depth, K, *, method: str = DEFAULT_METHOD, mask=None, threads: int | None = None,
-             scale_invariant: bool = False, disparity: bool = False, out: np.ndarray | None = None,
-             **options) -> np.ndarray:
+def estimate(
+    depth,
+    K,
+    *,
+    method: str = DEFAULT_METHOD,
+    mask=None,
+    threads: int | None = None,
+    scale_invariant: bool = False,
+    disparity: bool = False,
+    out: np.ndarray | None = None,
+    **options,
+) -> np.ndarray:
     """Estimate surface normals from a depth image (or a stack of them).
 
     Parameters

@@ -23,8 +23,20 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["as_depth", "as_mask", "split_masked", "valid_pixels", "valid_map", "as_normals", "as_output", "check_choice", "check_positive",
-           "check_bool", "check_iterations", "check_window"]
+__all__ = [
+    "as_depth",
+    "as_mask",
+    "split_masked",
+    "valid_pixels",
+    "valid_map",
+    "as_normals",
+    "as_output",
+    "check_choice",
+    "check_positive",
+    "check_bool",
+    "check_iterations",
+    "check_window",
+]
 
 MIN_SIZE = 3
 
@@ -47,7 +59,9 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
     except Exception as exc:
         raise InputError(f"{name}: expected a 2-D array of depth values, got {type(depth).__name__}") from exc
     if arr.dtype == bool:
-        raise InputError(f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}; a boolean array is a mask, pass it as mask=")
+        raise InputError(
+            f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}; a boolean array is a mask, pass it as mask="
+        )
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise InputError(f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}")
     ndims = (2, 3) if batch else (2,)
@@ -55,8 +69,10 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
         want = "a 2-D array (H, W) or a stack (N, H, W)" if batch else "a 2-D array (H, W)"
         raise InputError(f"{name}: expected {want}, got {_describe(arr)}")
     if arr.ndim == 3 and arr.shape[-1] <= 4 < arr.shape[-2]:
-        raise InputError(f"{name}: expected one depth channel, (H, W) or a stack (N, H, W), got shape {arr.shape}, "
-                         f"which looks like an image with {arr.shape[-1]} channel(s); pass depth[..., 0] if that channel is depth")
+        raise InputError(
+            f"{name}: expected one depth channel, (H, W) or a stack (N, H, W), got shape {arr.shape}, "
+            f"which looks like an image with {arr.shape[-1]} channel(s); pass depth[..., 0] if that channel is depth"
+        )
     if arr.shape[-2] < MIN_SIZE or arr.shape[-1] < MIN_SIZE:
         raise InputError(f"{name}: expected at least {MIN_SIZE}x{MIN_SIZE} pixels, got shape {arr.shape}")
     if arr.ndim == 3 and arr.shape[0] == 0:
@@ -165,13 +181,17 @@ def as_output(out, shape: tuple, inputs=(), *, name: str = "out") -> np.ndarray:
     what they read.
     """
     if not isinstance(out, np.ndarray):
-        raise InputError(f"{name}: expected a float32 NumPy array of shape {tuple(shape)} to write the normals into, "
-                         f"got {type(out).__name__}")
+        raise InputError(
+            f"{name}: expected a float32 NumPy array of shape {tuple(shape)} to write the normals into, "
+            f"got {type(out).__name__}"
+        )
     if out.dtype != np.float32 or out.shape != tuple(shape):
         raise InputError(f"{name}: expected a float32 array of shape {tuple(shape)}, got {_describe(out)}")
     if not out.flags.c_contiguous:
-        raise InputError(f"{name}: expected a C-contiguous array (written in place), got a non-contiguous view; "
-                         f"pass np.empty({tuple(shape)}, np.float32) or an array like it")
+        raise InputError(
+            f"{name}: expected a C-contiguous array (written in place), got a non-contiguous view; "
+            f"pass np.empty({tuple(shape)}, np.float32) or an array like it"
+        )
     if not out.flags.writeable:
         raise InputError(f"{name}: expected a writeable array, got a read-only one")
     for input_name, arr in inputs:
@@ -203,27 +223,35 @@ def check_iterations(name: str, value) -> int | None:
     if value is None:
         return None
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 0:
-        raise InputError(f"{name}: expected a non-negative integer number of passes, or None to run until stable, got {value!r}")
+        raise InputError(
+            f"{name}: expected a non-negative integer number of passes, or None to run until stable, got {value!r}"
+        )
     return int(value)
 
 
 def check_fill(value) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise InputError(f"fill: expected a number (0.0 or nan) written into every component of a pixel without a valid normal, got {value!r}")
+        raise InputError(
+            f"fill: expected a number (0.0 or nan) written into every component of a pixel without a valid normal, got {value!r}"
+        )
     value = float(value)
     with np.errstate(over="ignore", under="ignore"):
         stored = np.float32(value)
     if (np.isinf(stored) and np.isfinite(value)) or (stored == 0 and value != 0):
-        raise InputError(f"fill: expected a value that the float32 output can hold (0, nan, +-inf, or a magnitude "
-                         f"between 1.4e-45 and 3.4e38), got {value!r}, which float32 stores as {float(stored)!r}")
+        raise InputError(
+            f"fill: expected a value that the float32 output can hold (0, nan, +-inf, or a magnitude "
+            f"between 1.4e-45 and 3.4e38), got {value!r}, which float32 stores as {float(stored)!r}"
+        )
     return value
 
 
 def check_window(name: str, value) -> int:
     """A square pixel neighbourhood's side: an odd integer >= 3 (the window is centred on the pixel)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value < 3 or value % 2 == 0:
-        raise InputError(f"{name}: expected an odd integer >= 3 (pixels per side of the square neighbourhood "
-                         f"centred on each pixel), got {value!r}")
+        raise InputError(
+            f"{name}: expected an odd integer >= 3 (pixels per side of the square neighbourhood "
+            f"centred on each pixel), got {value!r}"
+        )
     return int(value)
 
 

@@ -45,14 +45,20 @@ class Intrinsics:
             object.__setattr__(self, name, float(value))
         for name in ("fx", "fy"):
             if getattr(self, name) <= 0:
-                raise InputError(f"intrinsics.{name}: expected a positive focal length in pixels, got {getattr(self, name)!r}")
+                raise InputError(
+                    f"intrinsics.{name}: expected a positive focal length in pixels, got {getattr(self, name)!r}"
+                )
             if not FOCAL_RANGE[0] <= getattr(self, name) <= FOCAL_RANGE[1]:
-                raise InputError(f"intrinsics.{name}: expected a focal length between {FOCAL_RANGE[0]:g} and "
-                                 f"{FOCAL_RANGE[1]:g} pixels, got {getattr(self, name)!r}")
+                raise InputError(
+                    f"intrinsics.{name}: expected a focal length between {FOCAL_RANGE[0]:g} and "
+                    f"{FOCAL_RANGE[1]:g} pixels, got {getattr(self, name)!r}"
+                )
         for name in ("cx", "cy"):
             if abs(getattr(self, name)) > PRINCIPAL_POINT_LIMIT:
-                raise InputError(f"intrinsics.{name}: expected a principal point within {PRINCIPAL_POINT_LIMIT:g} "
-                                 f"pixels of the image origin, got {getattr(self, name)!r}")
+                raise InputError(
+                    f"intrinsics.{name}: expected a principal point within {PRINCIPAL_POINT_LIMIT:g} "
+                    f"pixels of the image origin, got {getattr(self, name)!r}"
+                )
 
     @classmethod
     def from_matrix(cls, K, *, name: str = "K") -> "Intrinsics":
@@ -73,7 +79,11 @@ class Intrinsics:
             arr = np.asarray(K)
         except Exception as exc:  # pragma: no cover - exotic objects
             raise InputError(f"{name}: expected a 3x3 intrinsic matrix, got {type(K).__name__}") from exc
-        if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)) or arr.dtype == bool:
+        if (
+            arr.dtype == object
+            or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating))
+            or arr.dtype == bool
+        ):
             raise InputError(f"{name}: expected a 3x3 matrix of real numbers, got dtype {arr.dtype}")
         if arr.shape != (3, 3):
             raise InputError(f"{name}: expected a 3x3 intrinsic matrix, got shape {arr.shape}")
@@ -84,11 +94,15 @@ class Intrinsics:
         if fx <= 0 or fy <= 0:
             raise InputError(f"{name}: expected positive focal lengths K[0,0] and K[1,1], got fx={fx:g}, fy={fy:g}")
         if not (FOCAL_RANGE[0] <= fx <= FOCAL_RANGE[1] and FOCAL_RANGE[0] <= fy <= FOCAL_RANGE[1]):
-            raise InputError(f"{name}: expected focal lengths K[0,0] and K[1,1] between {FOCAL_RANGE[0]:g} and "
-                             f"{FOCAL_RANGE[1]:g} pixels, got fx={fx:g}, fy={fy:g}")
+            raise InputError(
+                f"{name}: expected focal lengths K[0,0] and K[1,1] between {FOCAL_RANGE[0]:g} and "
+                f"{FOCAL_RANGE[1]:g} pixels, got fx={fx:g}, fy={fy:g}"
+            )
         if abs(cx) > PRINCIPAL_POINT_LIMIT or abs(cy) > PRINCIPAL_POINT_LIMIT:
-            raise InputError(f"{name}: expected a principal point K[0,2], K[1,2] within {PRINCIPAL_POINT_LIMIT:g} "
-                             f"pixels of the image origin, got cx={cx:g}, cy={cy:g}")
+            raise InputError(
+                f"{name}: expected a principal point K[0,2], K[1,2] within {PRINCIPAL_POINT_LIMIT:g} "
+                f"pixels of the image origin, got cx={cx:g}, cy={cy:g}"
+            )
         if arr[0, 1] != 0 or arr[1, 0] != 0 or arr[2, 0] != 0 or arr[2, 1] != 0 or arr[2, 2] != 1:
             raise InputError(f"{name}: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew), got {arr.tolist()}")
         return cls(fx, fy, cx, cy)

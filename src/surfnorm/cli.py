@@ -107,8 +107,13 @@ class OneLineGroup(TyperGroup):
             return super().invoke(ctx)
 
 
-app = typer.Typer(cls=OneLineGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
-                  help="Surface normals from depth images: D2NT (ICRA 2023) and the estimators it is compared with.")
+app = typer.Typer(
+    cls=OneLineGroup,
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="Surface normals from depth images: D2NT (ICRA 2023) and the estimators it is compared with.",
+)
 
 
 def method_names() -> list[str]:
@@ -118,10 +123,14 @@ def method_names() -> list[str]:
     return list(methods())
 
 
-INTRINSICS_HELP = "Camera intrinsics file: JSON/YAML (fx, fy, cx, cy or K), ROS camera_info YAML, OpenCV YAML, 3F2N params.txt."
+INTRINSICS_HELP = (
+    "Camera intrinsics file: JSON/YAML (fx, fy, cx, cy or K), ROS camera_info YAML, OpenCV YAML, 3F2N params.txt."
+)
 FORMAT_HELP = "Output format: npy (float32), png16 (lossless, 3F2N encoding) or png8 (picture)."
 KINECT_HELP = "The file holds Kinect v1 raw 11-bit disparity (NYU Depth v2 raw frames): convert to metres, a / (b - d), NYU toolbox constants."
-BYTE_ORDER_HELP = "Byte order of 16-bit .pgm samples: big (netpbm, default) or little (libfreenect dumps, NYU Depth v2 raw d-*.pgm)."
+BYTE_ORDER_HELP = (
+    "Byte order of 16-bit .pgm samples: big (netpbm, default) or little (libfreenect dumps, NYU Depth v2 raw d-*.pgm)."
+)
 
 
 def _intrinsics(intrinsics: Optional[Path], fx, fy, cx, cy, depth_path: Optional[Path] = None):
@@ -151,17 +160,27 @@ def _check_format(fmt: str) -> str:
 
 @app.command()
 def estimate(
-    depth: Path = typer.Argument(..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png or .pgm, float .tif or .exr)."),
-    output: Path = typer.Argument(..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."),
-    method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
+    depth: Path = typer.Argument(
+        ..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png or .pgm, float .tif or .exr)."
+    ),
+    output: Path = typer.Argument(
+        ..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."
+    ),
+    method: str = typer.Option(
+        DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."
+    ),
     intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP),
     fx: Optional[float] = typer.Option(None, help="Focal length x, pixels."),
     fy: Optional[float] = typer.Option(None, help="Focal length y, pixels."),
     cx: Optional[float] = typer.Option(None, help="Principal point x, pixels, 0-based."),
     cy: Optional[float] = typer.Option(None, help="Principal point y, pixels, 0-based."),
-    depth_scale: Optional[float] = typer.Option(None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."),
+    depth_scale: Optional[float] = typer.Option(
+        None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."
+    ),
     mask: Optional[Path] = typer.Option(None, help="Mask image or .npy: non-zero where depth may be used."),
-    scale_invariant: bool = typer.Option(False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."),
+    scale_invariant: bool = typer.Option(
+        False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."
+    ),
     disparity: bool = typer.Option(False, "--disparity", help="The input holds disparity (inverse depth up to scale)."),
     fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
@@ -195,8 +214,13 @@ def list_methods():
 
     table = Table("method", "category", "reference", "options", "kernel")
     for info in methods().values():
-        table.add_row(info.name, info.category, info.reference, ", ".join(f"{k}={v!r}" for k, v in info.options.items()),
-                      info.kernel)
+        table.add_row(
+            info.name,
+            info.category,
+            info.reference,
+            ", ".join(f"{k}={v!r}" for k, v in info.options.items()),
+            info.kernel,
+        )
     console.print(table)
     console.print("Any method name followed by +mnr refines its output with MNR.")
 
@@ -237,7 +261,9 @@ def demo(
         table.add_row(name, *cells, f"{ms:.1f}")
     console.print(table)
     console.print(f"normal maps and error maps (PNG) written to {out}/")
-    console.print(f"contact sheet (every frame and method on one picture): {out / CONTACT_SHEET}", highlight=False, soft_wrap=True)
+    console.print(
+        f"contact sheet (every frame and method on one picture): {out / CONTACT_SHEET}", highlight=False, soft_wrap=True
+    )
     _sensor_demo(out)
 
 
@@ -250,8 +276,10 @@ def _sensor_demo(out: Path):
             rows, skipped, picture = run_sensor_demo(out)
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
-    table = Table(title="Real sensor depth: RealSense D435 frame (ClearGrasp, Apache-2.0), angle to its reference planes",
-                  title_justify="left")
+    table = Table(
+        title="Real sensor depth: RealSense D435 frame (ClearGrasp, Apache-2.0), angle to its reference planes",
+        title_justify="left",
+    )
     for name in ("estimator", "mean angle (deg)", "coverage", "ms"):
         table.add_column(name, justify="left" if name == "estimator" else "right")
     for r in rows:
@@ -264,24 +292,45 @@ def _sensor_demo(out: Path):
 
 @app.command()
 def convert(
-    inputs: str = typer.Argument(..., metavar="INPUT", help="A depth file, a folder (searched recursively) or a quoted glob pattern."),
-    output_dir: Path = typer.Argument(..., help="Folder for the normal files (created if missing); sub-folders mirror INPUT."),
-    method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."),
-    depth_scale: Optional[float] = typer.Option(None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."),
-    intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k",
-                                              help=INTRINSICS_HELP + " Default: each 3F2N file's params.txt."),
+    inputs: str = typer.Argument(
+        ..., metavar="INPUT", help="A depth file, a folder (searched recursively) or a quoted glob pattern."
+    ),
+    output_dir: Path = typer.Argument(
+        ..., help="Folder for the normal files (created if missing); sub-folders mirror INPUT."
+    ),
+    method: str = typer.Option(
+        DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."
+    ),
+    depth_scale: Optional[float] = typer.Option(
+        None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."
+    ),
+    intrinsics: Optional[Path] = typer.Option(
+        None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP + " Default: each 3F2N file's params.txt."
+    ),
     fx: Optional[float] = typer.Option(None, help="Focal length x, pixels."),
     fy: Optional[float] = typer.Option(None, help="Focal length y, pixels."),
     cx: Optional[float] = typer.Option(None, help="Principal point x, pixels, 0-based."),
     cy: Optional[float] = typer.Option(None, help="Principal point y, pixels, 0-based."),
     fmt: str = typer.Option("npy", "--format", "-f", help=FORMAT_HELP),
     jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel processes."),
-    scale_invariant: bool = typer.Option(False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs that exist (default: skip them, so a re-run resumes)."),
-    cluster: Optional[str] = typer.Option(None, "--cluster", metavar="ADDRESS",
-                                          help="Run on the Dask scheduler at ADDRESS (tcp://host:8786); every worker must see INPUT and OUTPUT_DIR at the same paths."),
-    local_cluster: Optional[int] = typer.Option(None, "--local-cluster", metavar="N", help="Run on a Dask LocalCluster of N worker processes."),
-    shard_size: Optional[int] = typer.Option(None, "--shard-size", help="Files per Dask task (default: about 4 per worker thread, 8 to 64 files)."),
+    scale_invariant: bool = typer.Option(
+        False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."
+    ),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace outputs that exist (default: skip them, so a re-run resumes)."
+    ),
+    cluster: Optional[str] = typer.Option(
+        None,
+        "--cluster",
+        metavar="ADDRESS",
+        help="Run on the Dask scheduler at ADDRESS (tcp://host:8786); every worker must see INPUT and OUTPUT_DIR at the same paths.",
+    ),
+    local_cluster: Optional[int] = typer.Option(
+        None, "--local-cluster", metavar="N", help="Run on a Dask LocalCluster of N worker processes."
+    ),
+    shard_size: Optional[int] = typer.Option(
+        None, "--shard-size", help="Files per Dask task (default: about 4 per worker thread, 8 to 64 files)."
+    ),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
 ):
@@ -294,7 +343,8 @@ def convert(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from .batch import convert as convert_, plan_tasks
+    from .batch import convert as convert_
+    from .batch import plan_tasks
 
     _check_format(fmt)
     if jobs < 1:
@@ -325,16 +375,31 @@ def convert(
                 bar.advance(task)
 
             bar.update(task, total=len(plan_tasks(inputs, output_dir, fmt)))
-            summary = convert_(inputs, output_dir, method=method, fmt=fmt, depth_scale=depth_scale, intrinsics=cam,
-                               jobs=jobs, overwrite=overwrite, progress=advance, scale_invariant=scale_invariant,
-                               client=client, shard_size=shard_size, kinect_disparity=kinect_disparity,
-                               byte_order=byte_order)
+            summary = convert_(
+                inputs,
+                output_dir,
+                method=method,
+                fmt=fmt,
+                depth_scale=depth_scale,
+                intrinsics=cam,
+                jobs=jobs,
+                overwrite=overwrite,
+                progress=advance,
+                scale_invariant=scale_invariant,
+                client=client,
+                shard_size=shard_size,
+                kinect_disparity=kinect_disparity,
+                byte_order=byte_order,
+            )
     except KeyboardInterrupt:
         fail("interrupted: finished outputs are complete; run the same command again to do the rest", 130)
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
-    console.print(f"{summary.written} written, {summary.skipped} skipped (output existed), {len(summary.errors)} failed "
-                  f"-> {output_dir}", highlight=False)
+    console.print(
+        f"{summary.written} written, {summary.skipped} skipped (output existed), {len(summary.errors)} failed "
+        f"-> {output_dir}",
+        highlight=False,
+    )
     if summary.errors:
         for r in summary.errors:
             err_console.print(f"[bold red]error:[/] {r.message}", highlight=False, soft_wrap=True)
@@ -343,17 +408,53 @@ def convert(
 
 @app.command()
 def bench(
-    dataset: Optional[Path] = typer.Argument(None, help="Folder in the 3F2N layout (Easy|Medium|Hard/<object>/depth|normal, params.txt). Default: the frames shipped in surfnorm."),
-    out: Path = typer.Option(..., "--out", "-o", help="Report folder: report.md, results.json, PNG figures, and a cache of finished per-frame results."),
-    methods_: Optional[list[str]] = typer.Option(None, "--methods", "-m", help="Table III rows: registered names (+mnr allowed), repeatable or comma-separated. Default: every registered method."),
-    peers: Optional[list[str]] = typer.Option(None, "--peers", help="Peer libraries: d2nt, kornia, open3d, opencv, or none. Repeatable or comma-separated. Default: all."),
-    levels: Optional[list[str]] = typer.Option(None, "--levels", help="Easy, Medium, Hard (repeatable or comma-separated). Default: all."),
-    frames_per_object: Optional[int] = typer.Option(None, "--frames-per-object", help="At most this many frames of each object (the first ones). Default: all."),
-    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Processes for the accuracy runs (timing runs are always single-process, one thread). Default: one per core."),
+    dataset: Optional[Path] = typer.Argument(
+        None,
+        help="Folder in the 3F2N layout (Easy|Medium|Hard/<object>/depth|normal, params.txt). Default: the frames shipped in surfnorm.",
+    ),
+    out: Path = typer.Option(
+        ...,
+        "--out",
+        "-o",
+        help="Report folder: report.md, results.json, PNG figures, and a cache of finished per-frame results.",
+    ),
+    methods_: Optional[list[str]] = typer.Option(
+        None,
+        "--methods",
+        "-m",
+        help="Table III rows: registered names (+mnr allowed), repeatable or comma-separated. Default: every registered method.",
+    ),
+    peers: Optional[list[str]] = typer.Option(
+        None,
+        "--peers",
+        help="Peer libraries: d2nt, kornia, open3d, opencv, or none. Repeatable or comma-separated. Default: all.",
+    ),
+    levels: Optional[list[str]] = typer.Option(
+        None, "--levels", help="Easy, Medium, Hard (repeatable or comma-separated). Default: all."
+    ),
+    frames_per_object: Optional[int] = typer.Option(
+        None, "--frames-per-object", help="At most this many frames of each object (the first ones). Default: all."
+    ),
+    jobs: Optional[int] = typer.Option(
+        None,
+        "--jobs",
+        "-j",
+        help="Processes for the accuracy runs (timing runs are always single-process, one thread). Default: one per core.",
+    ),
     seed: int = typer.Option(0, "--seed", help="Seed of the noise study's Gaussian noise."),
-    tables: Optional[list[str]] = typer.Option(None, "--tables", help="Experiments to run: table2, table3, table4, noise, fig4 (repeatable or comma-separated). Default: all."),
-    repeats: int = typer.Option(7, "--repeats", help="Timed calls per method and frame after the warm-up (3 for methods over 200 ms)."),
-    sensor: Optional[Path] = typer.Option(None, "--sensor", help="Instead: the sensor benchmark on a folder of real frames (<frame>/depth.npy in metres, K.json, planes.npz or gt.npy); --methods then also takes peer names and name:option=value."),
+    tables: Optional[list[str]] = typer.Option(
+        None,
+        "--tables",
+        help="Experiments to run: table2, table3, table4, noise, fig4 (repeatable or comma-separated). Default: all.",
+    ),
+    repeats: int = typer.Option(
+        7, "--repeats", help="Timed calls per method and frame after the warm-up (3 for methods over 200 ms)."
+    ),
+    sensor: Optional[Path] = typer.Option(
+        None,
+        "--sensor",
+        help="Instead: the sensor benchmark on a folder of real frames (<frame>/depth.npy in metres, K.json, planes.npz or gt.npy); --methods then also takes peer names and name:option=value.",
+    ),
 ):
     """Regenerate the paper's Tables II-IV and Figs. 1, 3, 4 (with today's peers) on data in the 3F2N layout.
 
@@ -377,15 +478,29 @@ def bench(
     peer_list = split(peers)
     if peer_list is not None and "none" in peer_list:
         peer_list = []
-    cfg = BenchConfig(root=dataset if dataset is not None else sample_root(), out=out, methods=split(methods_),
-                      peers=peer_list, levels=tuple(split(levels) or LEVELS), frames_per_object=frames_per_object,
-                      jobs=jobs if jobs is not None else (os.cpu_count() or 1), seed=seed, repeats=repeats,
-                      tables=tuple(split(tables) or TABLES))
+    cfg = BenchConfig(
+        root=dataset if dataset is not None else sample_root(),
+        out=out,
+        methods=split(methods_),
+        peers=peer_list,
+        levels=tuple(split(levels) or LEVELS),
+        frames_per_object=frames_per_object,
+        jobs=jobs if jobs is not None else (os.cpu_count() or 1),
+        seed=seed,
+        repeats=repeats,
+        tables=tuple(split(tables) or TABLES),
+    )
     t0 = time.perf_counter()
     try:
         out.mkdir(parents=True, exist_ok=True)
-        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=err_console, transient=True) as progress:
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=err_console,
+            transient=True,
+        ) as progress:
             tasks = {}
 
             def report(stage, done, total):
@@ -402,7 +517,9 @@ def bench(
     for name, why in result.skipped.items():
         err_console.print(f"[yellow]skipped:[/] {name}: {why}", highlight=False, soft_wrap=True)
     console.print(_table3_text(paths["report"]), highlight=False, soft_wrap=True)
-    console.print(f"wrote {paths['report']}, {paths['results']} and figures in {out}/ in {time.perf_counter() - t0:.0f} s")
+    console.print(
+        f"wrote {paths['report']}, {paths['results']} and figures in {out}/ in {time.perf_counter() - t0:.0f} s"
+    )
 
 
 def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: int):
@@ -421,27 +538,43 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
         libs = []
     t0 = time.perf_counter()
     try:
-        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=err_console, transient=True) as progress:
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=err_console,
+            transient=True,
+        ) as progress:
             task = progress.add_task("sensor frames", total=None)
-            result, paths = sensor_bench(folder, out, names=names, peer_libraries=libs, repeats=repeats,
-                                         progress=lambda stage, done, total: progress.update(task, completed=done, total=total))
+            result, paths = sensor_bench(
+                folder,
+                out,
+                names=names,
+                peer_libraries=libs,
+                repeats=repeats,
+                progress=lambda stage, done, total: progress.update(task, completed=done, total=total),
+            )
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
     for name, why in result["absent"].items():
         err_console.print(f"[yellow]absent:[/] {name}: {why}", highlight=False, soft_wrap=True)
     for e in result["errors"]:
-        err_console.print(f"[yellow]failed:[/] {e['entry']} on {e['frame']}: {e['error']}", highlight=False, soft_wrap=True)
+        err_console.print(
+            f"[yellow]failed:[/] {e['entry']} on {e['frame']}: {e['error']}", highlight=False, soft_wrap=True
+        )
     text = paths["report"].read_text()
-    console.print(text[text.index("## Angle"):text.index("## Coverage")].strip(), highlight=False, soft_wrap=True)
-    console.print(f"wrote {paths['report']}, {paths['results']} and {paths['figure']} in {time.perf_counter() - t0:.0f} s")
+    console.print(text[text.index("## Angle") : text.index("## Coverage")].strip(), highlight=False, soft_wrap=True)
+    console.print(
+        f"wrote {paths['report']}, {paths['results']} and {paths['figure']} in {time.perf_counter() - t0:.0f} s"
+    )
 
 
 def _table3_text(report_path: Path) -> str:
     text = report_path.read_text()
     start = text.index("## Table III")
     end = text.find("\n## ", start + 1)
-    return text[start:end if end >= 0 else None].strip()
+    return text[start : end if end >= 0 else None].strip()
 
 
 def main():  # pragma: no cover

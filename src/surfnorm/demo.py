@@ -23,8 +23,22 @@ from .io.threef2n import find_frames, read_frame, sample_root
 from .methods import methods
 from .reference import official_figures
 
-__all__ = ["demo_methods", "run_demo", "DemoRow", "write_contact_sheet", "ContactSheet", "CONTACT_SHEET", "run_sensor_demo", "read_sensor_frame", "sensor_root", "SensorFrame",
-           "SensorRow", "default_method", "default_label", "opencv_rgbd_normals"]
+__all__ = [
+    "demo_methods",
+    "run_demo",
+    "DemoRow",
+    "write_contact_sheet",
+    "ContactSheet",
+    "CONTACT_SHEET",
+    "run_sensor_demo",
+    "read_sensor_frame",
+    "sensor_root",
+    "SensorFrame",
+    "SensorRow",
+    "default_method",
+    "default_label",
+    "opencv_rgbd_normals",
+]
 
 #: Table IV of the paper: MNR on other depth-to-normal estimators.
 TABLE_IV_COMBOS = ("3f2n_median+mnr", "cp2tv+mnr")
@@ -180,14 +194,19 @@ def write_contact_sheet(out_dir, rows: list[DemoRow], *, root=None) -> ContactSh
     height = _MARGIN + 30 + (1 + len(names)) * row_h + scale_h + _MARGIN
     img = np.full((height, width, 3), 255, np.uint8)
     tiles, captions = {}, {}
-    _put(img, "surfnorm demo: normal maps and angular error (degrees) on the 3F2N frames shipped in the package",
-         _MARGIN, _MARGIN + 16, 0.6)
+    _put(
+        img,
+        "surfnorm demo: normal maps and angular error (degrees) on the 3F2N frames shipped in the package",
+        _MARGIN,
+        _MARGIN + 16,
+        0.6,
+    )
 
     def place(key, rgb, caption, r, c):
         top = _MARGIN + 30 + r * row_h + _CAPTION_H
         left = _MARGIN + _LABEL_W + (c // 2) * col_w + (c % 2) * (_TILE_W + _GAP)
         t = _tile(rgb, scale)
-        img[top:top + t.shape[0], left:left + t.shape[1]] = t
+        img[top : top + t.shape[0], left : left + t.shape[1]] = t
         _put(img, caption, left, top - 8, 0.42)
         tiles[key] = (top, left, t.shape[0], t.shape[1])
         captions[key] = caption
@@ -196,8 +215,13 @@ def write_contact_sheet(out_dir, rows: list[DemoRow], *, root=None) -> ContactSh
         stem = frame_name.replace("/", "_")
         frame = read_frame(root, frame_name)
         z = frame.depth[frame.mask]
-        place((frame_name, "", "depth"), _read_rgb8(out_dir / f"{stem}_depth.png"),
-              f"{frame_name}: depth {z.min():.4g} (dark) to {z.max():.4g}", 0, 2 * c)
+        place(
+            (frame_name, "", "depth"),
+            _read_rgb8(out_dir / f"{stem}_depth.png"),
+            f"{frame_name}: depth {z.min():.4g} (dark) to {z.max():.4g}",
+            0,
+            2 * c,
+        )
         place((frame_name, "", "gt"), _read_rgb8(out_dir / f"{stem}_gt.png"), "ground truth", 0, 2 * c + 1)
         for r, name in enumerate(names, start=1):
             safe = name.replace("+", "_plus_")
@@ -205,8 +229,13 @@ def write_contact_sheet(out_dir, rows: list[DemoRow], *, root=None) -> ContactSh
             if row is None:
                 continue
             e_a = f"e_A {row.e_a:.3f} deg" + (f" [authors' {row.official:.3f}]" if row.official is not None else "")
-            place((frame_name, name, "normals"), _read_rgb8(out_dir / f"{stem}_{safe}_normals.png"), f"{name} normals",
-                  r, 2 * c)
+            place(
+                (frame_name, name, "normals"),
+                _read_rgb8(out_dir / f"{stem}_{safe}_normals.png"),
+                f"{name} normals",
+                r,
+                2 * c,
+            )
             place((frame_name, name, "error"), _read_rgb8(out_dir / f"{stem}_{safe}_error.png"), e_a, r, 2 * c + 1)
     for r, label in enumerate(["frame", *names]):
         _put(img, label, _MARGIN, _MARGIN + 30 + r * row_h + _CAPTION_H + tile_h // 2, 0.55)
@@ -215,12 +244,18 @@ def write_contact_sheet(out_dir, rows: list[DemoRow], *, root=None) -> ContactSh
     bar_top = height - _MARGIN - scale_h + 34
     bar_left, bar_w, bar_h = _MARGIN + _LABEL_W, min(width - _MARGIN - _LABEL_W - 2 * _MARGIN, 900), 20
     ramp = colormaps["inferno"](np.linspace(0.0, 1.0, bar_w))[:, :3]
-    img[bar_top:bar_top + bar_h, bar_left:bar_left + bar_w] = np.rint(ramp * 255).astype(np.uint8)[None]
-    _put(img, f"angular error (degrees), error maps; {ERROR_VMAX:g} and above in the brightest colour; "
-         "white: no ground truth or no normal", bar_left, bar_top - 10, 0.5)
+    img[bar_top : bar_top + bar_h, bar_left : bar_left + bar_w] = np.rint(ramp * 255).astype(np.uint8)[None]
+    _put(
+        img,
+        f"angular error (degrees), error maps; {ERROR_VMAX:g} and above in the brightest colour; "
+        "white: no ground truth or no normal",
+        bar_left,
+        bar_top - 10,
+        0.5,
+    )
     for tick in np.arange(0.0, ERROR_VMAX + 1e-9, 5.0):
         x = bar_left + int(round(tick / ERROR_VMAX * (bar_w - 1)))
-        img[bar_top + bar_h:bar_top + bar_h + 6, x] = 0
+        img[bar_top + bar_h : bar_top + bar_h + 6, x] = 0
         _put(img, f"{tick:g}", x - 6, bar_top + bar_h + 22, 0.45)
     path = write_rgb8(out_dir / CONTACT_SHEET, img)
     return ContactSheet(path, tiles, captions, (bar_top, bar_left, bar_h, bar_w))
@@ -297,8 +332,10 @@ def opencv_rgbd_normals():
     import cv2
 
     if not hasattr(cv2, "RgbdNormals") or not hasattr(cv2, "depthTo3d"):
-        return None, (f"OpenCV {cv2.__version__} has no cv2.RgbdNormals/cv2.depthTo3d; they come with OpenCV 5 "
-                      "(pip install 'opencv-python-headless>=5' or 'opencv-contrib-python-headless>=5')")
+        return None, (
+            f"OpenCV {cv2.__version__} has no cv2.RgbdNormals/cv2.depthTo3d; they come with OpenCV 5 "
+            "(pip install 'opencv-python-headless>=5' or 'opencv-contrib-python-headless>=5')"
+        )
     cache = {}
 
     def run(depth: np.ndarray, K: Intrinsics, method: str, window: int) -> np.ndarray:
@@ -306,8 +343,9 @@ def opencv_rgbd_normals():
         Kf = K.matrix.astype(np.float32)
         key = (H, W, method, window)
         if key not in cache:  # building the estimator is setup, as a user keeps it
-            cache[key] = cv2.RgbdNormals.create(H, W, cv2.CV_32F, Kf, window,
-                                                method=getattr(cv2, f"RgbdNormals_RGBD_NORMALS_METHOD_{method}"))
+            cache[key] = cv2.RgbdNormals.create(
+                H, W, cv2.CV_32F, Kf, window, method=getattr(cv2, f"RgbdNormals_RGBD_NORMALS_METHOD_{method}")
+            )
         points = cv2.depthTo3d(np.ascontiguousarray(depth, dtype=np.float32), Kf)
         return np.asarray(cache[key].apply(points))[..., :3]
 

@@ -22,7 +22,17 @@ from ._choices import BORDERS, DLF_NAMES, SDA_BASES, SDA_MAX_ITERATIONS
 from ._validate import check_bool, check_choice, check_fill, check_iterations, check_positive, check_window
 from .errors import InputError
 
-__all__ = ["Option", "Method", "MethodInfo", "register", "resolve", "methods", "CATEGORIES", "MNR_SUFFIX", "DEFAULT_METHOD"]
+__all__ = [
+    "Option",
+    "Method",
+    "MethodInfo",
+    "register",
+    "resolve",
+    "methods",
+    "CATEGORIES",
+    "MNR_SUFFIX",
+    "DEFAULT_METHOD",
+]
 
 CATEGORIES = ("energy minimisation", "averaging", "depth-to-normal", "automatic")
 MNR_SUFFIX = "+mnr"
@@ -43,20 +53,26 @@ def _dlf(name, value):
     return check_choice(name, value, DLF_NAMES)
 
 
-FILL = Option(0.0, lambda name, value: check_fill(value),
-              "value written into all three components where no valid normal exists")
+FILL = Option(
+    0.0, lambda name, value: check_fill(value), "value written into all three components where no valid normal exists"
+)
 DAG_OPTIONS = {
     "dlf": Option("1d", _dlf, "discrete Laplace filter of the DAG smoothness (Table II): 1d, alpha, beta, gamma"),
     "tau": Option(1.0, check_positive, "softness tau of the softmin (eq. 13)"),
     "truncate": Option(True, check_bool, "use the truncated softmin (eq. 14)"),
 }
 BORDER_OPTIONS = {
-    "border": Option("one-sided", lambda name, value: check_choice(name, value, BORDERS),
-                     "finite differences at the image border: one-sided, or reflect (OpenCV BORDER_REFLECT_101, "
-                     "as the authors' code, which zeroes the gradient there)"),
+    "border": Option(
+        "one-sided",
+        lambda name, value: check_choice(name, value, BORDERS),
+        "finite differences at the image border: one-sided, or reflect (OpenCV BORDER_REFLECT_101, "
+        "as the authors' code, which zeroes the gradient there)",
+    ),
 }
 MNR_OPTIONS = {
-    "mnr_dlf": Option("alpha", _dlf, "discrete Laplace filter of the MNR smoothness (authors' code: alpha; Sec. IV-A text: beta)"),
+    "mnr_dlf": Option(
+        "alpha", _dlf, "discrete Laplace filter of the MNR smoothness (authors' code: alpha; Sec. IV-A text: beta)"
+    ),
 }
 
 
@@ -131,8 +147,14 @@ def methods() -> dict[str, MethodInfo]:
     ('depth-to-normal', '1d', 'alpha')
     """
     return {
-        m.name: MethodInfo(m.name, m.category, m.reference, m.summary,
-                           {k: o.default for k, o in option_specs(m, False).items()}, m.kernel)
+        m.name: MethodInfo(
+            m.name,
+            m.category,
+            m.reference,
+            m.summary,
+            {k: o.default for k, o in option_specs(m, False).items()},
+            m.kernel,
+        )
         for m in _REGISTRY.values()
     }
 
@@ -150,12 +172,16 @@ def resolve(name, options: dict) -> tuple[Method, bool, dict]:
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
     base, refined = (name[: -len(MNR_SUFFIX)], True) if name.endswith(MNR_SUFFIX) else (name, False)
     if base not in _REGISTRY:
-        raise InputError(f"method: expected one of {', '.join(_REGISTRY)} (optionally followed by {MNR_SUFFIX!r}), got {name!r}")
+        raise InputError(
+            f"method: expected one of {', '.join(_REGISTRY)} (optionally followed by {MNR_SUFFIX!r}), got {name!r}"
+        )
     method = _REGISTRY[base]
     specs = option_specs(method, refined)
     unknown = sorted(set(options) - set(specs))
     if unknown:
-        raise InputError(f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, got unknown option(s) {', '.join(unknown)}")
+        raise InputError(
+            f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, got unknown option(s) {', '.join(unknown)}"
+        )
     clean = {k: spec.check(k, options[k]) if k in options else spec.default for k, spec in specs.items()}
     return method, refined, clean
 
@@ -191,19 +217,58 @@ def _run_cp2tv(z, valid, cam, out, **options):
     return cp2tv(z, valid, cam, out, **options)
 
 
-register(Method("d2nt_basic", "depth-to-normal", D2NT_PAPER + ", eq. 9",
-                "D2NT translation with finite-difference gradients", _run_d2nt_basic, BORDER_OPTIONS, bands=True,
-                kernel="surfnorm.kernels.translate.d2nt"))
-register(Method("d2nt_v2", "depth-to-normal", D2NT_PAPER + ", eq. 9-14",
-                "D2NT with discontinuity-aware gradient (DAG) filter", _run_d2nt_v2, DAG_OPTIONS, relative=True,
-                bands=True, kernel="surfnorm.kernels.translate.d2nt"))
-register(Method("d2nt_v3", "depth-to-normal", D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
-                "D2NT with DAG filter and MRF-based normal refinement (MNR)", _run_d2nt_v3, DAG_OPTIONS, mnr=True,
-                ties=True, relative=True, bands=True, kernel="surfnorm.kernels.d2nt_v3.d2nt_v3"))
-register(Method("cp2tv", "depth-to-normal",
-                "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
-                "cross product of two finite-difference tangent vectors", _run_cp2tv, BORDER_OPTIONS, bands=True,
-                kernel="surfnorm.kernels.translate.cp2tv"))
+register(
+    Method(
+        "d2nt_basic",
+        "depth-to-normal",
+        D2NT_PAPER + ", eq. 9",
+        "D2NT translation with finite-difference gradients",
+        _run_d2nt_basic,
+        BORDER_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.translate.d2nt",
+    )
+)
+register(
+    Method(
+        "d2nt_v2",
+        "depth-to-normal",
+        D2NT_PAPER + ", eq. 9-14",
+        "D2NT with discontinuity-aware gradient (DAG) filter",
+        _run_d2nt_v2,
+        DAG_OPTIONS,
+        relative=True,
+        bands=True,
+        kernel="surfnorm.kernels.translate.d2nt",
+    )
+)
+register(
+    Method(
+        "d2nt_v3",
+        "depth-to-normal",
+        D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
+        "D2NT with DAG filter and MRF-based normal refinement (MNR)",
+        _run_d2nt_v3,
+        DAG_OPTIONS,
+        mnr=True,
+        ties=True,
+        relative=True,
+        bands=True,
+        kernel="surfnorm.kernels.d2nt_v3.d2nt_v3",
+    )
+)
+register(
+    Method(
+        "cp2tv",
+        "depth-to-normal",
+        "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
+        "cross product of two finite-difference tangent vectors",
+        _run_cp2tv,
+        BORDER_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.translate.cp2tv",
+    )
+)
 
 # --- 3F2N and SNE-RoadSeg ------------------------------------------------------------------------
 
@@ -228,27 +293,59 @@ def _run_sne_roadseg(z, valid, cam, out, **options):
     return sne_roadseg(z, valid, cam, out, **options)
 
 
-register(Method("3f2n_mean", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
-                "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours", _run_3f2n_mean,
-                BORDER_OPTIONS, bands=True, kernel="surfnorm.kernels.three_filters.three_filters"))
-register(Method("3f2n_median", "depth-to-normal", THREE_F2N_PAPER + ", eq. 7-11",
-                "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours", _run_3f2n_median,
-                BORDER_OPTIONS, bands=True, kernel="surfnorm.kernels.three_filters.three_filters"))
-register(Method("sne_roadseg", "depth-to-normal",
-                "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
-                "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
-                "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
-                _run_sne_roadseg, BORDER_OPTIONS, bands=True, kernel="surfnorm.kernels.three_filters.sne_roadseg"))
+register(
+    Method(
+        "3f2n_mean",
+        "depth-to-normal",
+        THREE_F2N_PAPER + ", eq. 7-11",
+        "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours",
+        _run_3f2n_mean,
+        BORDER_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.three_filters.three_filters",
+    )
+)
+register(
+    Method(
+        "3f2n_median",
+        "depth-to-normal",
+        THREE_F2N_PAPER + ", eq. 7-11",
+        "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours",
+        _run_3f2n_median,
+        BORDER_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.three_filters.three_filters",
+    )
+)
+register(
+    Method(
+        "sne_roadseg",
+        "depth-to-normal",
+        "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
+        "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
+        "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
+        _run_sne_roadseg,
+        BORDER_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.three_filters.sne_roadseg",
+    )
+)
 
 # --- SDA-SNE -------------------------------------------------------------------------------------
 
 SDA_OPTIONS = {
-    "iterations": Option(3, check_iterations,
-                         "passes of the dynamic programming (authors' demo: 3); None runs until no pixel changes, "
-                         f"at most {SDA_MAX_ITERATIONS} passes"),
-    "base": Option("cp2tv", lambda name, value: check_choice(name, value, SDA_BASES),
-                   "how gradients become normals: cp2tv (on depth, the paper's SDA-SNE) or 3f2n "
-                   "(SDA on inverse depth, then 3F2N's median filter, as the authors' demo offers)"),
+    "iterations": Option(
+        3,
+        check_iterations,
+        "passes of the dynamic programming (authors' demo: 3); None runs until no pixel changes, "
+        f"at most {SDA_MAX_ITERATIONS} passes",
+    ),
+    "base": Option(
+        "cp2tv",
+        lambda name, value: check_choice(name, value, SDA_BASES),
+        "how gradients become normals: cp2tv (on depth, the paper's SDA-SNE) or 3f2n "
+        "(SDA on inverse depth, then 3F2N's median filter, as the authors' demo offers)",
+    ),
     **BORDER_OPTIONS,
 }
 
@@ -259,11 +356,21 @@ def _run_sda_sne(z, valid, cam, out, **options):
     return sda_sne(z, valid, cam, out, **options)
 
 
-register(Method("sda_sne", "energy minimisation",
-                "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
-                "Dynamic Programming, 3DV 2022",
-                "depth gradients chosen by multi-directional dynamic programming, then CP2TV", _run_sda_sne,
-                SDA_OPTIONS, ties=True, equivariant=False, bands=True, kernel="surfnorm.kernels.sda.sda_sne"))
+register(
+    Method(
+        "sda_sne",
+        "energy minimisation",
+        "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
+        "Dynamic Programming, 3DV 2022",
+        "depth gradients chosen by multi-directional dynamic programming, then CP2TV",
+        _run_sda_sne,
+        SDA_OPTIONS,
+        ties=True,
+        equivariant=False,
+        bands=True,
+        kernel="surfnorm.kernels.sda.sda_sne",
+    )
+)
 
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
 
@@ -302,32 +409,71 @@ def _run_angle_weighted(z, valid, cam, out, **options):
     return angle_weighted(z, valid, cam, out, **options)
 
 
-register(Method("plane_svd", "energy minimisation",
-                "Wang et al., Comparison of local plane fitting methods for range data, CVPR 2001 "
-                "(as formulated by Klasing et al., ICRA 2009); D2NT Table I",
-                "least-squares plane with offset: smallest right singular vector of [Q+, 1]",
-                _run_plane_svd, WINDOW_OPTIONS, relative=True, equivariant=False, bands=True,
-                kernel="surfnorm.kernels.plane_fit.plane_svd"))
-register(Method("plane_pca", "energy minimisation",
-                "Klasing et al., Realtime segmentation of range data using continuous nearest neighbors, ICRA 2009; "
-                "D2NT Table I",
-                "smallest eigenvector of the covariance of the window's points about their centroid",
-                _run_plane_pca, WINDOW_OPTIONS, bands=True, kernel="surfnorm.kernels.plane_fit.plane_pca"))
-register(Method("vector_svd", "energy minimisation",
-                "Jordan and Mordohai, A quantitative evaluation of surface normal estimation in point clouds, "
-                "IROS 2014; D2NT Table I",
-                "smallest right singular vector of the matrix of the vectors q - p",
-                _run_vector_svd, WINDOW_OPTIONS, bands=True, kernel="surfnorm.kernels.plane_fit.vector_svd"))
-register(Method("area_weighted", "averaging",
-                "Klasing et al., Comparison of surface normal estimation methods for range sensing applications, "
-                "ICRA 2009; D2NT eq. 2 and Table I",
-                "mean of the 8 triangle normals around the pixel, weighted by triangle area",
-                _run_area_weighted, bands=True, kernel="surfnorm.kernels.averaging.area_weighted"))
-register(Method("angle_weighted", "averaging",
-                "Jin et al., A comparison of algorithms for vertex normal computation, The Visual Computer 2005; "
-                "D2NT eq. 2 and Table I",
-                "mean of the 8 triangle normals around the pixel, weighted by their angle at the pixel",
-                _run_angle_weighted, bands=True, kernel="surfnorm.kernels.averaging.angle_weighted"))
+register(
+    Method(
+        "plane_svd",
+        "energy minimisation",
+        "Wang et al., Comparison of local plane fitting methods for range data, CVPR 2001 "
+        "(as formulated by Klasing et al., ICRA 2009); D2NT Table I",
+        "least-squares plane with offset: smallest right singular vector of [Q+, 1]",
+        _run_plane_svd,
+        WINDOW_OPTIONS,
+        relative=True,
+        equivariant=False,
+        bands=True,
+        kernel="surfnorm.kernels.plane_fit.plane_svd",
+    )
+)
+register(
+    Method(
+        "plane_pca",
+        "energy minimisation",
+        "Klasing et al., Realtime segmentation of range data using continuous nearest neighbors, ICRA 2009; "
+        "D2NT Table I",
+        "smallest eigenvector of the covariance of the window's points about their centroid",
+        _run_plane_pca,
+        WINDOW_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.plane_fit.plane_pca",
+    )
+)
+register(
+    Method(
+        "vector_svd",
+        "energy minimisation",
+        "Jordan and Mordohai, A quantitative evaluation of surface normal estimation in point clouds, "
+        "IROS 2014; D2NT Table I",
+        "smallest right singular vector of the matrix of the vectors q - p",
+        _run_vector_svd,
+        WINDOW_OPTIONS,
+        bands=True,
+        kernel="surfnorm.kernels.plane_fit.vector_svd",
+    )
+)
+register(
+    Method(
+        "area_weighted",
+        "averaging",
+        "Klasing et al., Comparison of surface normal estimation methods for range sensing applications, "
+        "ICRA 2009; D2NT eq. 2 and Table I",
+        "mean of the 8 triangle normals around the pixel, weighted by triangle area",
+        _run_area_weighted,
+        bands=True,
+        kernel="surfnorm.kernels.averaging.area_weighted",
+    )
+)
+register(
+    Method(
+        "angle_weighted",
+        "averaging",
+        "Jin et al., A comparison of algorithms for vertex normal computation, The Visual Computer 2005; "
+        "D2NT eq. 2 and Table I",
+        "mean of the 8 triangle normals around the pixel, weighted by their angle at the pixel",
+        _run_angle_weighted,
+        bands=True,
+        kernel="surfnorm.kernels.averaging.angle_weighted",
+    )
+)
 
 # --- Sensor depth (ours) -------------------------------------------------------------------------
 
@@ -339,9 +485,11 @@ def _check_window_or_none(name, value):
 
 
 ADAPTIVE_OPTIONS = {
-    "window": Option(None, _check_window_or_none,
-                     "side of the fitted window (odd, >= 3); None: chosen per pixel from the frame's noise and "
-                     "the pixel's depth"),
+    "window": Option(
+        None,
+        _check_window_or_none,
+        "side of the fitted window (odd, >= 3); None: chosen per pixel from the frame's noise and the pixel's depth",
+    ),
     "max_window": Option(31, check_window, "largest window side (odd, >= 3), also for sparse depth"),
 }
 
@@ -362,15 +510,33 @@ def _run_auto(z, valid, cam, out, **options):
     return auto(z, valid, cam, out, **options)
 
 
-register(Method("adaptive_fit", "energy minimisation",
-                SURFNORM + ": least-squares plane of inverse depth over a window sized from the frame's noise, "
-                "integral images, edge-aware quadrant windows",
-                "plane fit of inverse depth, support sized from the depth's own noise; for sensor depth",
-                _run_adaptive_fit, ADAPTIVE_OPTIONS, kernel="surfnorm.kernels.adaptive_fit.adaptive_fit"))
-register(Method("auto", "automatic",
-                SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's "
-                "noise floor",
-                "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
-                _run_auto, {"tau": Option(1.0, DAG_OPTIONS["tau"].check, "softness tau of d2nt_v3's softmin (eq. 13), "
-                                          "where auto picks d2nt_v3")},
-                ties=True, relative=True, bands=True, kernel="surfnorm.kernels.auto.auto"))
+register(
+    Method(
+        "adaptive_fit",
+        "energy minimisation",
+        SURFNORM + ": least-squares plane of inverse depth over a window sized from the frame's noise, "
+        "integral images, edge-aware quadrant windows",
+        "plane fit of inverse depth, support sized from the depth's own noise; for sensor depth",
+        _run_adaptive_fit,
+        ADAPTIVE_OPTIONS,
+        kernel="surfnorm.kernels.adaptive_fit.adaptive_fit",
+    )
+)
+register(
+    Method(
+        "auto",
+        "automatic",
+        SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's noise floor",
+        "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
+        _run_auto,
+        {
+            "tau": Option(
+                1.0, DAG_OPTIONS["tau"].check, "softness tau of d2nt_v3's softmin (eq. 13), where auto picks d2nt_v3"
+            )
+        },
+        ties=True,
+        relative=True,
+        bands=True,
+        kernel="surfnorm.kernels.auto.auto",
+    )
+)

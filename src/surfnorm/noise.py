@@ -33,7 +33,12 @@ __all__ = ["SensorNoise", "add_noise"]
 
 
 def _check(name, value, *, upper=None):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not np.isfinite(value) or value < 0:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not np.isfinite(value)
+        or value < 0
+    ):
         raise InputError(f"{name}: expected a finite number >= 0, got {value!r}")
     if upper is not None and value > upper:
         raise InputError(f"{name}: expected a number <= {upper}, got {value!r}")
@@ -44,20 +49,24 @@ def _check(name, value, *, upper=None):
 class SensorNoise:
     """Parameters of the noise model (lengths in the depth unit; defaults: metres, Kinect-v1-like)."""
 
-    a: float = 0.0012            # axial noise at zero depth
-    b: float = 0.0019            # growth of axial noise with depth squared (per unit of depth)
-    quantum: float = 0.001       # depth step; 0 for none
-    edge_jump: float = 0.05      # a relative jump |z_p - z_q| / z_p above this is a discontinuity
-    edge_width: int = 1          # pixels on each side of a discontinuity that may drop out
-    edge_dropout: float = 0.5    # probability that such a pixel drops out
-    dropout: float = 0.0         # probability that any pixel drops out
+    a: float = 0.0012  # axial noise at zero depth
+    b: float = 0.0019  # growth of axial noise with depth squared (per unit of depth)
+    quantum: float = 0.001  # depth step; 0 for none
+    edge_jump: float = 0.05  # a relative jump |z_p - z_q| / z_p above this is a discontinuity
+    edge_width: int = 1  # pixels on each side of a discontinuity that may drop out
+    edge_dropout: float = 0.5  # probability that such a pixel drops out
+    dropout: float = 0.0  # probability that any pixel drops out
 
     def __post_init__(self):
         for name in ("a", "b", "quantum", "edge_jump"):
             _check(name, getattr(self, name))
         for name in ("edge_dropout", "dropout"):
             _check(name, getattr(self, name), upper=1.0)
-        if isinstance(self.edge_width, bool) or not isinstance(self.edge_width, (int, np.integer)) or self.edge_width < 0:
+        if (
+            isinstance(self.edge_width, bool)
+            or not isinstance(self.edge_width, (int, np.integer))
+            or self.edge_width < 0
+        ):
             raise InputError(f"edge_width: expected an integer >= 0, got {self.edge_width!r}")
 
     def in_unit(self, per_metre: float) -> "SensorNoise":

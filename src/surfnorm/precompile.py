@@ -99,8 +99,9 @@ def precompile(names=None, *, verbose: bool = False) -> dict[str, float]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m surfnorm.precompile",
-                                     description="Compile every kernel of surfnorm into Numba's on-disk cache.")
+    parser = argparse.ArgumentParser(
+        prog="python -m surfnorm.precompile", description="Compile every kernel of surfnorm into Numba's on-disk cache."
+    )
     parser.add_argument("methods", nargs="*", help="only these methods (default: every registered one)")
     parser.add_argument("--quiet", action="store_true", help="print nothing")
     args = parser.parse_args(argv)

@@ -142,7 +142,15 @@ import math
 
 import numpy as np
 
-__all__ = ["REFERENCE_DEPTH", "TIE_TOLERANCE", "STEP_TOLERANCE", "quantisation_step", "relative_depth", "range_exponent", "power_of_two_exponent"]
+__all__ = [
+    "REFERENCE_DEPTH",
+    "TIE_TOLERANCE",
+    "STEP_TOLERANCE",
+    "quantisation_step",
+    "relative_depth",
+    "range_exponent",
+    "power_of_two_exponent",
+]
 
 #: The depth at which tau is in depth units in the scale-invariant mode (tau relative to depth: tau z / 100).
 REFERENCE_DEPTH = 100.0
@@ -171,7 +179,7 @@ def range_exponent(z: np.ndarray) -> int:
         sample = sample[(sample > 0) & (sample < np.inf)]
     if sample.size == 0:
         return 0
-    lo, hi = 2.0 ** -SAFE_EXPONENT, 2.0 ** SAFE_EXPONENT
+    lo, hi = 2.0**-SAFE_EXPONENT, 2.0**SAFE_EXPONENT
     if sample.min() >= lo and sample.max() <= hi:
         return 0
     m = float(np.median(sample.astype(np.float64)))
@@ -201,7 +209,7 @@ def _nice_steps(g: float) -> list[float]:
     for k in range(1, 9):
         h = g / k
         e = math.floor(math.log10(h))
-        candidates = {m * 10.0 ** j for j in (e - 1, e, e + 1) for m in _STEP_MANTISSAS}
+        candidates = {m * 10.0**j for j in (e - 1, e, e + 1) for m in _STEP_MANTISSAS}
         candidates.add(2.0 ** round(math.log2(h)))
         near = sorted((q for q in candidates if abs(math.log(h / q)) < 0.05), key=lambda q: abs(math.log(h / q)))
         steps += [q for q in near if q not in steps]
@@ -231,9 +239,10 @@ def quantisation_step(z64: np.ndarray, valid: np.ndarray) -> float | None:
     g = float(gaps.min())
     if not (g > 0.0 and math.isfinite(g)):
         return None
+
     def on_grid(values, q):
         n = values * (1.0 / q)
-        if not n.max() < 2.0 ** 24:
+        if not n.max() < 2.0**24:
             return False
         n -= np.rint(n)
         return np.abs(n).max() <= STEP_TOLERANCE

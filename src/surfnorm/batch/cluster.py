@@ -107,7 +107,7 @@ def _convert_shard(tasks, settings):
 
 
 def _shards(tasks: Sequence, size: int) -> list[list]:
-    return [list(tasks[i:i + size]) for i in range(0, len(tasks), size)]
+    return [list(tasks[i : i + size]) for i in range(0, len(tasks), size)]
 
 
 def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int | None = None) -> list:
@@ -149,9 +149,9 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
     run_id = uuid.uuid4().hex[:12]
     position = {id(task): i for i, task in enumerate(tasks)}
     results: list = [None] * len(tasks)
-    shard_of = {}   # future key -> its tasks
+    shard_of = {}  # future key -> its tasks
     suspects: deque = deque()  # files of shards that kept killing workers, to be tried one at a time
-    lane = None     # key of the one suspect in flight
+    lane = None  # key of the one suspect in flight
     counter = 0
 
     def submit(shard):
@@ -177,9 +177,15 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
                 suspects.extend(shard)
                 shard_results = []
             else:
-                shard_results = [FileResult(shard[0].input, shard[0].output, "error",
-                                            f"{shard[0].input}: the worker process died each time it converted this "
-                                            f"file (out of memory, or a crash in a native library?): {exc}")]
+                shard_results = [
+                    FileResult(
+                        shard[0].input,
+                        shard[0].output,
+                        "error",
+                        f"{shard[0].input}: the worker process died each time it converted this "
+                        f"file (out of memory, or a crash in a native library?): {exc}",
+                    )
+                ]
         except Exception as exc:
             if future.status != "error":  # cancelled, or the client lost the scheduler: not the files' fault
                 raise
@@ -190,8 +196,14 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
                     pending.add(submit([task]))
                 shard_results = []
             else:
-                shard_results = [FileResult(shard[0].input, shard[0].output, "error",
-                                            f"{shard[0].input}: failed on a worker: {type(exc).__name__}: {exc}")]
+                shard_results = [
+                    FileResult(
+                        shard[0].input,
+                        shard[0].output,
+                        "error",
+                        f"{shard[0].input}: failed on a worker: {type(exc).__name__}: {exc}",
+                    )
+                ]
         finally:
             future.release()
         for task, result in zip(shard, shard_results):
@@ -208,8 +220,9 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
 
 
 @contextmanager
-def cluster_client(address: str | None = None, *, local_workers: int | None = None,
-                   timeout: float | None = None) -> Iterator:
+def cluster_client(
+    address: str | None = None, *, local_workers: int | None = None, timeout: float | None = None
+) -> Iterator:
     """A ``distributed.Client`` for the CLI: to the scheduler at ``address``, or to a new LocalCluster.
 
     ``local_workers`` starts a LocalCluster of that many single-threaded worker
@@ -220,7 +233,9 @@ def cluster_client(address: str | None = None, *, local_workers: int | None = No
 
     distributed = _require_distributed()
     if (address is None) == (local_workers is None):
-        raise InputError(f"cluster_client: expected exactly one of address= and local_workers=, got address={address!r}, local_workers={local_workers!r}")
+        raise InputError(
+            f"cluster_client: expected exactly one of address= and local_workers=, got address={address!r}, local_workers={local_workers!r}"
+        )
     cluster = None
     if address is not None:
         try:
@@ -229,13 +244,13 @@ def cluster_client(address: str | None = None, *, local_workers: int | None = No
         except (OSError, TimeoutError) as exc:
             raise ConnectionError(f"cluster address {address!r}: no Dask scheduler answered there ({exc})") from exc
         except (ValueError, TypeError) as exc:  # distributed's own words for a malformed address
-            raise InputError(f"cluster address: expected a Dask scheduler address such as tcp://host:8786, "
-                             f"got {address!r} ({exc})") from exc
+            raise InputError(
+                f"cluster address: expected a Dask scheduler address such as tcp://host:8786, got {address!r} ({exc})"
+            ) from exc
     else:
         n = check_positive_int("local_workers", local_workers)
         # ":0": any free port for the scheduler's HTTP server (8787 may be another cluster's)
-        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=":0")
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
         client = distributed.Client(cluster)
     try:
         yield client

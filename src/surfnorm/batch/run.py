@@ -14,7 +14,15 @@ from typing import Callable
 
 from ..errors import InputError
 from ..methods import DEFAULT_METHOD
-from .tasks import ConvertSettings, ConvertSummary, FileResult, convert_file, one_thread_per_frame, plan_tasks, remove_stale_temporaries
+from .tasks import (
+    ConvertSettings,
+    ConvertSummary,
+    FileResult,
+    convert_file,
+    one_thread_per_frame,
+    plan_tasks,
+    remove_stale_temporaries,
+)
 
 __all__ = ["convert"]
 
@@ -30,8 +38,9 @@ def _check_output_dir(output_dir: Path):
         raise InputError(f"output_dir: cannot write into {output_dir} (Permission denied)")
 
 
-def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity=False,
-              byte_order=None) -> ConvertSettings:
+def _settings(
+    method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity=False, byte_order=None
+) -> ConvertSettings:
     from .._validate import check_bool, check_choice, check_positive
     from ..io.depth import PGM_BYTE_ORDERS
     from ..io.intrinsics import resolve_intrinsics
@@ -46,10 +55,20 @@ def _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, 
     if byte_order is not None:
         check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
     if kinect_disparity and depth_scale is not None:
-        raise InputError(f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}")
-    return ConvertSettings(method, dict(options), fmt, depth_scale, resolve_intrinsics(intrinsics),
-                           check_bool("scale_invariant", scale_invariant), check_bool("overwrite", overwrite),
-                           kinect_disparity, byte_order)
+        raise InputError(
+            f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}"
+        )
+    return ConvertSettings(
+        method,
+        dict(options),
+        fmt,
+        depth_scale,
+        resolve_intrinsics(intrinsics),
+        check_bool("scale_invariant", scale_invariant),
+        check_bool("overwrite", overwrite),
+        kinect_disparity,
+        byte_order,
+    )
 
 
 def _alive(pid: int) -> bool:
@@ -127,10 +146,24 @@ def _pool_context():
     return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
 
 
-def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy", depth_scale: float | None = None,
-            intrinsics=None, jobs: int = 1, client=None, shard_size: int | None = None, overwrite: bool = False,
-            progress: Callable[[FileResult], None] | None = None, scale_invariant: bool = False,
-            kinect_disparity: bool = False, byte_order: str | None = None, **options) -> ConvertSummary:
+def convert(
+    inputs,
+    output_dir,
+    *,
+    method: str = DEFAULT_METHOD,
+    fmt: str = "npy",
+    depth_scale: float | None = None,
+    intrinsics=None,
+    jobs: int = 1,
+    client=None,
+    shard_size: int | None = None,
+    overwrite: bool = False,
+    progress: Callable[[FileResult], None] | None = None,
+    scale_invariant: bool = False,
+    kinect_disparity: bool = False,
+    byte_order: str | None = None,
+    **options,
+) -> ConvertSummary:
     """Convert depth files to normal files; see :func:`plan_tasks` for ``inputs`` and the output names.
 
     Parameters
@@ -184,9 +217,12 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     3
     >>> out.cleanup()
     """
-    settings = _settings(method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity,
-                         byte_order)
-    if client is not None and not (callable(getattr(client, "submit", None)) and callable(getattr(client, "nthreads", None))):
+    settings = _settings(
+        method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity, byte_order
+    )
+    if client is not None and not (
+        callable(getattr(client, "submit", None)) and callable(getattr(client, "nthreads", None))
+    ):
         try:
             import distributed  # noqa: F401
         except ImportError:
@@ -203,8 +239,10 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
 
         missing = [t.input for t in tasks if params_for(t.input) is None]
         if missing:
-            raise InputError(f"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy "
-                             f"(no 3F2N params.txt beside {missing[0]}{' and %d more' % (len(missing) - 1) if len(missing) > 1 else ''})")
+            raise InputError(
+                f"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy "
+                f"(no 3F2N params.txt beside {missing[0]}{' and %d more' % (len(missing) - 1) if len(missing) > 1 else ''})"
+            )
     remove_stale_temporaries(tasks)
     results: dict[int, FileResult] = {}
 
@@ -232,8 +270,12 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
     else:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=_pool_context(), initializer=_worker_init,
-                                   initargs=(os.getpid(),))
+        pool = ProcessPoolExecutor(
+            max_workers=min(jobs, len(tasks)),
+            mp_context=_pool_context(),
+            initializer=_worker_init,
+            initargs=(os.getpid(),),
+        )
         try:
             futures = {pool.submit(convert_file, t, settings): i for i, t in enumerate(tasks)}
             for fut in as_completed(futures):
@@ -242,7 +284,9 @@ def convert(inputs, output_dir, *, method: str = DEFAULT_METHOD, fmt: str = "npy
                     result = fut.result()
                 except Exception as exc:  # noqa: BLE001 - a worker that died (e.g. out of memory)
                     t = tasks[i]
-                    result = FileResult(t.input, t.output, "error", f"{t.input}: worker failed ({type(exc).__name__}: {exc})")
+                    result = FileResult(
+                        t.input, t.output, "error", f"{t.input}: worker failed ({type(exc).__name__}: {exc})"
+                    )
                 done(i, result)
         except BaseException:
             # Ctrl-C or an error in a callback: stop now instead of finishing the queue. A file being

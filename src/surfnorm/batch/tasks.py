@@ -26,8 +26,17 @@ from ..camera import Intrinsics
 from ..errors import InputError, SurfnormError
 from ..methods import DEFAULT_METHOD
 
-__all__ = ["ConvertTask", "ConvertSettings", "FileResult", "ConvertSummary", "plan_tasks", "convert_file",
-           "remove_stale_temporaries", "one_thread_per_frame", "STATUSES"]
+__all__ = [
+    "ConvertTask",
+    "ConvertSettings",
+    "FileResult",
+    "ConvertSummary",
+    "plan_tasks",
+    "convert_file",
+    "remove_stale_temporaries",
+    "one_thread_per_frame",
+    "STATUSES",
+]
 
 STATUSES = ("written", "skipped", "error")
 
@@ -103,6 +112,7 @@ class ConvertSummary:
 
 # ---------------------------------------------------------------------------- planning
 
+
 def _output_stem(path: Path) -> str:
     name = path.name
     return name[: -len(".bin.gz")] if name.lower().endswith(".bin.gz") else path.stem
@@ -152,11 +162,15 @@ def _sources(inputs) -> list[tuple[Path, Path]]:
             root = _glob_root(text)
             files = sorted(Path(p) for p in globlib.glob(text, recursive=True))
             return [(f, root) for f in files if _is_depth_file(f)]
-        raise InputError(f"inputs: expected a depth file, a folder or a glob pattern, got {text!r}, which does not exist")
+        raise InputError(
+            f"inputs: expected a depth file, a folder or a glob pattern, got {text!r}, which does not exist"
+        )
     try:
         items = list(inputs)
     except TypeError as exc:
-        raise InputError(f"inputs: expected a path, a glob pattern or a list of files, got {type(inputs).__name__}") from exc
+        raise InputError(
+            f"inputs: expected a path, a glob pattern or a list of files, got {type(inputs).__name__}"
+        ) from exc
     out = []
     for item in items:
         if not isinstance(item, (str, os.PathLike)):
@@ -197,12 +211,16 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
     if isinstance(inputs, (str, os.PathLike)) and not Path(inputs).is_file():
         roots = {r.resolve() for _, r in sources} or {Path(os.fspath(inputs)).resolve()}
         if out_root in roots:
-            raise InputError(f"output_dir: expected a folder other than the input folder {os.fspath(inputs)}, got {output_dir}; "
-                             "its outputs would be read as inputs by the next run")
+            raise InputError(
+                f"output_dir: expected a folder other than the input folder {os.fspath(inputs)}, got {output_dir}; "
+                "its outputs would be read as inputs by the next run"
+            )
         # outputs of an earlier run inside the input folder (e.g. convert data data/normals) are not inputs
         sources = [(f, r) for f, r in sources if out_root not in f.resolve().parents]
     if not sources:
-        raise InputError(f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}")
+        raise InputError(
+            f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}"
+        )
     tasks: list = []
     seen: dict = {}
     for file, root in sources:
@@ -212,8 +230,10 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
             rel = Path()
         out = output_dir / rel / (_output_stem(file) + FORMAT_SUFFIX[fmt])
         if out in seen:
-            raise InputError(f"inputs: {seen[out]} and {file} would both be written to {out}; "
-                             "convert them into different output folders")
+            raise InputError(
+                f"inputs: {seen[out]} and {file} would both be written to {out}; "
+                "convert them into different output folders"
+            )
         if out.resolve() == file.resolve():
             raise InputError(f"output_dir: writing {out} would replace its input; choose another output folder")
         seen[out] = file
@@ -247,13 +267,22 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     if cam is None:
         params = params_for(task.input)
         if params is None:
-            raise InputError(f"intrinsics: none given and no 3F2N params.txt beside {task.input} or in the folder above it")
+            raise InputError(
+                f"intrinsics: none given and no 3F2N params.txt beside {task.input} or in the folder above it"
+            )
         cam = read_params(params)
     byte_order = settings.byte_order if depth_suffix(task.input) == ".pgm" else None  # other files in the folder
-    depth = read_depth(task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity,
-                       byte_order=byte_order)
-    normals = estimate(depth, cam, method=settings.method, scale_invariant=settings.scale_invariant,
-                       threads=_frame_threads, **settings.options)
+    depth = read_depth(
+        task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity, byte_order=byte_order
+    )
+    normals = estimate(
+        depth,
+        cam,
+        method=settings.method,
+        scale_invariant=settings.scale_invariant,
+        threads=_frame_threads,
+        **settings.options,
+    )
     task.output.parent.mkdir(parents=True, exist_ok=True)
     write_normals(task.output, normals, fmt=settings.fmt)
     with np.errstate(invalid="ignore"):
@@ -270,7 +299,9 @@ def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
     try:
         if task.output.exists() and not settings.overwrite:
             if task.output.is_dir():
-                return FileResult(task.input, task.output, "error", f"{task.input}: output {task.output} exists and is a folder")
+                return FileResult(
+                    task.input, task.output, "error", f"{task.input}: output {task.output} exists and is a folder"
+                )
             return FileResult(task.input, task.output, "skipped", "output exists")
         return FileResult(task.input, task.output, "written", _convert(task, settings))
     except (SurfnormError, ValueError) as exc:
@@ -280,7 +311,9 @@ def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
         return FileResult(task.input, task.output, "error", message)
     except OSError as exc:
         where = exc.filename if exc.filename else task.output
-        return FileResult(task.input, task.output, "error", f"{task.input}: cannot write {where} ({exc.strerror or exc})")
+        return FileResult(
+            task.input, task.output, "error", f"{task.input}: cannot write {where} ({exc.strerror or exc})"
+        )
     except Exception as exc:  # noqa: BLE001 - a bad file must not stop the other thousand
         return FileResult(task.input, task.output, "error", f"{task.input}: unexpected {type(exc).__name__}: {exc}")
 

@@ -49,11 +49,24 @@ def tradeoff(path, rows: list[dict], levels: list[str]) -> Path:
         colour = cmap(i % 20)
         for lv in levels:
             if r["e_a"].get(lv) is not None:
-                ax.scatter(r["t_ms"], r["e_a"][lv], marker=LEVEL_MARKERS[lv], color=colour, s=46,
-                           edgecolors="black" if not r["peer"] else colour, linewidths=0.6,
-                           facecolors=colour if not r["peer"] else "none")
-        ax.scatter([], [], marker="o", color=colour, facecolors=colour if not r["peer"] else "none",
-                   label=r["method"] + (" (peer)" if r["peer"] else ""))
+                ax.scatter(
+                    r["t_ms"],
+                    r["e_a"][lv],
+                    marker=LEVEL_MARKERS[lv],
+                    color=colour,
+                    s=46,
+                    edgecolors="black" if not r["peer"] else colour,
+                    linewidths=0.6,
+                    facecolors=colour if not r["peer"] else "none",
+                )
+        ax.scatter(
+            [],
+            [],
+            marker="o",
+            color=colour,
+            facecolors=colour if not r["peer"] else "none",
+            label=r["method"] + (" (peer)" if r["peer"] else ""),
+        )
     for lv in levels:
         ax.scatter([], [], marker=LEVEL_MARKERS[lv], color="grey", label=f"level: {lv}")
     ax.axvline(paper.REAL_TIME_MS, color="grey", linestyle="--", linewidth=1)
@@ -61,8 +74,10 @@ def tradeoff(path, rows: list[dict], levels: list[str]) -> Path:
     ax.set_xscale("log")
     ax.set_xlabel("t: median ms per 480x640 frame, one thread (log scale)")
     ax.set_ylabel("e_A (degrees)")
-    ax.set_title("Fig. 1 (regenerated): accuracy against time, one point per method and level\n"
-                 "lower left is better; hollow markers: peers")
+    ax.set_title(
+        "Fig. 1 (regenerated): accuracy against time, one point per method and level\n"
+        "lower left is better; hollow markers: peers"
+    )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
     return _save(fig, Path(path))
@@ -75,8 +90,11 @@ def noise(path, result, summary: dict, levels: list[str]) -> Path:
     fig, axes = plt.subplots(1, max(len(levels), 1), figsize=(4.2 * max(len(levels), 1), 3.6), squeeze=False)
     for ax, lv in zip(axes[0], levels):
         for method, style in (("d2nt_basic", "o-"), ("d2nt_v2", "s-"), ("d2nt_v3", "^-")):
-            pts = [(float(label.split("/", 1)[1]), summary.get(key, {}).get("e_a", {}).get(lv))
-                   for label, key in table.items() if label.split("/", 1)[0] == method]
+            pts = [
+                (float(label.split("/", 1)[1]), summary.get(key, {}).get("e_a", {}).get(lv))
+                for label, key in table.items()
+                if label.split("/", 1)[0] == method
+            ]
             pts = [(s, e) for s, e in pts if e is not None]
             if pts:
                 xs, ys = zip(*sorted(pts))
@@ -86,7 +104,9 @@ def noise(path, result, summary: dict, levels: list[str]) -> Path:
         ax.grid(True, alpha=0.3)
     axes[0][0].set_ylabel("e_A (degrees)")
     axes[0][0].legend(fontsize=8)
-    fig.suptitle(f"Fig. 3 (regenerated): D2NT versions under zero-mean Gaussian depth noise (seed {result.config['seed']})")
+    fig.suptitle(
+        f"Fig. 3 (regenerated): D2NT versions under zero-mean Gaussian depth noise (seed {result.config['seed']})"
+    )
     fig.tight_layout()
     return _save(fig, Path(path))
 
@@ -118,8 +138,10 @@ def _bbox(mask: np.ndarray, margin: int = 8):
     if rows.size == 0:
         return (slice(None), slice(None))
     H, W = mask.shape
-    return (slice(max(rows.min() - margin, 0), min(rows.max() + margin + 1, H)),
-            slice(max(cols.min() - margin, 0), min(cols.max() + margin + 1, W)))
+    return (
+        slice(max(rows.min() - margin, 0), min(rows.max() + margin + 1, H)),
+        slice(max(cols.min() - margin, 0), min(cols.max() + margin + 1, W)),
+    )
 
 
 def panel(path, result) -> tuple[Path, str | None]:
@@ -132,8 +154,9 @@ def panel(path, result) -> tuple[Path, str | None]:
 
     plt = _plt()
     name = _panel_frame(result)
-    fig, axes = plt.subplots(1, 2 + len(PANEL_METHODS), figsize=(3.6 * (2 + len(PANEL_METHODS)), 3.8),
-                             layout="constrained")
+    fig, axes = plt.subplots(
+        1, 2 + len(PANEL_METHODS), figsize=(3.6 * (2 + len(PANEL_METHODS)), 3.8), layout="constrained"
+    )
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
@@ -160,9 +183,18 @@ def panel(path, result) -> tuple[Path, str | None]:
         err = metrics.angular_error(n, frame.normals)
         err[~frame.mask] = np.nan
         err_im = ax.imshow(err[crop], cmap="inferno", vmin=0.0, vmax=PANEL_VMAX)
-        ax.set_title(f"{label} error\ne_A {metrics.mean_angular_error(n, frame.normals, frame.mask):.2f} deg", fontsize=10)
+        ax.set_title(
+            f"{label} error\ne_A {metrics.mean_angular_error(n, frame.normals, frame.mask):.2f} deg", fontsize=10
+        )
     if err_im is not None:
-        fig.colorbar(err_im, ax=list(axes[2:]), fraction=0.02, pad=0.01,
-                     label=f"angular error (degrees, clipped at {PANEL_VMAX:g})")
-    fig.suptitle(f"Fig. 4 (regenerated): {name}, cropped to the object; black = small error, yellow = 30 degrees or more")
+        fig.colorbar(
+            err_im,
+            ax=list(axes[2:]),
+            fraction=0.02,
+            pad=0.01,
+            label=f"angular error (degrees, clipped at {PANEL_VMAX:g})",
+        )
+    fig.suptitle(
+        f"Fig. 4 (regenerated): {name}, cropped to the object; black = small error, yellow = 30 degrees or more"
+    )
     return _save(fig, Path(path)), name

@@ -52,6 +52,7 @@ def _clean(n: np.ndarray) -> np.ndarray:
 
 # --- the authors' d2nt package -------------------------------------------------
 
+
 def _make_d2nt(version: str):
     def make():
         from d2nt import depth2normal
@@ -68,6 +69,7 @@ def _make_d2nt(version: str):
 
 # --- kornia ----------------------------------------------------------------------
 
+
 def _make_kornia():
     import torch
     from kornia.geometry.depth import depth_to_normals
@@ -83,6 +85,7 @@ def _make_kornia():
 
 
 # --- Open3D ----------------------------------------------------------------------
+
 
 def _make_open3d_pcd():
     import open3d as o3d
@@ -121,6 +124,7 @@ def _make_open3d_tensor():
 
 # --- OpenCV RgbdNormals ---------------------------------------------------------------
 
+
 def _make_opencv(method_name: str, window: int = 5):
     def make():
         import cv2
@@ -136,7 +140,9 @@ def _make_opencv(method_name: str, window: int = 5):
             key = (H, W, K.tobytes())
             if key not in cache:  # building the estimator is setup, as a user would keep it
                 cache.clear()
-                cache[key] = cv2.RgbdNormals.create(H, W, cv2.CV_32F, K, window_size=window, diff_threshold=50, method=method)
+                cache[key] = cv2.RgbdNormals.create(
+                    H, W, cv2.CV_32F, K, window_size=window, diff_threshold=50, method=method
+                )
             pts = cv2.depthTo3d(np.ascontiguousarray(depth, dtype=np.float32), K)
             n = cache[key].apply(pts)
             return _clean(np.asarray(n)[..., :3]) if clean else np.asarray(n)[..., :3]
@@ -150,11 +156,31 @@ PEERS: tuple[Peer, ...] = (
     Peer("d2nt 0.1.3 basic (authors)", "d2nt", "the authors' package, d2nt_basic", _make_d2nt("d2nt_basic")),
     Peer("d2nt 0.1.3 v2 (authors)", "d2nt", "the authors' package, d2nt_v2", _make_d2nt("d2nt_v2")),
     Peer("d2nt 0.1.3 v3 (authors)", "d2nt", "the authors' package, d2nt_v3", _make_d2nt("d2nt_v3")),
-    Peer("kornia depth_to_normals", "kornia", "kornia.geometry.depth.depth_to_normals (flipped to face the camera)", _make_kornia),
-    Peer("Open3D estimate_normals", "open3d", "PointCloud.estimate_normals, KNN 30, oriented towards the camera", _make_open3d_pcd),
-    Peer("Open3D tensor normal map", "open3d", "t.geometry.Image.create_vertex_map().create_normal_map()", _make_open3d_tensor),
+    Peer(
+        "kornia depth_to_normals",
+        "kornia",
+        "kornia.geometry.depth.depth_to_normals (flipped to face the camera)",
+        _make_kornia,
+    ),
+    Peer(
+        "Open3D estimate_normals",
+        "open3d",
+        "PointCloud.estimate_normals, KNN 30, oriented towards the camera",
+        _make_open3d_pcd,
+    ),
+    Peer(
+        "Open3D tensor normal map",
+        "open3d",
+        "t.geometry.Image.create_vertex_map().create_normal_map()",
+        _make_open3d_tensor,
+    ),
     Peer("OpenCV RgbdNormals FALS", "opencv", "cv2.RgbdNormals FALS, window 5", _make_opencv("FALS")),
-    Peer("OpenCV RgbdNormals LINEMOD", "opencv", "cv2.RgbdNormals LINEMOD, window 5, threshold 50", _make_opencv("LINEMOD")),
+    Peer(
+        "OpenCV RgbdNormals LINEMOD",
+        "opencv",
+        "cv2.RgbdNormals LINEMOD, window 5, threshold 50",
+        _make_opencv("LINEMOD"),
+    ),
     Peer("OpenCV RgbdNormals SRI", "opencv", "cv2.RgbdNormals SRI, window 5", _make_opencv("SRI")),
     Peer("OpenCV RgbdNormals CROSS_PRODUCT", "opencv", "cv2.RgbdNormals CROSS_PRODUCT", _make_opencv("CROSS_PRODUCT")),
 )
@@ -164,11 +190,21 @@ PEERS: tuple[Peer, ...] = (
 #: what a user of real depth would pick instead of surfnorm (OpenCV's RgbdNormals at windows 5 and 7
 #: with its default threshold, Open3D's two estimators, kornia).
 SENSOR_PEERS: tuple[Peer, ...] = tuple(
-    Peer(f"opencv_{m.lower()}_w{w}", "opencv", f"cv2.RgbdNormals {m}, window {w}, on cv2.depthTo3d points",
-         _make_opencv(m, w))
-    for m in ("FALS", "LINEMOD", "SRI") for w in (5, 7)
+    Peer(
+        f"opencv_{m.lower()}_w{w}",
+        "opencv",
+        f"cv2.RgbdNormals {m}, window {w}, on cv2.depthTo3d points",
+        _make_opencv(m, w),
+    )
+    for m in ("FALS", "LINEMOD", "SRI")
+    for w in (5, 7)
 ) + (
-    Peer("open3d_knn30", "open3d", "Open3D PointCloud.estimate_normals, KNN 30, oriented towards the camera", _make_open3d_pcd),
+    Peer(
+        "open3d_knn30",
+        "open3d",
+        "Open3D PointCloud.estimate_normals, KNN 30, oriented towards the camera",
+        _make_open3d_pcd,
+    ),
     Peer("open3d_normal_map", "open3d", "Open3D t.geometry.Image vertex map -> create_normal_map", _make_open3d_tensor),
     Peer("kornia", "kornia", "kornia.geometry.depth.depth_to_normals", _make_kornia),
 )
@@ -197,8 +233,16 @@ def peer_versions() -> dict[str, str]:
     from importlib import metadata
 
     out = {}
-    for dist in ("d2nt", "kornia", "torch", "open3d", "opencv-python-headless", "opencv-contrib-python-headless",
-                 "opencv-python", "opencv-contrib-python"):
+    for dist in (
+        "d2nt",
+        "kornia",
+        "torch",
+        "open3d",
+        "opencv-python-headless",
+        "opencv-contrib-python-headless",
+        "opencv-python",
+        "opencv-contrib-python",
+    ):
         try:
             out[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:

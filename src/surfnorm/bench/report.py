@@ -22,6 +22,7 @@ __all__ = ["summarise", "write_report", "table3_rows"]
 
 # ---------------------------------------------------------------------------- aggregates
 
+
 def _levels(result: BenchResult) -> list[str]:
     present = {f.split("/")[0] for f in result.frames if f not in result.unreadable}
     return [lv for lv in paper.LEVELS if lv in present]
@@ -45,7 +46,9 @@ def summarise(result: BenchResult) -> dict:
         entry["e_a"] = {lv: float(np.mean(v)) for lv, v in entry["e_a"].items()}
     for rec in result.timing:
         if "ms" in rec:
-            out.setdefault(rec["key"], {"e_a": {}, "frames": {}, "coverage": {}, "errors": 0}).setdefault("ms_frames", []).append(rec["ms"])
+            out.setdefault(rec["key"], {"e_a": {}, "frames": {}, "coverage": {}, "errors": 0}).setdefault(
+                "ms_frames", []
+            ).append(rec["ms"])
     for entry in out.values():
         frames_ms = entry.pop("ms_frames", [])
         entry["t_ms"] = float(np.median(frames_ms)) if frames_ms else None
@@ -83,23 +86,26 @@ def table3_rows(result: BenchResult, summary: dict) -> list[dict]:
         s = summary.get(key, {})
         t = s.get("t_ms")
         e_a = {lv: s.get("e_a", {}).get(lv) for lv in levels}
-        rows.append({
-            "method": label,
-            "peer": key.startswith("peer:"),
-            "real_time": None if t is None else t < paper.REAL_TIME_MS,
-            "t_ms": t,
-            "e_a": e_a,
-            "pi": {lv: (None if t is None or e_a[lv] is None else e_a[lv] * t) for lv in levels},
-            "coverage": s.get("coverage", {}),
-            "paper": paper.TABLE_III.get(paper.PAPER_NAME.get(label, "")),
-            "paper_name": paper.PAPER_NAME.get(label),
-            "on_these_frames": _reference(result, label, key, levels),
-            "reference_ms": paper.PEERS_REFERENCE.get(label, (None, None))[1],
-        })
+        rows.append(
+            {
+                "method": label,
+                "peer": key.startswith("peer:"),
+                "real_time": None if t is None else t < paper.REAL_TIME_MS,
+                "t_ms": t,
+                "e_a": e_a,
+                "pi": {lv: (None if t is None or e_a[lv] is None else e_a[lv] * t) for lv in levels},
+                "coverage": s.get("coverage", {}),
+                "paper": paper.TABLE_III.get(paper.PAPER_NAME.get(label, "")),
+                "paper_name": paper.PAPER_NAME.get(label),
+                "on_these_frames": _reference(result, label, key, levels),
+                "reference_ms": paper.PEERS_REFERENCE.get(label, (None, None))[1],
+            }
+        )
     return rows
 
 
 # ---------------------------------------------------------------------------- markdown
+
 
 def _f(v, digits=2) -> str:
     return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{digits}f}"
@@ -122,16 +128,22 @@ def _e(summary, key, lv):
 def _markdown(result: BenchResult, summary: dict, meta: dict) -> str:
     levels = _levels(result)
     lvi = [paper.LEVELS.index(lv) for lv in levels]
-    n_frames = {lv: sum(1 for f in result.frames if f.startswith(lv + "/") and f not in result.unreadable) for lv in levels}
+    n_frames = {
+        lv: sum(1 for f in result.frames if f.startswith(lv + "/") and f not in result.unreadable) for lv in levels
+    }
     out = ["# surfnorm bench report", ""]
-    out.append(f"Dataset: `{result.config['root']}`, {sum(n_frames.values())} frames evaluated "
-               f"({', '.join(f'{lv} {n}' for lv, n in n_frames.items())}). "
-               f"e_A: mean folded angular error in degrees over the object's pixels (depth != 1), averaged over the "
-               f"frames of a level. Figures in brackets are the paper's (full 3F2N dataset, its machine), "
-               f"so on a sample they agree only roughly.")
+    out.append(
+        f"Dataset: `{result.config['root']}`, {sum(n_frames.values())} frames evaluated "
+        f"({', '.join(f'{lv} {n}' for lv, n in n_frames.items())}). "
+        f"e_A: mean folded angular error in degrees over the object's pixels (depth != 1), averaged over the "
+        f"frames of a level. Figures in brackets are the paper's (full 3F2N dataset, its machine), "
+        f"so on a sample they agree only roughly."
+    )
     out.append("")
-    out.append(f"surfnorm {meta['surfnorm']} (commit {meta['git_commit'] or 'unknown'}), Python {meta['python']}, "
-               f"CPU: {meta['cpu']} ({meta['cpu_count']} logical cores), timing threads: {meta['threads']}.")
+    out.append(
+        f"surfnorm {meta['surfnorm']} (commit {meta['git_commit'] or 'unknown'}), Python {meta['python']}, "
+        f"CPU: {meta['cpu']} ({meta['cpu_count']} logical cores), timing threads: {meta['threads']}."
+    )
     out.append("")
     if result.unreadable:
         out += ["## Frames not evaluated", ""]
@@ -158,27 +170,40 @@ def _markdown(result: BenchResult, summary: dict, meta: dict) -> str:
     if "table3" in tables:
         figs.append("- `fig1_tradeoff.png`: e_A against t (log time axis), one point per method and level (Fig. 1).")
     if "noise" in tables:
-        figs.append("- `fig3_noise.png`: e_A of the three D2NT versions against the noise's standard deviation, per level (Fig. 3).")
+        figs.append(
+            "- `fig3_noise.png`: e_A of the three D2NT versions against the noise's standard deviation, per level (Fig. 3)."
+        )
     if "fig4" in tables:
-        figs.append(f"- `fig4_panel.png`: depth, ground truth and error maps of 3F2N, CP2TV and D2NT V3 on "
-                    f"`{meta.get('panel_frame')}`, one colour scale (Fig. 4).")
+        figs.append(
+            f"- `fig4_panel.png`: depth, ground truth and error maps of 3F2N, CP2TV and D2NT V3 on "
+            f"`{meta.get('panel_frame')}`, one colour scale (Fig. 4)."
+        )
     if figs:
         out += ["## Figures", ""] + figs + [""]
     return "\n".join(out)
 
 
 def _table3_md(result, summary, levels, lvi) -> list[str]:
-    out = ["## Table III: speed, accuracy and trade-off", "",
-            f"t: median over frames of the median of repeated warm calls on one frame, one thread, in ms "
-            f"(methods interleaved; slow methods, over {SLOW_MS:g} ms, get {SLOW_REPEATS} calls). Real-time (RT): "
-            f"t < 1000/30 ms (30 frames per second). pi = e_A x t (degrees/kHz). In brackets: the paper's figure "
-            f"(full dataset, its machine), or for peers the one-thread time in peers.md. Last column: the same "
-            f"estimator's e_A per level on these frames as measured with its authors' code (JSON shipped with "
-            f"surfnorm), or for the other peers in peers.md (shown only when the 12 sample frames are evaluated; "
-            f"peers.md used the 1-based principal point of params.txt as is, which moves e_A by up to 0.05). "
-            f"The paper's pi are shown as printed, though two do not equal its e_A x t: D2NT Easy (3.05, not 2.80) "
-            f"and D2NT V2 (computed with t = 7.1 ms, not the 7.80 printed).", ""]
-    header = ["RT", "method", "t (ms)"] + [f"e_A {lv}" for lv in levels] + [f"pi {lv}" for lv in levels] + ["reference on these frames"]
+    out = [
+        "## Table III: speed, accuracy and trade-off",
+        "",
+        f"t: median over frames of the median of repeated warm calls on one frame, one thread, in ms "
+        f"(methods interleaved; slow methods, over {SLOW_MS:g} ms, get {SLOW_REPEATS} calls). Real-time (RT): "
+        f"t < 1000/30 ms (30 frames per second). pi = e_A x t (degrees/kHz). In brackets: the paper's figure "
+        f"(full dataset, its machine), or for peers the one-thread time in peers.md. Last column: the same "
+        f"estimator's e_A per level on these frames as measured with its authors' code (JSON shipped with "
+        f"surfnorm), or for the other peers in peers.md (shown only when the 12 sample frames are evaluated; "
+        f"peers.md used the 1-based principal point of params.txt as is, which moves e_A by up to 0.05). "
+        f"The paper's pi are shown as printed, though two do not equal its e_A x t: D2NT Easy (3.05, not 2.80) "
+        f"and D2NT V2 (computed with t = 7.1 ms, not the 7.80 printed).",
+        "",
+    ]
+    header = (
+        ["RT", "method", "t (ms)"]
+        + [f"e_A {lv}" for lv in levels]
+        + [f"pi {lv}" for lv in levels]
+        + ["reference on these frames"]
+    )
     rows = []
     for r in table3_rows(result, summary):
         p = r["paper"]
@@ -186,7 +211,11 @@ def _table3_md(result, summary, levels, lvi) -> list[str]:
         if p:
             rt += f" [{'Y' if p[0] else 'N'}]"
         name = r["method"] + (f" ({r['paper_name']})" if r["paper_name"] else "") + (" — peer" if r["peer"] else "")
-        t = _t(r["t_ms"]) + (f" [{p[1]:.2f}]" if p else "") + (f" [peers.md {r['reference_ms']:g}]" if r["reference_ms"] else "")
+        t = (
+            _t(r["t_ms"])
+            + (f" [{p[1]:.2f}]" if p else "")
+            + (f" [peers.md {r['reference_ms']:g}]" if r["reference_ms"] else "")
+        )
         cells = [rt, name, t]
         cells += [_f(r["e_a"][lv]) + (f" [{p[2][i]:.2f}]" if p else "") for lv, i in zip(levels, lvi)]
         cells += [_f(r["pi"][lv]) + (f" [{p[3][i]:.2f}]" if p else "") for lv, i in zip(levels, lvi)]
@@ -201,8 +230,9 @@ def _faithfulness_md(result, levels) -> list[str]:
     """Our D2NT family against the authors' figures (shipped JSON) on the frames that have them."""
     rows = []
     for name, key in result.experiments["faithfulness"].items():
-        ours = {r["frame"]: r.get("e_a") for r in result.accuracy
-                if r["key"] == key and r["frame"] not in result.unreadable}
+        ours = {
+            r["frame"]: r.get("e_a") for r in result.accuracy if r["key"] == key and r["frame"] not in result.unreadable
+        }
         pairs = [(f, e, official_figures(f).get(name)) for f, e in ours.items()]
         pairs = [(f, e, o) for f, e, o in pairs if e is not None and o is not None]
         if not pairs:
@@ -213,33 +243,49 @@ def _faithfulness_md(result, levels) -> list[str]:
             cells.append(f"{np.mean([e for e, _ in sel]):.4f} / {np.mean([o for _, o in sel]):.4f}" if sel else "–")
         cells.append(f"{max(abs(e - o) for _, e, o in pairs):.4f}")
         peer = next((p for p, m in paper.PEER_OFFICIAL.items() if m == name), None)
-        live = {r["frame"]: r.get("e_a") for r in result.accuracy
-                if r["key"] == result.experiments["table3"].get(peer, "") and r.get("e_a") is not None}
+        live = {
+            r["frame"]: r.get("e_a")
+            for r in result.accuracy
+            if r["key"] == result.experiments["table3"].get(peer, "") and r.get("e_a") is not None
+        }
         diffs = [abs(e - live[f]) for f, e in ours.items() if e is not None and f in live]
         cells.append(f"{max(diffs):.1e}" if diffs else "– (peer not run)")
         cells.append(str(len(pairs)))
         rows.append(cells)
     if not rows:
         return []
-    return ["## The D2NT family against the authors' code on these frames", "",
-            "e_A per level, ours / the authors' d2nt 0.1.3 (figures shipped with surfnorm, "
-            "`surfnorm.reference.official_figures`), the largest difference on one frame, in degrees, and the "
-            "largest difference on one frame from the same package run live in this bench (the d2nt peer).", "",
-            _table(["method"] + [f"{lv} ours / authors" for lv in levels]
-                   + ["max abs. diff. per frame", "max abs. diff. vs the d2nt peer", "frames"], rows), ""]
+    return [
+        "## The D2NT family against the authors' code on these frames",
+        "",
+        "e_A per level, ours / the authors' d2nt 0.1.3 (figures shipped with surfnorm, "
+        "`surfnorm.reference.official_figures`), the largest difference on one frame, in degrees, and the "
+        "largest difference on one frame from the same package run live in this bench (the d2nt peer).",
+        "",
+        _table(
+            ["method"]
+            + [f"{lv} ours / authors" for lv in levels]
+            + ["max abs. diff. per frame", "max abs. diff. vs the d2nt peer", "frames"],
+            rows,
+        ),
+        "",
+    ]
 
 
 def _table2_md(result, summary, levels, lvi) -> list[str]:
     out = []
     t2 = result.experiments["table2"]
     if t2:
-        out += ["## Table II: the four discrete Laplace filters (DLF)", "",
-                "D2NT+DAG: `d2nt_v2` with the DAG filter's DLF = X. D2NT+MNR: our reading is D2NT with finite-difference "
-                "gradients followed by MNR whose smoothness uses DLF X (`d2nt_basic+mnr`, `mnr_dlf=X`): Table II is an "
-                "ablation of each module on its own, and D2NT V3 (DAG 1D + MNR) in Table III (0.89/4.78/9.86) matches "
-                "none of the D2NT+MNR rows, so that column is not DAG followed by MNR. For comparison, the last column "
-                "group is DAG (1D) followed by MNR with DLF X (`d2nt_v3`, `mnr_dlf=X`). The paper's DLF-gamma row is the "
-                "same in both of its columns, which looks like a copying slip in the paper.", ""]
+        out += [
+            "## Table II: the four discrete Laplace filters (DLF)",
+            "",
+            "D2NT+DAG: `d2nt_v2` with the DAG filter's DLF = X. D2NT+MNR: our reading is D2NT with finite-difference "
+            "gradients followed by MNR whose smoothness uses DLF X (`d2nt_basic+mnr`, `mnr_dlf=X`): Table II is an "
+            "ablation of each module on its own, and D2NT V3 (DAG 1D + MNR) in Table III (0.89/4.78/9.86) matches "
+            "none of the D2NT+MNR rows, so that column is not DAG followed by MNR. For comparison, the last column "
+            "group is DAG (1D) followed by MNR with DLF X (`d2nt_v3`, `mnr_dlf=X`). The paper's DLF-gamma row is the "
+            "same in both of its columns, which looks like a copying slip in the paper.",
+            "",
+        ]
         groups = [g for g in ("D2NT+DAG", "D2NT+MNR", "D2NT+DAG+MNR") if any(k.startswith(g + "/") for k in t2)]
         header = ["DLF"] + [f"{g} {lv}" for g in groups for lv in levels]
         rows = []
@@ -258,10 +304,14 @@ def _table2_md(result, summary, levels, lvi) -> list[str]:
 
 def _table4_md(result, summary, levels, lvi) -> list[str]:
     t4 = result.experiments["table4"]
-    out = ["## Table IV: MNR after 3F2N and CP2TV", "",
-            "3F2N is `3f2n_median` (the 3F2N paper's default aggregation); improvement = (w/o - w/) / w/o. "
-            "The paper's CP2TV improvements (40.8 / 15.0 / 35.6 %) do not follow from its own e_A "
-            "(which give 46.2 / 20.3 / 28.7 %); they are shown as printed.", ""]
+    out = [
+        "## Table IV: MNR after 3F2N and CP2TV",
+        "",
+        "3F2N is `3f2n_median` (the 3F2N paper's default aggregation); improvement = (w/o - w/) / w/o. "
+        "The paper's CP2TV improvements (40.8 / 15.0 / 35.6 %) do not follow from its own e_A "
+        "(which give 46.2 / 20.3 / 28.7 %); they are shown as printed.",
+        "",
+    ]
     header = ["config"] + [f"{m} {lv}" for m in paper.TABLE_IV for lv in levels]
     rows = []
     for cfg_name in ("w/o MNR", "w/ MNR", "improvement"):
@@ -284,12 +334,16 @@ def _table4_md(result, summary, levels, lvi) -> list[str]:
 
 def _noise_md(result, summary, levels) -> list[str]:
     noise = result.experiments["noise"]
-    out = ["## Fig. 3: robustness to Gaussian noise", "",
-            f"Zero-mean Gaussian noise of standard deviation sigma (depth units; the objects are 20-30 units away, "
-            f"neighbouring pixels about 0.02 apart) added to the object's depth (background kept), seeded "
-            f"(seed {result.config['seed']}, per frame and sigma, the same noise for the three versions). The paper "
-            f"gives this study only as a figure without numbers, so there is nothing to print beside ours. "
-            f"Figure: `fig3_noise.png`.", ""]
+    out = [
+        "## Fig. 3: robustness to Gaussian noise",
+        "",
+        f"Zero-mean Gaussian noise of standard deviation sigma (depth units; the objects are 20-30 units away, "
+        f"neighbouring pixels about 0.02 apart) added to the object's depth (background kept), seeded "
+        f"(seed {result.config['seed']}, per frame and sigma, the same noise for the three versions). The paper "
+        f"gives this study only as a figure without numbers, so there is nothing to print beside ours. "
+        f"Figure: `fig3_noise.png`.",
+        "",
+    ]
     stds = list(dict.fromkeys(k.split("/", 1)[1] for k in noise))
     header = ["method", "level"] + [f"sigma {s}" for s in stds]
     rows = []
@@ -302,6 +356,7 @@ def _noise_md(result, summary, levels) -> list[str]:
 
 
 # ---------------------------------------------------------------------------- machine
+
 
 def machine_meta(result: BenchResult) -> dict:
     import cv2
@@ -319,10 +374,23 @@ def machine_meta(result: BenchResult) -> dict:
     except OSError:
         pass
     try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).resolve().parent,
-                                capture_output=True, text=True, timeout=10).stdout.strip() or None
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "."], cwd=Path(__file__).resolve().parents[1],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        commit = (
+            subprocess.run(
+                ["git", "rev-parse", "HEAD"],
+                cwd=Path(__file__).resolve().parent,
+                capture_output=True,
+                text=True,
+                timeout=10,
+            ).stdout.strip()
+            or None
+        )
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "."],
+            cwd=Path(__file__).resolve().parents[1],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
         if commit and dirty:
             commit += "+dirty"
     except (OSError, subprocess.SubprocessError):
@@ -367,7 +435,9 @@ def write_report(result: BenchResult, out_dir, *, elapsed_s: float | None = None
         text += f"\nRun time: {elapsed_s:.0f} s in all (cached results reused where present)"
         stages = meta.get("stages") or {}
         if stages:
-            text += "; " + ", ".join(f"{k} {v['wall_s']:.0f} s wall / {v['cpu_s']:.0f} s CPU" for k, v in stages.items())
+            text += "; " + ", ".join(
+                f"{k} {v['wall_s']:.0f} s wall / {v['cpu_s']:.0f} s CPU" for k, v in stages.items()
+            )
         text += ".\n"
     paths["report"] = atomic_write(out_dir / "report.md", lambda tmp: tmp.write_text(text))
     doc = {
@@ -382,8 +452,9 @@ def write_report(result: BenchResult, out_dir, *, elapsed_s: float | None = None
         "accuracy": result.accuracy,
         "timing": result.timing,
     }
-    paths["results"] = atomic_write(out_dir / "results.json",
-                                    lambda tmp: tmp.write_text(json.dumps(_finite(doc), indent=1, allow_nan=False)))
+    paths["results"] = atomic_write(
+        out_dir / "results.json", lambda tmp: tmp.write_text(json.dumps(_finite(doc), indent=1, allow_nan=False))
+    )
     return paths
 
 

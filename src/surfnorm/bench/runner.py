@@ -86,7 +86,9 @@ def _check_config(cfg: BenchConfig, registered: list[str]):
     for name in cfg.methods or []:
         base = name[:-4] if name.endswith("+mnr") else name
         if base not in registered:
-            raise InputError(f"methods: expected names from {', '.join(registered)} (optionally with +mnr), got {name!r}")
+            raise InputError(
+                f"methods: expected names from {', '.join(registered)} (optionally with +mnr), got {name!r}"
+            )
     for lib in cfg.peers or []:
         if lib not in PEER_LIBRARIES:
             raise InputError(f"peers: expected some of {', '.join(PEER_LIBRARIES)}, got {lib!r}")
@@ -110,12 +112,13 @@ def _check_config(cfg: BenchConfig, registered: list[str]):
 
 def experiments(cfg: BenchConfig, registered: list[str], peer_names: list[str]) -> dict[str, dict[str, Spec]]:
     """The estimates each table needs, by experiment, as {row label: Spec}. Specs shared by tables are made once."""
+
     def s(method, noise=0.0, **options):
         return Spec("surfnorm", method, tuple(sorted(options.items())), float(noise))
 
     out: dict[str, dict] = {"table3": {}, "table2": {}, "table4": {}, "noise": {}, "faithfulness": {}}
     if "table3" in cfg.tables:
-        for name in (cfg.methods if cfg.methods is not None else registered):
+        for name in cfg.methods if cfg.methods is not None else registered:
             out["table3"][name] = s(name)
         for name in peer_names:
             out["table3"][name] = Spec("peer", name)
@@ -144,6 +147,7 @@ def experiments(cfg: BenchConfig, registered: list[str], peer_names: list[str]) 
 
 
 # ---------------------------------------------------------------------------- frames
+
 
 def discover(cfg: BenchConfig) -> tuple[list[str], dict[str, str]]:
     """Frame names to evaluate, and {name: reason} for frames that are known to be incomplete.
@@ -222,7 +226,9 @@ class Cache:
         return "|".join(parts)
 
     def path(self, stage: str, frame: str, key: str) -> Path:
-        digest = hashlib.sha256("\n".join([stage, frame, key, self.version, self._frame_id(frame)]).encode()).hexdigest()
+        digest = hashlib.sha256(
+            "\n".join([stage, frame, key, self.version, self._frame_id(frame)]).encode()
+        ).hexdigest()
         return self.folder / f"{stage}-{digest[:24]}.json"
 
     def get(self, stage, frame, key):
@@ -237,6 +243,7 @@ class Cache:
 
 
 # ---------------------------------------------------------------------------- accuracy
+
 
 def _estimate(spec: Spec, depth, frame, peer_runs):
     if spec.kind == "peer":
@@ -280,6 +287,7 @@ def _accuracy_one_frame(root: str, frame_name: str, specs: list[Spec], seed: int
 
 # ---------------------------------------------------------------------------- timing
 
+
 def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[str, dict]:
     """Warm-up call of each spec, then interleaved single-thread calls; {key: {'ms': median, 'calls': n}}."""
     from .._api import estimate
@@ -289,10 +297,10 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
         if spec.kind == "peer":
             run = peer_runs[spec.method]
             # the peer's own output, unconverted: its time is its library call
-            calls[spec.key] = (lambda run=run: run(frame.depth, frame.K, frame.mask, clean=False))
+            calls[spec.key] = lambda run=run: run(frame.depth, frame.K, frame.mask, clean=False)
         else:
             opts = dict(spec.options)
-            calls[spec.key] = (lambda m=spec.method, o=opts: estimate(frame.depth, frame.K, method=m, **o))
+            calls[spec.key] = lambda m=spec.method, o=opts: estimate(frame.depth, frame.K, method=m, **o)
     times: dict[str, list[float]] = {}
     wanted, errors = {}, {}
     for key, call in calls.items():
@@ -310,7 +318,7 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
         wanted[key] = SLOW_REPEATS if warm > SLOW_MS else repeats
     keys = list(times)
     for r in range(max(wanted.values(), default=0)):
-        order = keys[r % len(keys):] + keys[: r % len(keys)]  # rotate so that no method always goes first
+        order = keys[r % len(keys) :] + keys[: r % len(keys)]  # rotate so that no method always goes first
         for key in order:
             if len(times[key]) < wanted[key]:
                 t0 = time.perf_counter()
@@ -322,6 +330,7 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
 
 
 # ---------------------------------------------------------------------------- the run
+
 
 class _Clock:
     """Wall time and CPU time (this process and its finished children) since the last lap."""
@@ -373,8 +382,11 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
     peer_names = [n for n in wanted_peers if n in peer_runs]
     exps = experiments(cfg, registered, peer_names)
     specs = list(dict.fromkeys(s for table in exps.values() for s in table.values()))
-    needs = {"table2": ("d2nt_basic", "d2nt_v2", "d2nt_v3"), "table4": tuple(paper.TABLE_IV_METHODS.values()),
-             "noise": NOISE_METHODS}
+    needs = {
+        "table2": ("d2nt_basic", "d2nt_v2", "d2nt_v3"),
+        "table4": tuple(paper.TABLE_IV_METHODS.values()),
+        "noise": NOISE_METHODS,
+    }
     for table, names in needs.items():
         for name in names:
             if table in cfg.tables and name not in registered:
@@ -383,8 +395,10 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
     frames, unreadable = discover(cfg)
     if not frames:
         found = f"; only frames without depth: {', '.join(list(unreadable)[:3])}" if unreadable else ""
-        raise InputError(f"dataset: expected frames in the 3F2N layout ({'|'.join(cfg.levels)}/<object>/depth/<frame>.bin), "
-                         f"found none in {cfg.root}{found}")
+        raise InputError(
+            f"dataset: expected frames in the 3F2N layout ({'|'.join(cfg.levels)}/<object>/depth/<frame>.bin), "
+            f"found none in {cfg.root}{found}"
+        )
     cache = Cache(Path(cfg.out) / "cache", code_version(), cfg.root)
 
     # accuracy: what is not cached yet, one task per frame
@@ -417,8 +431,9 @@ def run_bench(cfg: BenchConfig, *, progress: Callable[[str, int, int], None] | N
 
         ctx = multiprocessing.get_context("spawn")  # numba and OpenMP do not survive fork well
         with ProcessPoolExecutor(max_workers=min(cfg.jobs, len(todo)), mp_context=ctx) as pool:
-            futures = {pool.submit(_accuracy_one_frame, str(cfg.root), n, s, cfg.seed, peer_names): n
-                       for n, s in todo.items()}
+            futures = {
+                pool.submit(_accuracy_one_frame, str(cfg.root), n, s, cfg.seed, peer_names): n for n, s in todo.items()
+            }
             for fut in as_completed(futures):
                 try:
                     absorb(fut.result())

@@ -34,8 +34,21 @@ from .. import metrics
 from ..camera import Intrinsics
 from ..errors import InputError
 
-__all__ = ["Entry", "VARIANTS", "make_entries", "parse_name", "run_simulated", "sim_tables", "SensorFrame",
-           "find_sensor_frames", "read_sensor_frame", "score_frame", "run_folder", "write_folder_report", "sensor_bench"]
+__all__ = [
+    "Entry",
+    "VARIANTS",
+    "make_entries",
+    "parse_name",
+    "run_simulated",
+    "sim_tables",
+    "SensorFrame",
+    "find_sensor_frames",
+    "read_sensor_frame",
+    "score_frame",
+    "run_folder",
+    "write_folder_report",
+    "sensor_bench",
+]
 
 #: Variants run beside the registered methods' defaults: (method, options).
 VARIANTS = (("plane_pca", {"window": 11}),)
@@ -105,8 +118,9 @@ def _peer_entry(peer, run) -> Entry:
     return Entry(peer.name, "peer", peer.summary, call, clean)
 
 
-def make_entries(names: list[str] | None = None, *, peer_libraries: list[str] | None = None
-                 ) -> tuple[list[Entry], dict[str, str]]:
+def make_entries(
+    names: list[str] | None = None, *, peer_libraries: list[str] | None = None
+) -> tuple[list[Entry], dict[str, str]]:
     """The entries for ``names`` (registered methods, ``name:opt=value`` variants, peer keys), default all.
 
     ``peer_libraries`` (opencv, open3d, kornia; default all) limits the default peers.
@@ -134,8 +148,10 @@ def make_entries(names: list[str] | None = None, *, peer_libraries: list[str] | 
             method, options = parse_name(name)
             base = method[:-4] if method.endswith("+mnr") else method
             if base not in registered:
-                raise InputError(f"methods: expected registered methods ({', '.join(registered)}), optionally with "
-                                 f":option=value, or peers ({', '.join(peer_keys)}), got {name!r}")
+                raise InputError(
+                    f"methods: expected registered methods ({', '.join(registered)}), optionally with "
+                    f":option=value, or peers ({', '.join(peer_keys)}), got {name!r}"
+                )
             wanted.append((method, options))
     entries = [_surfnorm_entry(m, o) for m, o in wanted]
     runs, absent = load_peers(wanted_peers, table=SENSOR_PEERS) if wanted_peers else ({}, {})
@@ -153,8 +169,17 @@ def _timed(entry: Entry, depth, cam, valid) -> tuple[np.ndarray, float]:
 
 # ---------------------------------------------------------------------------- simulated sensors
 
-def run_simulated(root, entries: list[Entry], sensors: list[str], *, levels=None, frames_per_level: int | None = None,
-                  seed: int = 0, progress: Callable[[str], None] | None = None) -> dict:
+
+def run_simulated(
+    root,
+    entries: list[Entry],
+    sensors: list[str],
+    *,
+    levels=None,
+    frames_per_level: int | None = None,
+    seed: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> dict:
     """e_A, coverage and time of every entry on the 3F2N frames under ``root`` as each sensor would see them.
 
     Per (sensor, frame, entry): e_A over the object's pixels where the sensor delivered depth and the
@@ -175,14 +200,18 @@ def run_simulated(root, entries: list[Entry], sensors: list[str], *, levels=None
             picked += [n for n in names if n.startswith(lv + "/")][:frames_per_level]
         names = picked
     if not names:
-        raise InputError(f"root: expected 3F2N frames (Easy|Medium|Hard/<object>/depth/*.bin) of levels "
-                         f"{', '.join(levels)}, found none under {root}")
+        raise InputError(
+            f"root: expected 3F2N frames (Easy|Medium|Hard/<object>/depth/*.bin) of levels "
+            f"{', '.join(levels)}, found none under {root}"
+        )
     progress = progress or (lambda msg: None)
     records, errors, warm = [], [], set()
     for name in names:
         frame = read_frame(root, name)
         for s in sensors:
-            z = simulate(frame.depth, frame.K, s, seed=frame_seed(seed, name, s), mask=frame.mask, normals=frame.normals)
+            z = simulate(
+                frame.depth, frame.K, s, seed=frame_seed(seed, name, s), mask=frame.mask, normals=frame.normals
+            )
             valid = z > 0
             scored = frame.mask & valid
             for e in entries:
@@ -192,15 +221,31 @@ def run_simulated(root, entries: list[Entry], sensors: list[str], *, levels=None
                         warm.add(e.label)
                     n, ms = _timed(e, z, frame.K, valid)
                 except Exception as exc:  # noqa: BLE001 - one entry failing is reported, never fatal
-                    errors.append({"sensor": s, "frame": name, "entry": e.label, "error": f"{type(exc).__name__}: {exc}"})
+                    errors.append(
+                        {"sensor": s, "frame": name, "entry": e.label, "error": f"{type(exc).__name__}: {exc}"}
+                    )
                     continue
-                records.append({"sensor": s, "frame": name, "level": frame.level, "entry": e.label,
-                                "e_a": metrics.mean_angular_error(n, frame.normals, scored),
-                                "coverage": metrics.coverage(n, scored), "ms": ms,
-                                "depth_coverage": float(scored.sum() / max(frame.mask.sum(), 1))})
+                records.append(
+                    {
+                        "sensor": s,
+                        "frame": name,
+                        "level": frame.level,
+                        "entry": e.label,
+                        "e_a": metrics.mean_angular_error(n, frame.normals, scored),
+                        "coverage": metrics.coverage(n, scored),
+                        "ms": ms,
+                        "depth_coverage": float(scored.sum() / max(frame.mask.sum(), 1)),
+                    }
+                )
             progress(f"{name} {s}")
-    return {"records": records, "errors": errors, "frames": names, "sensors": list(sensors),
-            "entries": [e.label for e in entries], "seed": seed}
+    return {
+        "records": records,
+        "errors": errors,
+        "frames": names,
+        "sensors": list(sensors),
+        "entries": [e.label for e in entries],
+        "seed": seed,
+    }
 
 
 def _mean(values):
@@ -239,9 +284,11 @@ def sim_tables(result: dict) -> str:
             rows = sel(entry=e, sensor=s)
             cells = [fmt(_mean([r["e_a"] for r in rows if r["level"] == lv])) for lv in levels]
             ms = [r["ms"] for r in rows]
-            out.append(f"| {e} | " + " | ".join(cells) + f" | {fmt(_mean([r['e_a'] for r in rows]))} | "
-                       f"{fmt(_mean([r['coverage'] for r in rows]), 3)} | "
-                       f"{fmt(float(np.median(ms)) if ms else float('nan'), 1)} |")
+            out.append(
+                f"| {e} | " + " | ".join(cells) + f" | {fmt(_mean([r['e_a'] for r in rows]))} | "
+                f"{fmt(_mean([r['coverage'] for r in rows]), 3)} | "
+                f"{fmt(float(np.median(ms)) if ms else float('nan'), 1)} |"
+            )
         dc = _mean([r["depth_coverage"] for r in sel(sensor=s, entry=entries[0])]) if entries else float("nan")
         out.append(f"\nShare of the objects' pixels with depth from {s}: {fmt(dc, 3)}")
     if result["errors"]:
@@ -277,13 +324,17 @@ def find_sensor_frames(root) -> list[Path]:
     """
     root = Path(root)
     if not root.is_dir():
-        raise InputError(f"sensor dataset: expected a folder of frame folders (depth.npy, K.json, planes.npz or gt.npy), got {root}")
+        raise InputError(
+            f"sensor dataset: expected a folder of frame folders (depth.npy, K.json, planes.npz or gt.npy), got {root}"
+        )
     if (root / "depth.npy").is_file():
         return [root]
     found = sorted(p for p in root.iterdir() if p.is_dir() and (p / "depth.npy").is_file())
     if not found:
-        raise InputError(f"sensor dataset: expected frame folders holding depth.npy, K.json and planes.npz or gt.npy, "
-                         f"found none in {root}")
+        raise InputError(
+            f"sensor dataset: expected frame folders holding depth.npy, K.json and planes.npz or gt.npy, "
+            f"found none in {root}"
+        )
     return found
 
 
@@ -308,7 +359,9 @@ def read_sensor_frame(folder) -> SensorFrame:
     folder = Path(folder)
     depth = _load_npy(folder / "depth.npy", "depth in metres, (H, W) float")
     if depth.ndim != 2 or not (np.issubdtype(depth.dtype, np.floating) or np.issubdtype(depth.dtype, np.integer)):
-        raise DataFileError(f"{folder / 'depth.npy'}: expected (H, W) float depth in metres, got shape {depth.shape} dtype {depth.dtype}")
+        raise DataFileError(
+            f"{folder / 'depth.npy'}: expected (H, W) float depth in metres, got shape {depth.shape} dtype {depth.dtype}"
+        )
     depth = np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     if not np.any(depth > 0):
         raise DataFileError(f"{folder / 'depth.npy'}: expected some valid (positive) depth, got none")
@@ -321,20 +374,28 @@ def read_sensor_frame(folder) -> SensorFrame:
             with np.load(path, allow_pickle=False) as z:
                 normals, masks = np.asarray(z["normals"], np.float64), np.asarray(z["masks"]).astype(bool)
         except KeyError as exc:
-            raise DataFileError(f"{path}: expected arrays 'normals' (P, 3) and 'masks' (P, H, W), missing {exc}") from exc
+            raise DataFileError(
+                f"{path}: expected arrays 'normals' (P, 3) and 'masks' (P, H, W), missing {exc}"
+            ) from exc
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
             raise DataFileError(f"{path}: cannot read as a NumPy .npz file: {exc}") from exc
         if normals.ndim != 2 or normals.shape[1] != 3 or masks.shape != (normals.shape[0], H, W):
-            raise DataFileError(f"{path}: expected normals (P, 3) and masks (P, {H}, {W}) to match depth.npy, "
-                                f"got {normals.shape} and {masks.shape}")
+            raise DataFileError(
+                f"{path}: expected normals (P, 3) and masks (P, {H}, {W}) to match depth.npy, "
+                f"got {normals.shape} and {masks.shape}"
+            )
         planes = (normals, masks)
     elif (folder / "gt.npy").is_file():
         gt = _load_npy(folder / "gt.npy", "ground-truth normals (H, W, 3)")
         if gt.shape != (H, W, 3):
-            raise DataFileError(f"{folder / 'gt.npy'}: expected normals of shape {(H, W, 3)} to match depth.npy, got {gt.shape}")
+            raise DataFileError(
+                f"{folder / 'gt.npy'}: expected normals of shape {(H, W, 3)} to match depth.npy, got {gt.shape}"
+            )
         gt = gt.astype(np.float32)
     else:
-        raise DataFileError(f"{folder}: expected a reference, planes.npz (real frames) or gt.npy (rendered), found neither")
+        raise DataFileError(
+            f"{folder}: expected a reference, planes.npz (real frames) or gt.npy (rendered), found neither"
+        )
     return SensorFrame(folder.name, depth, K, planes, gt)
 
 
@@ -349,8 +410,9 @@ def score_frame(n: np.ndarray, frame: SensorFrame) -> tuple[str, float, float]:
     return "gt", metrics.mean_angular_error(n, frame.gt, where), metrics.coverage(n, where)
 
 
-def run_folder(root, entries: list[Entry], *, repeats: int = 5,
-               progress: Callable[[str, int, int], None] | None = None) -> dict:
+def run_folder(
+    root, entries: list[Entry], *, repeats: int = 5, progress: Callable[[str, int, int], None] | None = None
+) -> dict:
     """The sensor benchmark on every frame folder under ``root``.
 
     Per frame and entry: the metric of its normals (from the warm-up call), then ``repeats`` timed
@@ -387,13 +449,29 @@ def run_folder(root, entries: list[Entry], *, repeats: int = 5,
                     times[e.label].append((time.perf_counter() - t0) * 1e3)
         for e in live:
             metric, angle, cov = scores[e.label]
-            records.append({"frame": frame.name, "entry": e.label, "kind": e.kind, "metric": metric, "angle": angle,
-                            "coverage": cov, "ms": float(np.median(times[e.label])), "calls": len(times[e.label]),
-                            "size": list(frame.depth.shape)})
+            records.append(
+                {
+                    "frame": frame.name,
+                    "entry": e.label,
+                    "kind": e.kind,
+                    "metric": metric,
+                    "angle": angle,
+                    "coverage": cov,
+                    "ms": float(np.median(times[e.label])),
+                    "calls": len(times[e.label]),
+                    "size": list(frame.depth.shape),
+                }
+            )
         progress("frames", i + 1, len(frames))
-    return {"root": str(root), "frames": [f.name for f in frames], "entries": [e.label for e in entries],
-            "summaries": {e.label: e.summary for e in entries}, "records": records, "errors": errors,
-            "repeats": repeats}
+    return {
+        "root": str(root),
+        "frames": [f.name for f in frames],
+        "entries": [e.label for e in entries],
+        "summaries": {e.label: e.summary for e in entries},
+        "records": records,
+        "errors": errors,
+        "repeats": repeats,
+    }
 
 
 def _fmt(v, d=1) -> str:
@@ -409,12 +487,17 @@ def folder_markdown(result: dict) -> str:
         vals = [(get[(f, e)]["angle"], e) for e in entries if (f, e) in get and np.isfinite(get[(f, e)]["angle"])]
         best[f] = min(vals)[1] if vals else None
     metric = {f: next((get[(f, e)]["metric"] for e in entries if (f, e) in get), "") for f in frames}
-    out = ["# Sensor benchmark", "",
-           f"Frames: {len(frames)} in {result['root']}. Cells: mean folded angle in degrees to the reference planes "
-           "(plane metric) or to the ground truth (e_A, frames marked *), and in brackets the median time of a warm "
-           f"call in ms at one thread ({result['repeats']} calls, {SLOW_REPEATS} for calls over {SLOW_MS:g} ms). "
-           "Best angle per frame in bold. Medians over frames in the last columns.", "",
-           "## Angle (ms)", ""]
+    out = [
+        "# Sensor benchmark",
+        "",
+        f"Frames: {len(frames)} in {result['root']}. Cells: mean folded angle in degrees to the reference planes "
+        "(plane metric) or to the ground truth (e_A, frames marked *), and in brackets the median time of a warm "
+        f"call in ms at one thread ({result['repeats']} calls, {SLOW_REPEATS} for calls over {SLOW_MS:g} ms). "
+        "Best angle per frame in bold. Medians over frames in the last columns.",
+        "",
+        "## Angle (ms)",
+        "",
+    ]
     head = [f + ("*" if metric[f] == "gt" else "") for f in frames]
     out.append("| method | " + " | ".join(head) + " | median angle | median ms |")
     out.append("|---|" + "---|" * (len(frames) + 2))
@@ -429,8 +512,10 @@ def folder_markdown(result: dict) -> str:
             cells.append((f"**{a}**" if best[f] == e else a) + f" ({_fmt(r['ms'], 0 if r['ms'] >= 10 else 1)})")
             angles.append(r["angle"])
             times.append(r["ms"])
-        out.append(f"| {e} | " + " | ".join(cells) + f" | {_fmt(float(np.median(angles)) if angles else None)} | "
-                   f"{_fmt(float(np.median(times)) if times else None)} |")
+        out.append(
+            f"| {e} | " + " | ".join(cells) + f" | {_fmt(float(np.median(angles)) if angles else None)} | "
+            f"{_fmt(float(np.median(times)) if times else None)} |"
+        )
     out += ["", "## Coverage (share of the reference pixels that received a normal)", ""]
     out.append("| method | " + " | ".join(head) + " | min |")
     out.append("|---|" + "---|" * (len(frames) + 1))
@@ -469,7 +554,7 @@ def folder_figure(path, result: dict) -> Path:
         ax.set_ylabel("angle (deg)", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(frames):]:
+    for ax in list(axes.flat)[len(frames) :]:
         ax.axis("off")
     fig.suptitle("Sensor benchmark: angle vs time per frame (blue: surfnorm, orange: peers)", fontsize=10)
     fig.tight_layout()
@@ -497,13 +582,22 @@ def write_folder_report(result: dict, out_dir) -> dict[str, Path]:
 
     return {
         "report": atomic_write(out_dir / "report.md", lambda tmp: tmp.write_text(text)),
-        "results": atomic_write(out_dir / "results.json", lambda tmp: tmp.write_text(json.dumps(finite(result), indent=1))),
+        "results": atomic_write(
+            out_dir / "results.json", lambda tmp: tmp.write_text(json.dumps(finite(result), indent=1))
+        ),
         "figure": folder_figure(out_dir / "sensor.png", result),
     }
 
 
-def sensor_bench(root, out, *, names: list[str] | None = None, peer_libraries: list[str] | None = None,
-                 repeats: int = 5, progress=None) -> tuple[dict, dict[str, Path]]:
+def sensor_bench(
+    root,
+    out,
+    *,
+    names: list[str] | None = None,
+    peer_libraries: list[str] | None = None,
+    repeats: int = 5,
+    progress=None,
+) -> tuple[dict, dict[str, Path]]:
     """``surfnorm bench --sensor ROOT --out OUT``: one thread everywhere, every entry, the report. Returns (result, paths)."""
     import platform
 
@@ -514,6 +608,11 @@ def sensor_bench(root, out, *, names: list[str] | None = None, peer_libraries: l
     entries, absent = make_entries(names, peer_libraries=peer_libraries)
     result = run_folder(root, entries, repeats=repeats, progress=progress)
     result["absent"] = absent
-    result["meta"] = {"threads": threads, "versions": peer_versions(), "python": platform.python_version(),
-                      "machine": platform.machine(), "cpus": __import__("os").cpu_count()}
+    result["meta"] = {
+        "threads": threads,
+        "versions": peer_versions(),
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpus": __import__("os").cpu_count(),
+    }
     return result, write_folder_report(result, out)

@@ -118,27 +118,94 @@ class Sensor:
     row_run: int = 8  # LiDAR: a scanline wanders a row up or down in runs of this many columns
 
 
-SENSORS: dict[str, Sensor] = {s.name: s for s in (
-    Sensor("kinect_v1", "structured light, Kinect v1 (NYU Depth v2): 1/8-px disparity steps, B 7.5 cm, 2.5 m",
-           "disparity", distance_m=2.5, focal_px=580.0, baseline_m=0.075, disparity_step_px=1 / 8,
-           disparity_noise_px=0.04, disparity_corr_px=0.02, depth_step_m=0.001, shadow=True,
-           edge_width=2, edge_dropout=0.5, flying=0.1),
-    Sensor("primesense", "structured light, PrimeSense/Xtion (Redwood): 1/8-px disparity steps, B 7.5 cm, 1.9 m",
-           "disparity", distance_m=1.9, focal_px=570.0, baseline_m=0.075, disparity_step_px=1 / 8,
-           disparity_noise_px=0.05, depth_step_m=0.001, shadow=True, edge_width=1, edge_dropout=0.6, flying=0.05),
-    Sensor("d435", "active stereo, RealSense D435: ~0.08 px RMS disparity noise (correlated), 1/32-px steps, B 50 mm, 0.7 m",
-           "disparity", distance_m=0.7, focal_px=640.0, baseline_m=0.050, disparity_step_px=1 / 32,
-           disparity_noise_px=0.05, disparity_corr_px=0.06, corr_width_px=2.0, depth_step_m=0.001, shadow=True,
-           edge_width=1, edge_dropout=0.3, flying=0.3),
-    Sensor("tof", "time of flight (Azure-Kinect-like): range noise 1 mm + 0.5 mm/m^2 z^2 / sqrt(cos), flying pixels, 2 m",
-           "range", distance_m=2.0, focal_px=504.0, range_noise_m=0.001, range_noise_z2=0.0005, depth_step_m=0.001,
-           edge_width=1, edge_dropout=0.1, flying=0.6, grazing_cos=0.1),
-    Sensor("lidar", "LiDAR (KITTI-like): wandering scanlines every 2nd row, ~20 % valid, 1.5 cm range noise, 1/256 m steps, 14 m",
-           "range", distance_m=14.0, focal_px=721.0, range_noise_m=0.015, depth_step_m=1 / 256,
-           edge_width=1, flying=0.1, row_period=2, row_keep=0.45, row_run=8),
-    Sensor("exact", "no sensor effect: exact depth in metres, background as no depth", "range",
-           distance_m=2.0, focal_px=1.0),
-)}
+SENSORS: dict[str, Sensor] = {
+    s.name: s
+    for s in (
+        Sensor(
+            "kinect_v1",
+            "structured light, Kinect v1 (NYU Depth v2): 1/8-px disparity steps, B 7.5 cm, 2.5 m",
+            "disparity",
+            distance_m=2.5,
+            focal_px=580.0,
+            baseline_m=0.075,
+            disparity_step_px=1 / 8,
+            disparity_noise_px=0.04,
+            disparity_corr_px=0.02,
+            depth_step_m=0.001,
+            shadow=True,
+            edge_width=2,
+            edge_dropout=0.5,
+            flying=0.1,
+        ),
+        Sensor(
+            "primesense",
+            "structured light, PrimeSense/Xtion (Redwood): 1/8-px disparity steps, B 7.5 cm, 1.9 m",
+            "disparity",
+            distance_m=1.9,
+            focal_px=570.0,
+            baseline_m=0.075,
+            disparity_step_px=1 / 8,
+            disparity_noise_px=0.05,
+            depth_step_m=0.001,
+            shadow=True,
+            edge_width=1,
+            edge_dropout=0.6,
+            flying=0.05,
+        ),
+        Sensor(
+            "d435",
+            "active stereo, RealSense D435: ~0.08 px RMS disparity noise (correlated), 1/32-px steps, B 50 mm, 0.7 m",
+            "disparity",
+            distance_m=0.7,
+            focal_px=640.0,
+            baseline_m=0.050,
+            disparity_step_px=1 / 32,
+            disparity_noise_px=0.05,
+            disparity_corr_px=0.06,
+            corr_width_px=2.0,
+            depth_step_m=0.001,
+            shadow=True,
+            edge_width=1,
+            edge_dropout=0.3,
+            flying=0.3,
+        ),
+        Sensor(
+            "tof",
+            "time of flight (Azure-Kinect-like): range noise 1 mm + 0.5 mm/m^2 z^2 / sqrt(cos), flying pixels, 2 m",
+            "range",
+            distance_m=2.0,
+            focal_px=504.0,
+            range_noise_m=0.001,
+            range_noise_z2=0.0005,
+            depth_step_m=0.001,
+            edge_width=1,
+            edge_dropout=0.1,
+            flying=0.6,
+            grazing_cos=0.1,
+        ),
+        Sensor(
+            "lidar",
+            "LiDAR (KITTI-like): wandering scanlines every 2nd row, ~20 % valid, 1.5 cm range noise, 1/256 m steps, 14 m",
+            "range",
+            distance_m=14.0,
+            focal_px=721.0,
+            range_noise_m=0.015,
+            depth_step_m=1 / 256,
+            edge_width=1,
+            flying=0.1,
+            row_period=2,
+            row_keep=0.45,
+            row_run=8,
+        ),
+        Sensor(
+            "exact",
+            "no sensor effect: exact depth in metres, background as no depth",
+            "range",
+            distance_m=2.0,
+            focal_px=1.0,
+        ),
+    )
+}
 
 
 def frame_seed(seed: int, *names: str) -> list[int]:
@@ -297,7 +364,7 @@ def simulate(depth, K, sensor, *, seed, mask=None, normals=None, scale: float | 
     else:
         if s.range_noise_m > 0 or s.range_noise_z2 > 0:
             c = np.ones_like(z) if cos_inc is None else np.maximum(cos_inc, 0.05)
-            sigma = (s.range_noise_m + s.range_noise_z2 * z ** 2 / np.sqrt(c)) * metric
+            sigma = (s.range_noise_m + s.range_noise_z2 * z**2 / np.sqrt(c)) * metric
             out = z + sigma * rng.standard_normal((H, W)) / ray  # noise along the ray, as depth
         if s.grazing_cos > 0 and cos_inc is not None:
             hit &= cos_inc >= s.grazing_cos

@@ -5,5 +5,18 @@ from .intrinsics import read_intrinsics, resolve_intrinsics
 from .normals import read_normals, write_normals
 from .threef2n import Frame, find_frames, read_frame, read_params, sample_root
 
-__all__ = ["read_depth", "read_mask", "disparity_to_depth", "kinect_disparity_to_depth", "read_intrinsics",
-           "resolve_intrinsics", "read_normals", "write_normals", "Frame", "find_frames", "read_frame", "read_params", "sample_root"]
+__all__ = [
+    "read_depth",
+    "read_mask",
+    "disparity_to_depth",
+    "kinect_disparity_to_depth",
+    "read_intrinsics",
+    "resolve_intrinsics",
+    "read_normals",
+    "write_normals",
+    "Frame",
+    "find_frames",
+    "read_frame",
+    "read_params",
+    "sample_root",
+]

@@ -56,8 +56,15 @@ from ..errors import DataFileError, InputError, MissingDependencyError
 from ._files import as_path, check_shape, decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
 
-__all__ = ["read_depth", "read_mask", "disparity_to_depth", "kinect_disparity_to_depth", "depth_suffix",
-           "DEPTH_SUFFIXES", "KINECT_V1_NYU"]
+__all__ = [
+    "read_depth",
+    "read_mask",
+    "disparity_to_depth",
+    "kinect_disparity_to_depth",
+    "depth_suffix",
+    "DEPTH_SUFFIXES",
+    "KINECT_V1_NYU",
+]
 
 DEPTH_SUFFIXES = (".bin", ".bin.gz", ".npy", ".npz", ".png", ".tif", ".tiff", ".exr", ".pgm")
 
@@ -89,8 +96,10 @@ def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
                     if name in keys:
                         return np.asarray(data[name])
                     if len(keys) != 1:
-                        raise DataFileError(f"{path}: expected an array named {name!r} or a single array in the .npz archive, "
-                                            f"got {len(keys)} arrays ({', '.join(keys) or 'none'})")
+                        raise DataFileError(
+                            f"{path}: expected an array named {name!r} or a single array in the .npz archive, "
+                            f"got {len(keys)} arrays ({', '.join(keys) or 'none'})"
+                        )
                     return np.asarray(data[keys[0]])
             return np.asarray(data)
     except DataFileError:
@@ -104,16 +113,26 @@ def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
 def _read_image(path: Path) -> np.ndarray:
     img = decode_image(path, read_bytes(path, "depth"), cv2.IMREAD_UNCHANGED)
     if img.ndim != 2:
-        raise DataFileError(f"{path}: expected a single-channel depth image, got {img.shape[2]} channels "
-                            f"(shape {img.shape}); a colour picture is not depth")
+        raise DataFileError(
+            f"{path}: expected a single-channel depth image, got {img.shape[2]} channels "
+            f"(shape {img.shape}); a colour picture is not depth"
+        )
     if img.dtype == np.uint8:
-        raise DataFileError(f"{path}: expected 16-bit integer or 32-bit float depth, got an 8-bit image "
-                            "(8 bits cannot hold sensor depth; is this a picture?)")
+        raise DataFileError(
+            f"{path}: expected 16-bit integer or 32-bit float depth, got an 8-bit image "
+            "(8 bits cannot hold sensor depth; is this a picture?)"
+        )
     return img
 
 
-def read_depth(path, *, depth_scale: float | None = None, shape=(HEIGHT, WIDTH), kinect_disparity: bool = False,
-               byte_order: str | None = None) -> np.ndarray:
+def read_depth(
+    path,
+    *,
+    depth_scale: float | None = None,
+    shape=(HEIGHT, WIDTH),
+    kinect_disparity: bool = False,
+    byte_order: str | None = None,
+) -> np.ndarray:
     """Read a depth image as float32 (H, W).
 
     Parameters
@@ -196,8 +215,10 @@ def read_mask(path) -> np.ndarray:
         arr = decode_image(path, read_bytes(path, "mask"), cv2.IMREAD_GRAYSCALE)
     real = arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)
     if arr.ndim != 2 or not real:  # not strings, complex numbers, objects or records
-        raise DataFileError(f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype} "
-                            "(a mask holds booleans or real numbers)")
+        raise DataFileError(
+            f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype} "
+            "(a mask holds booleans or real numbers)"
+        )
     return np.ascontiguousarray(arr != 0)
 
 
@@ -239,7 +260,11 @@ def _library_output(lines: list):
     output during the call lands there too; the call lasts milliseconds.)
     """
     python_out = io.StringIO()
-    with tempfile.TemporaryFile() as tmp, contextlib.redirect_stdout(python_out), contextlib.redirect_stderr(python_out):
+    with (
+        tempfile.TemporaryFile() as tmp,
+        contextlib.redirect_stdout(python_out),
+        contextlib.redirect_stderr(python_out),
+    ):
         try:
             for stream in (sys.__stdout__, sys.__stderr__):  # None where Python runs without a console
                 if stream is not None:
@@ -268,8 +293,9 @@ def _exr_channels(path: Path) -> dict[str, object]:
     try:
         import OpenEXR
     except ImportError as exc:
-        raise MissingDependencyError(f"{path}: reading OpenEXR depth needs the OpenEXR package: "
-                                     "pip install 'surfnorm[exr]'") from exc
+        raise MissingDependencyError(
+            f"{path}: reading OpenEXR depth needs the OpenEXR package: pip install 'surfnorm[exr]'"
+        ) from exc
     try:
         with open(path, "rb") as fh:
             magic = fh.read(len(_EXR_MAGIC))
@@ -285,7 +311,9 @@ def _exr_channels(path: Path) -> dict[str, object]:
             count = len(exr.parts)
             for i in range(count):
                 part_name = exr.header(i).get("name") if count > 1 else None
-                channels.update({(f"{part_name}.{name}" if part_name else name): ch for name, ch in exr.channels(i).items()})
+                channels.update(
+                    {(f"{part_name}.{name}" if part_name else name): ch for name, ch in exr.channels(i).items()}
+                )
     except (RuntimeError, ValueError, TypeError, OSError) as exc:
         failure = exc
     if failure is not None or chatter or not channels:  # the library complains without raising on some truncations
@@ -318,9 +346,13 @@ def _exr_depth_channel(path: Path, channels: dict) -> str:
         first = np.asarray(channels[colour[0]].pixels)
         if all(np.array_equal(first, np.asarray(channels[n].pixels), equal_nan=True) for n in colour[1:]):
             return next(n for n in colour if last(n) == "r")
-        raise DataFileError(f"{path}: expected one depth channel, got the colour channels {', '.join(colour)} "
-                            "holding different values (a colour image is not depth)")
-    raise DataFileError(f"{path}: expected one depth channel (named Z, depth, distance, D, Y or R), got channels {listed}")
+        raise DataFileError(
+            f"{path}: expected one depth channel, got the colour channels {', '.join(colour)} "
+            "holding different values (a colour image is not depth)"
+        )
+    raise DataFileError(
+        f"{path}: expected one depth channel (named Z, depth, distance, D, Y or R), got channels {listed}"
+    )
 
 
 def _read_exr(path: Path) -> np.ndarray:
@@ -328,16 +360,21 @@ def _read_exr(path: Path) -> np.ndarray:
     name = _exr_depth_channel(path, channels)
     ch: Any = channels[name]  # an OpenEXR channel
     if (getattr(ch, "xSampling", 1), getattr(ch, "ySampling", 1)) != (1, 1):
-        raise DataFileError(f"{path}: expected a full-resolution depth channel, got channel {name!r} subsampled "
-                            f"{ch.xSampling}x{ch.ySampling}")
+        raise DataFileError(
+            f"{path}: expected a full-resolution depth channel, got channel {name!r} subsampled "
+            f"{ch.xSampling}x{ch.ySampling}"
+        )
     pixels = np.asarray(ch.pixels)
     if pixels.dtype not in (np.float16, np.float32):
-        raise DataFileError(f"{path}: expected a float16 (HALF) or float32 (FLOAT) depth channel, "
-                            f"got channel {name!r} of dtype {pixels.dtype}")
+        raise DataFileError(
+            f"{path}: expected a float16 (HALF) or float32 (FLOAT) depth channel, "
+            f"got channel {name!r} of dtype {pixels.dtype}"
+        )
     return pixels.astype(np.float32)
 
 
 # ---------------------------------------------------------------------------- PGM byte order, Kinect v1 disparity
+
 
 def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order):
     """The options of :func:`read_depth` that say how raw sensor values are stored; InputError when they do not fit."""
@@ -345,9 +382,13 @@ def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order):
     if byte_order is not None:
         check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
         if suffix != ".pgm":
-            raise InputError(f"byte_order: applies to 16-bit .pgm files, got byte_order={byte_order!r} for a {suffix} file")
+            raise InputError(
+                f"byte_order: applies to 16-bit .pgm files, got byte_order={byte_order!r} for a {suffix} file"
+            )
     if kinect_disparity and depth_scale is not None:
-        raise InputError(f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}")
+        raise InputError(
+            f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}"
+        )
     return kinect_disparity
 
 
@@ -362,14 +403,23 @@ def _raw_sensor_values(path: Path, raw: np.ndarray, suffix: str, *, kinect_dispa
     if top > 2047:
         hint = ""
         if suffix == ".pgm" and byte_order != "little" and raw.dtype == np.uint16 and raw.byteswap().max() <= 2047:
-            hint = ("; with the bytes swapped they are: pass byte_order='little' (libfreenect's dumps, such as "
-                    "NYU Depth v2's raw d-*.pgm frames, store little-endian samples)")
-        raise DataFileError(f"{path}: expected Kinect v1 raw disparity (11 bits, 0 to 2047), got values up to {top}{hint}")
+            hint = (
+                "; with the bytes swapped they are: pass byte_order='little' (libfreenect's dumps, such as "
+                "NYU Depth v2's raw d-*.pgm frames, store little-endian samples)"
+            )
+        raise DataFileError(
+            f"{path}: expected Kinect v1 raw disparity (11 bits, 0 to 2047), got values up to {top}{hint}"
+        )
     return kinect_disparity_to_depth(raw)
 
 
-def kinect_disparity_to_depth(disparity, *, a: float = KINECT_V1_NYU["a"], b: float = KINECT_V1_NYU["b"],
-                              max_depth: float | None = KINECT_V1_NYU["max_depth"]) -> np.ndarray:
+def kinect_disparity_to_depth(
+    disparity,
+    *,
+    a: float = KINECT_V1_NYU["a"],
+    b: float = KINECT_V1_NYU["b"],
+    max_depth: float | None = KINECT_V1_NYU["max_depth"],
+) -> np.ndarray:
     """Depth in metres, ``a / (b - d)``, from a Kinect v1's raw 11-bit disparity ``d``; float32 (H, W).
 
     The defaults are the NYU Depth v2 toolbox's (``camera_params.m``:

@@ -83,10 +83,14 @@ def _numbers(path: Path, value, what: str) -> np.ndarray:
     if isinstance(value, dict) and "data" in value:  # camera_calibration / OpenCV style {rows, cols, data}
         rows, cols = value.get("rows", 3), value.get("cols", 3)
         if not (_is_number(rows) and _is_number(cols) and rows * cols == 9):
-            raise DataFileError(f"{path}: expected rows: 3 and cols: 3 for {what!r}, got rows: {rows!r:.20}, cols: {cols!r:.20}")
+            raise DataFileError(
+                f"{path}: expected rows: 3 and cols: 3 for {what!r}, got rows: {rows!r:.20}, cols: {cols!r:.20}"
+            )
         value = value["data"]
     if isinstance(value, np.ndarray):
-        if value.dtype == bool or not (np.issubdtype(value.dtype, np.integer) or np.issubdtype(value.dtype, np.floating)):
+        if value.dtype == bool or not (
+            np.issubdtype(value.dtype, np.integer) or np.issubdtype(value.dtype, np.floating)
+        ):
             raise DataFileError(f"{path}: expected numbers for {what!r}, got an array of dtype {value.dtype}")
         return value.astype(np.float64).ravel()
     if _is_number(value):
@@ -139,7 +143,9 @@ def intrinsics_from_mapping(data, *, source="intrinsics") -> Intrinsics:
     partial = [k for k in ("fx", "fy", "cx", "cy") if k in data]
     if partial:
         missing = [k for k in ("fx", "fy", "cx", "cy") if k not in data]
-        raise DataFileError(f"{path}: expected all of fx, fy, cx, cy, got {', '.join(partial)} without {', '.join(missing)}")
+        raise DataFileError(
+            f"{path}: expected all of fx, fy, cx, cy, got {', '.join(partial)} without {', '.join(missing)}"
+        )
     keys = ", ".join(f"{k!s:.40}" for k in list(data)[:10]) or "no keys"
     raise DataFileError(f"{path}: expected {_EXPECTED}, got keys {keys}")
 
@@ -172,7 +178,9 @@ def _opencv_matrix(path: Path, key: str, node):
         raise DataFileError(f"{path}: expected {key!r} to be an opencv-matrix (rows, cols, dt, data)")
     rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
     if not (rows.isInt() and cols.isInt() and int(rows.real()) > 0 and int(rows.real()) * int(cols.real()) == 9):
-        shape = [f"{n}: {int(x.real()) if x.isInt() else 'not an integer'}" for n, x in (("rows", rows), ("cols", cols))]
+        shape = [
+            f"{n}: {int(x.real()) if x.isInt() else 'not an integer'}" for n, x in (("rows", rows), ("cols", cols))
+        ]
         raise DataFileError(f"{path}: expected rows: 3 and cols: 3 for {key!r}, got {', '.join(shape)}")
     if not (dt.isString() and dt.string() in _OPENCV_DT):
         got = repr(dt.string()[:20]) if dt.isString() else "no string"
@@ -257,12 +265,16 @@ def _safe_yaml_loader(path: Path):
         def compose_node(self, parent, index):
             event = self.peek_event()
             if isinstance(event, yaml.AliasEvent):
-                raise DataFileError(f"{path}: line {event.start_mark.line + 1}: expected plain values, got the YAML alias "
-                                    f"*{event.anchor} (aliases are not read in intrinsics files)")
+                raise DataFileError(
+                    f"{path}: line {event.start_mark.line + 1}: expected plain values, got the YAML alias "
+                    f"*{event.anchor} (aliases are not read in intrinsics files)"
+                )
             self.depth += 1
             if self.depth > MAX_DEPTH:
-                raise DataFileError(f"{path}: line {event.start_mark.line + 1}: expected lists and mappings at most "
-                                    f"{MAX_DEPTH} deep, got deeper nesting")
+                raise DataFileError(
+                    f"{path}: line {event.start_mark.line + 1}: expected lists and mappings at most "
+                    f"{MAX_DEPTH} deep, got deeper nesting"
+                )
             try:
                 return super().compose_node(parent, index)
             finally:
@@ -277,7 +289,9 @@ def _read_yaml(path: Path, text: str) -> Intrinsics:
     try:
         import yaml
     except ImportError as exc:  # pragma: no cover - pyyaml is in the test extras
-        raise MissingDependencyError(f"{path}: reading YAML intrinsics needs PyYAML: pip install 'surfnorm[yaml]'") from exc
+        raise MissingDependencyError(
+            f"{path}: reading YAML intrinsics needs PyYAML: pip install 'surfnorm[yaml]'"
+        ) from exc
     try:
         data = yaml.load(text, Loader=_safe_yaml_loader(path))  # noqa: S506 - a SafeLoader, see _safe_yaml_loader
     except yaml.YAMLError as exc:
@@ -299,8 +313,10 @@ def _read_txt(path: Path, text: str) -> Intrinsics:
     if len(values) in (9, 16):
         arr = np.asarray(values).reshape((3, 3) if len(values) == 9 else (4, 4))[:3, :3]
         return _from_matrix(path, "K", arr)
-    raise DataFileError(f"{path}: expected 4 or 5 numbers (3F2N 'fx fy u0 v0 count'), 9 (a 3x3 K) or 16 (a 4x4 matrix), "
-                        f"got {len(values)} numbers")
+    raise DataFileError(
+        f"{path}: expected 4 or 5 numbers (3F2N 'fx fy u0 v0 count'), 9 (a 3x3 K) or 16 (a 4x4 matrix), "
+        f"got {len(values)} numbers"
+    )
 
 
 def _depth(data, limit: int = MAX_DEPTH + 1) -> int:
@@ -341,7 +357,9 @@ def read_intrinsics(path) -> Intrinsics:
         except json.JSONDecodeError as exc:
             raise DataFileError(f"{path}: cannot parse as JSON ({exc.msg} at line {exc.lineno})") from exc
         except RecursionError as exc:  # the size cap bounds the work done before it
-            raise DataFileError(f"{path}: expected lists and mappings at most {MAX_DEPTH} deep, got far deeper nesting") from exc
+            raise DataFileError(
+                f"{path}: expected lists and mappings at most {MAX_DEPTH} deep, got far deeper nesting"
+            ) from exc
         if _depth(data) > MAX_DEPTH:
             raise DataFileError(f"{path}: expected lists and mappings at most {MAX_DEPTH} deep, got deeper nesting")
         return intrinsics_from_mapping(data, source=path)
@@ -360,11 +378,15 @@ def resolve_intrinsics(intrinsics=None, *, fx=None, fy=None, cx=None, cy=None) -
     numbers = {"fx": fx, "fy": fy, "cx": cx, "cy": cy}
     given = [k for k, v in numbers.items() if v is not None]
     if given and intrinsics is not None:
-        raise InputError(f"intrinsics: expected a file/matrix or --fx --fy --cx --cy, not both (got {', '.join(given)} too)")
+        raise InputError(
+            f"intrinsics: expected a file/matrix or --fx --fy --cx --cy, not both (got {', '.join(given)} too)"
+        )
     if given:
         if len(given) != 4:
             missing = [k for k in numbers if numbers[k] is None]
-            raise InputError(f"intrinsics: expected all of fx, fy, cx, cy, got {', '.join(given)} without {', '.join(missing)}")
+            raise InputError(
+                f"intrinsics: expected all of fx, fy, cx, cy, got {', '.join(given)} without {', '.join(missing)}"
+            )
         return Intrinsics(fx, fy, cx, cy)
     if intrinsics is None:
         return None

@@ -85,6 +85,7 @@ def write_normals(path, normals, *, fmt: str = "npy", colouring: str = "3f2n") -
     n = _as_normals(normals)
     path = Path(path)
     if fmt == "npy":
+
         def write(tmp: Path):
             with open(tmp, "wb") as fh:
                 np.save(fh, n, allow_pickle=False)
@@ -98,6 +99,7 @@ def write_normals(path, normals, *, fmt: str = "npy", colouring: str = "3f2n") -
                 raise DataFileError(f"{path}: could not encode PNG")
             with open(tmp, "wb") as fh:
                 fh.write(buf.tobytes())
+
     return atomic_write(path, write)
 
 
@@ -120,11 +122,15 @@ def read_normals(path, *, colouring: str = "3f2n", fill: float = 0.0) -> np.ndar
         except (ValueError, EOFError, OSError) as exc:
             raise DataFileError(f"{path}: cannot read as a NumPy normal map (truncated or corrupt: {exc})") from exc
         if n.ndim != 3 or n.shape[-1] != 3 or not np.issubdtype(n.dtype, np.floating):
-            raise DataFileError(f"{path}: expected a float array of shape (H, W, 3), got shape {n.shape} and dtype {n.dtype}")
+            raise DataFileError(
+                f"{path}: expected a float array of shape (H, W, 3), got shape {n.shape} and dtype {n.dtype}"
+            )
         return np.ascontiguousarray(n, dtype=np.float32)
     if suffix != ".png":
         raise DataFileError(f"{path}: unknown normal file type {suffix!r}; expected .npy or .png")
     img = decode_image(path, raw, cv2.IMREAD_UNCHANGED, "PNG")
     if img.ndim != 3 or img.shape[2] < 3 or img.dtype not in (np.uint8, np.uint16):
-        raise DataFileError(f"{path}: expected an 8- or 16-bit RGB PNG normal map, got shape {img.shape} and dtype {img.dtype}")
+        raise DataFileError(
+            f"{path}: expected an 8- or 16-bit RGB PNG normal map, got shape {img.shape} and dtype {img.dtype}"
+        )
     return decode_png(np.ascontiguousarray(img[:, :, 2::-1]), colouring=colouring, fill=fill)

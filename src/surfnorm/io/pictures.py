@@ -33,7 +33,9 @@ def normal_to_rgb8(normals: np.ndarray, *, colouring: str = "3f2n", background=(
     return img
 
 
-def error_to_rgb8(error_deg: np.ndarray, *, vmax: float = 30.0, cmap: str = "inferno", background=(255, 255, 255)) -> np.ndarray:
+def error_to_rgb8(
+    error_deg: np.ndarray, *, vmax: float = 30.0, cmap: str = "inferno", background=(255, 255, 255)
+) -> np.ndarray:
     """Angular error in degrees (H, W) to an RGB uint8 picture on a fixed scale [0, vmax]; NaN -> background."""
     from matplotlib import colormaps
 

@@ -24,7 +24,17 @@ import numpy as np
 from ..camera import Intrinsics
 from ..errors import DataFileError
 
-__all__ = ["Frame", "read_params", "params_for", "read_frame", "find_frames", "sample_root", "LEVELS", "HEIGHT", "WIDTH"]
+__all__ = [
+    "Frame",
+    "read_params",
+    "params_for",
+    "read_frame",
+    "find_frames",
+    "sample_root",
+    "LEVELS",
+    "HEIGHT",
+    "WIDTH",
+]
 
 LEVELS = ("Easy", "Medium", "Hard")
 HEIGHT, WIDTH = 480, 640
@@ -90,8 +100,10 @@ def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
             with gzip.open(path, "rb") as fh:
                 raw = fh.read(expected + 1)
             if len(raw) > expected:
-                raise DataFileError(f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}) "
-                                    f"once decompressed, got more")
+                raise DataFileError(
+                    f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}) "
+                    f"once decompressed, got more"
+                )
         else:
             with open(path, "rb") as fh:
                 raw = fh.read(expected + 1)
@@ -139,7 +151,9 @@ def read_frame(root, name: str) -> Frame:
     depth = read_depth_bin(_depth_path(obj_dir, frame))
     normals = read_normal_png(obj_dir / "normal" / f"{frame}.png")
     if normals.shape[:2] != depth.shape:
-        raise DataFileError(f"{obj_dir / 'normal' / (frame + '.png')}: expected {depth.shape} pixels to match depth, got {normals.shape[:2]}")
+        raise DataFileError(
+            f"{obj_dir / 'normal' / (frame + '.png')}: expected {depth.shape} pixels to match depth, got {normals.shape[:2]}"
+        )
     K = read_params(obj_dir / "params.txt")
     return Frame(name, level, depth, normals, depth != BACKGROUND_DEPTH, K)
 

@@ -16,7 +16,6 @@ from .._bands import whole
 from .._choices import ORIENTATION_TIE
 from .._config import as_float64, njit, pixel, row, select
 
-
 # --- clamped reads and the finite-difference stencil ------------------------------------------------
 
 
@@ -80,7 +79,6 @@ def stencil(valid, v, u, dv, du, reflect):
             vb, ub, vf, uf, dist = v - dv, u - du, v, u, 1
     # (one return statement: Numba compiles several tuple returns in a hot helper far slower)
     return vb, ub, vf, uf, dist
-
 
 
 # --- runs of pixels whose 3x3 neighbourhood is valid ---------------------------------------------
@@ -154,7 +152,6 @@ def segment(runs, n_runs, k, W):
     return a, b
 
 
-
 # --- exp -----------------------------------------------------------------------------------------
 
 
@@ -183,12 +180,29 @@ def exp32(x):
     x_c = x_c if x_c < _EXP_HI else _EXP_HI
     k = math.floor(x_c * _INV_LN2 + 0.5)
     r = (x_c - k * _LN2_HI) - k * _LN2_LO
-    e_r = ((((((((((((_C13 * r + _C12) * r + _C11) * r + _C10) * r + _C9) * r + _C8) * r + _C7) * r + _C6)
-                * r + _C5) * r + _C4) * r + _C3) * r + _C2) * r + _C1) * r + _C0  # Horner
+    e_r = (
+        (
+            (
+                (
+                    (
+                        (((((((_C13 * r + _C12) * r + _C11) * r + _C10) * r + _C9) * r + _C8) * r + _C7) * r + _C6) * r
+                        + _C5
+                    )
+                    * r
+                    + _C4
+                )
+                * r
+                + _C3
+            )
+            * r
+            + _C2
+        )
+        * r
+        + _C1
+    ) * r + _C0  # Horner
     two_k = as_float64((np.int64(k) + 1023) << 52)
     y = np.float32(e_r * two_k)
     return y if x_d == x_d else x
-
 
 
 # --- normalise and store -------------------------------------------------------------------------
@@ -246,7 +260,6 @@ def fill_pixel(out, v, u, fill):
     out[v, u, 0] = fill
     out[v, u, 1] = fill
     out[v, u, 2] = fill
-
 
 
 # --- orientation: which way a normal points ------------------------------------------------------
@@ -307,7 +320,6 @@ def camera_facing(n_x, n_y, n_z, u_c, v_c, f_x, f_y):
     """
     s = facing_sign(n_x, n_y, n_z, u_c * f_y, v_c * f_x, f_x * f_y)
     return s * n_x, s * n_y, s * n_z
-
 
 
 # --- pixel coordinates and the organised point cloud ----------------------------------------------

@@ -169,10 +169,19 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
             if span > 0.0:
                 b = min(nbins - 1, int((math.log(zb) - lo) / span * nbins))
             for a in range(1, _MAX_GAP + 1):
-                if (u - 4 * a >= 0 and u + 4 * a < W and valid[v, u - 4 * a] and valid[v, u - 2 * a]
-                        and valid[v, u - a] and valid[v, u + a] and valid[v, u + 2 * a] and valid[v, u + 4 * a]):
-                    if _spread(z[v, u - 4 * a], z[v, u - 2 * a], z[v, u - a], zb, z[v, u + a], z[v, u + 2 * a],
-                               z[v, u + 4 * a]):
+                if (
+                    u - 4 * a >= 0
+                    and u + 4 * a < W
+                    and valid[v, u - 4 * a]
+                    and valid[v, u - 2 * a]
+                    and valid[v, u - a]
+                    and valid[v, u + a]
+                    and valid[v, u + 2 * a]
+                    and valid[v, u + 4 * a]
+                ):
+                    if _spread(
+                        z[v, u - 4 * a], z[v, u - 2 * a], z[v, u - a], zb, z[v, u + a], z[v, u + 2 * a], z[v, u + 4 * a]
+                    ):
                         break  # across a depth discontinuity: not noise
                     xs[0, k] = (1.0 / z[v, u - a] - w0 + 1.0 / z[v, u + a]) * zb * scale
                     xs[1, k] = (1.0 / z[v, u - 2 * a] - w0 + 1.0 / z[v, u + 2 * a]) * zb * scale
@@ -181,10 +190,19 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
                     k += 1
                     break
             for a in range(1, _MAX_GAP + 1):
-                if (v - 4 * a >= 0 and v + 4 * a < H and valid[v - 4 * a, u] and valid[v - 2 * a, u]
-                        and valid[v - a, u] and valid[v + a, u] and valid[v + 2 * a, u] and valid[v + 4 * a, u]):
-                    if _spread(z[v - 4 * a, u], z[v - 2 * a, u], z[v - a, u], zb, z[v + a, u], z[v + 2 * a, u],
-                               z[v + 4 * a, u]):
+                if (
+                    v - 4 * a >= 0
+                    and v + 4 * a < H
+                    and valid[v - 4 * a, u]
+                    and valid[v - 2 * a, u]
+                    and valid[v - a, u]
+                    and valid[v + a, u]
+                    and valid[v + 2 * a, u]
+                    and valid[v + 4 * a, u]
+                ):
+                    if _spread(
+                        z[v - 4 * a, u], z[v - 2 * a, u], z[v - a, u], zb, z[v + a, u], z[v + 2 * a, u], z[v + 4 * a, u]
+                    ):
                         break
                     xs[0, k] = (1.0 / z[v - a, u] - w0 + 1.0 / z[v + a, u]) * zb * scale
                     xs[1, k] = (1.0 / z[v - 2 * a, u] - w0 + 1.0 / z[v + 2 * a, u]) * zb * scale
@@ -285,8 +303,9 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
 _TABLE = 512
 
 
-def radius_table(depths: np.ndarray, rho: np.ndarray, *, alpha: float = ALPHA, window=None,
-                 max_window: int = MAX_WINDOW) -> tuple[float, float, np.ndarray, np.ndarray]:
+def radius_table(
+    depths: np.ndarray, rho: np.ndarray, *, alpha: float = ALPHA, window=None, max_window: int = MAX_WINDOW
+) -> tuple[float, float, np.ndarray, np.ndarray]:
     """A look-up table from depth to the window radius and the noise rho.
 
     Returns (z0, inv_step, radius, rho): entry int((z - z0) * inv_step), clipped,
@@ -492,8 +511,20 @@ def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
     W = m_box.shape[1]
     for u in range(W):
         a[u], g_u[u], g_v[u], rss[u], dof[u] = affine_fit(
-            m_box[0, u], m_coords[0, u], m_coords[1, u], m_coords[2, u], m_coords[3, u], m_coords[4, u], m_box[1, u],
-            m_box[2, u], m_box[3, u], m_box[4, u], r_row[u], x_row[u], y)
+            m_box[0, u],
+            m_coords[0, u],
+            m_coords[1, u],
+            m_coords[2, u],
+            m_coords[3, u],
+            m_coords[4, u],
+            m_box[1, u],
+            m_box[2, u],
+            m_box[3, u],
+            m_box[4, u],
+            r_row[u],
+            x_row[u],
+            y,
+        )
 
 
 @njit(noalias=True, _nrt=False)
@@ -535,8 +566,27 @@ _SHIFTS = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], np.int64)
 
 @ahead_of_time
 @njit(noalias=True)
-def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen, n_widen, fx, fy, cx, cy, kappa,
-                         rho_floor, r_max, fill, ring, out):
+def _adaptive_fit_kernel(
+    z,
+    valid,
+    z0,
+    inv_step,
+    r_table,
+    rho_table,
+    grow,
+    widen,
+    n_widen,
+    fx,
+    fy,
+    cx,
+    cy,
+    kappa,
+    rho_floor,
+    r_max,
+    fill,
+    ring,
+    out,
+):
     H, W = z.shape
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
@@ -616,8 +666,10 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 # half as well as the full window of the noise's radius r0 (sum of squared offsets
                 # ~ n r (r + 1) / 3), with at least MIN_POINTS of them.
                 r0 = r_table[t_row[u]]
-                if pick[u] and (m_row[0, u] < MIN_POINTS
-                                or 2.0 * m_row[0, u] * (r * (r + 1)) < (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))):
+                if pick[u] and (
+                    m_row[0, u] < MIN_POINTS
+                    or 2.0 * m_row[0, u] * (r * (r + 1)) < (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))
+                ):
                     r_row[u] = grow[r]
                     present[grow[r]] = True
         for u in range(W):
@@ -660,8 +712,28 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
             for u in range(W):
                 r_float[u] = r_try[u]
             fit_row(m_try, m_coords2, r_float, x_row, y, g_u2, g_v2, a2, rss2, dof2)
-            keep_row(passed, limit, g_u2, g_v2, a2, rss2, dof2, r_try, g_u, g_v, a, rss, dof, r_row,
-                     g_u3, g_v3, a3, rss3, dof3, r_next)
+            keep_row(
+                passed,
+                limit,
+                g_u2,
+                g_v2,
+                a2,
+                rss2,
+                dof2,
+                r_try,
+                g_u,
+                g_v,
+                a,
+                rss,
+                dof,
+                r_row,
+                g_u3,
+                g_v3,
+                a3,
+                rss3,
+                dof3,
+                r_next,
+            )
             g_u, g_u3 = g_u3, g_u
             g_v, g_v3 = g_v3, g_v
             a, a3 = a3, a
@@ -691,8 +763,9 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
                 window_sums(ring, slot, H, W, v + dv, u + du, r, m)
                 if m[0] < n_min:
                     continue
-                a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9],
-                                                           r, x + du, y + dv)
+                a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(
+                    m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], r, x + du, y + dv
+                )
                 if not dof_k > 0.0:
                     continue
                 score = max(rss_k / dof_k, TIE * limit[u])
@@ -708,9 +781,19 @@ def _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, grow, widen
         normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_flat[v])
 
 
-def adaptive_fit(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, window=None, max_window: int = MAX_WINDOW,
-                 alpha: float = ALPHA, kappa: float = KAPPA, fill: float = 0.0,
-                 profile: NoiseProfile | None = None) -> np.ndarray:
+def adaptive_fit(
+    z: np.ndarray,
+    valid: np.ndarray,
+    cam,
+    out: np.ndarray,
+    *,
+    window=None,
+    max_window: int = MAX_WINDOW,
+    alpha: float = ALPHA,
+    kappa: float = KAPPA,
+    fill: float = 0.0,
+    profile: NoiseProfile | None = None,
+) -> np.ndarray:
     """Adaptive plane fit of inverse depth; fills ``out`` (H, W, 3) float32 and returns it.
 
     Parameters
@@ -742,7 +825,25 @@ def adaptive_fit(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, wind
     z0, inv_step, r_table, rho_table = radius_table(depths, rho, alpha=alpha, window=window, max_window=max_window)
     r_max = (max_window - 1) // 2
     ring = np.empty((4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1))
-    _adaptive_fit_kernel(z, valid, z0, inv_step, r_table, rho_table, growth_table(r_max),
-                         widen_table(r_max), N_WIDEN, float(cam.fx), float(cam.fy), float(cam.cx),
-                         float(cam.cy), float(kappa), RHO_FLOOR, r_max, np.float32(fill), ring, out)
+    _adaptive_fit_kernel(
+        z,
+        valid,
+        z0,
+        inv_step,
+        r_table,
+        rho_table,
+        growth_table(r_max),
+        widen_table(r_max),
+        N_WIDEN,
+        float(cam.fx),
+        float(cam.fy),
+        float(cam.cx),
+        float(cam.cy),
+        float(kappa),
+        RHO_FLOOR,
+        r_max,
+        np.float32(fill),
+        ring,
+        out,
+    )
     return out

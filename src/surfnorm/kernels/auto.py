@@ -76,8 +76,18 @@ def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray) 
     return out
 
 
-def auto(z: np.ndarray, valid: np.ndarray, cam, out: np.ndarray, *, tau: float = 1.0, fill: float = 0.0,
-         tie_tol: float = 0.0, relative: float = 0.0, **bands) -> np.ndarray:
+def auto(
+    z: np.ndarray,
+    valid: np.ndarray,
+    cam,
+    out: np.ndarray,
+    *,
+    tau: float = 1.0,
+    fill: float = 0.0,
+    tie_tol: float = 0.0,
+    relative: float = 0.0,
+    **bands,
+) -> np.ndarray:
     """``d2nt_v3`` (its defaults, and ``tau``) on clean depth, ``adaptive_fit`` on sensor depth, and their
     blend between (see the module docstring); fills ``out``.
 

@@ -44,8 +44,16 @@ RING = ((0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1))
 
 # atan(x) = x * sum_k _ATAN[k] x^(2k) for |x| <= tan(pi/8): a least-squares fit on Chebyshev nodes of
 # atan(sqrt(y)) / sqrt(y), y in [0, tan(pi/8)^2]; largest error 3e-13 rad (tested against np.arctan2).
-_ATAN = (0.9999999999992706, -0.3333333327838444, 0.19999993188896323, -0.14285391260192437,
-         0.11103534935103436, -0.08993217486701027, 0.06977006279223774, -0.03770175791065335)
+_ATAN = (
+    0.9999999999992706,
+    -0.3333333327838444,
+    0.19999993188896323,
+    -0.14285391260192437,
+    0.11103534935103436,
+    -0.08993217486701027,
+    0.06977006279223774,
+    -0.03770175791065335,
+)
 _TAN_PI_8 = math.tan(math.pi / 8)
 
 
@@ -64,8 +72,11 @@ def angle_from(s, c):
     den = select(big, a + b, b)
     x = num / select(den > 0.0, den, 1.0)
     y = x * x
-    atan_x = x * (_ATAN[0] + y * (_ATAN[1] + y * (_ATAN[2] + y * (_ATAN[3] + y * (_ATAN[4] + y * (
-        _ATAN[5] + y * (_ATAN[6] + y * _ATAN[7])))))))
+    atan_x = x * (
+        _ATAN[0]
+        + y
+        * (_ATAN[1] + y * (_ATAN[2] + y * (_ATAN[3] + y * (_ATAN[4] + y * (_ATAN[5] + y * (_ATAN[6] + y * _ATAN[7]))))))
+    )
     theta = atan_x + select(big, 0.25 * math.pi, 0.0)  # atan(a / b), in [0, pi/4]
     theta = select(s > abs_c, 0.5 * math.pi - theta, theta)
     return select(c < 0.0, math.pi - theta, theta)
@@ -111,6 +122,7 @@ def angle_term(a_x, a_y, a_z, b_x, b_y, b_z):
 # so the compiler vectorises it over pixels. The sums are taken in the order of eq. 2 (j = 1 .. 8)
 # from 0, as the naive reference does.
 
+
 def _make_row(term):
     """The row function of an averaging kernel whose triangle term (a @pixel helper) is ``term``."""
 
@@ -143,7 +155,7 @@ def _make_row(term):
         y_u, y_m, y_d = Y[v - 1, a:], Y[v, a:], Y[v + 1, a:]
         z_u, z_m, z_d = Z[v - 1, a:], Z[v, a:], Z[v + 1, a:]
         k_u, k_m, k_d = OK[v - 1, a:], OK[v, a:], OK[v + 1, a:]
-        o = row_out[3 * a:]
+        o = row_out[3 * a :]
         for u in range(b - a):
             p_x, p_y, p_z = x_m[u + 1], y_m[u + 1], z_m[u + 1]
             # RING: right, up-right, up, up-left, left, down-left, down, down-right

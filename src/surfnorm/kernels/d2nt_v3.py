@@ -25,8 +25,32 @@ __all__ = ["d2nt_v3"]
 
 
 @row
-def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs, n_runs,
-                    p_v, sm_v, s, p_h, ok_row, raw, has):
+def v3_estimate_row(
+    z,
+    valid,
+    q,
+    f_x,
+    f_y,
+    u_c,
+    c_y,
+    dlf,
+    tau,
+    rel,
+    ratio,
+    mnr_dlf,
+    fill,
+    fill_counts,
+    col,
+    runs,
+    n_runs,
+    p_v,
+    sm_v,
+    s,
+    p_h,
+    ok_row,
+    raw,
+    has,
+):
     """d2nt_v3, step 1 for row q: the row data of row q + 1, then the unrefined normals of row q.
 
     Rows live in rolling slots: row data (fast runs, softmin weights, MNR smoothness) of row r in slot r % 4,
@@ -81,16 +105,33 @@ def v3_estimate_row(z, valid, q, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_d
             softmin_weights_row(s, z[q], tau, rel, p_h)
         else:
             copy_row(p_v[j], p_h)
-        dag_row(z, valid, q, runs[j], n_runs[j], p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4], f_x, f_y, u_c,
-                np.float32(q - c_y), ratio, fill, raw[q % 3], ok_row)
+        dag_row(
+            z,
+            valid,
+            q,
+            runs[j],
+            n_runs[j],
+            p_h,
+            p_v[(q - 1) % 4],
+            p_v[(q + 1) % 4],
+            f_x,
+            f_y,
+            u_c,
+            np.float32(q - c_y),
+            ratio,
+            fill,
+            raw[q % 3],
+            ok_row,
+        )
         has_q, valid_q = has[q % 3], valid[q]
         for u in range(W):
             has_q[u] = ok_row[u] | (valid_q[u] & fill_counts)
 
 
 @row
-def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice,
-                  out_row):
+def v3_refine_row(
+    z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice, out_row
+):
     """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row.
 
     Parameters
@@ -121,9 +162,27 @@ def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h,
     else:
         copy_row(sm_v[j], sm_h)
     self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
-    mnr_row(v, H, raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3], has[(v - 1) % 3], has[v % 3],
-            has[(v + 1) % 3], sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self, z[v], tie_tol, fill, col, mruns,
-            choice, out_row)
+    mnr_row(
+        v,
+        H,
+        raw[(v - 1) % 3],
+        raw[v % 3],
+        raw[(v + 1) % 3],
+        has[(v - 1) % 3],
+        has[v % 3],
+        has[(v + 1) % 3],
+        sm_h,
+        sm_v[(v - 1) % 4],
+        sm_v[(v + 1) % 4],
+        s_self,
+        z[v],
+        tie_tol,
+        fill,
+        col,
+        mruns,
+        choice,
+        out_row,
+    )
 
 
 @ahead_of_time
@@ -144,8 +203,12 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf,
     runs, n_runs = np.empty((4, W // 2 + 1, 2), np.int64), np.zeros(4, np.int64)
     mruns, choice = np.empty((W // 2 + 1, 2), np.int64), np.empty(3 * W, np.int32)
     p_v, sm_v = np.empty((4, W), np.float32), np.empty((4, W), np.float32)
-    s, p_h, sm_h, s_self = (np.empty(W, np.float32), np.empty(W, np.float32), np.empty(W, np.float32),
-                            np.empty(W, np.float32))
+    s, p_h, sm_h, s_self = (
+        np.empty(W, np.float32),
+        np.empty(W, np.float32),
+        np.empty(W, np.float32),
+        np.empty(W, np.float32),
+    )
     raw, has = np.empty((3, W, 3), np.float32), np.empty((3, W), np.bool_)
     # A pixel whose normal failed holds `fill`; MNR treats it as having a normal when fill is non-zero and finite
     # (as when MNR runs on a finished map): fill_counts.
@@ -160,15 +223,69 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf,
     laplacian_row(z, valid, q0, runs[j], n_runs[j], mnr_dlf, np.int64(1), sm_v[j])
     for r in range(q0 - 1, v1):
         # estimate row q = r + 1 (needs the weights of rows q - 1 .. q + 1), then refine row v = r
-        v3_estimate_row(z, valid, r + 1, f_x, f_y, u_c, c_y, dlf, tau, rel, ratio, mnr_dlf, fill, fill_counts, col, runs,
-                        n_runs, p_v, sm_v, s, p_h, ok_row, raw, has)
+        v3_estimate_row(
+            z,
+            valid,
+            r + 1,
+            f_x,
+            f_y,
+            u_c,
+            c_y,
+            dlf,
+            tau,
+            rel,
+            ratio,
+            mnr_dlf,
+            fill,
+            fill_counts,
+            col,
+            runs,
+            n_runs,
+            p_v,
+            sm_v,
+            s,
+            p_h,
+            ok_row,
+            raw,
+            has,
+        )
         if r >= v0:
-            v3_refine_row(z, valid, r, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns,
-                          choice, out[r])
+            v3_refine_row(
+                z,
+                valid,
+                r,
+                mnr_dlf,
+                tie_tol,
+                fill,
+                runs,
+                n_runs,
+                sm_v,
+                sm_h,
+                s_self,
+                raw,
+                has,
+                col,
+                mruns,
+                choice,
+                out[r],
+            )
 
 
-def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="alpha", fill=0.0, tie_tol=0.0,
-            relative=0.0, bands=whole):
+def d2nt_v3(
+    z,
+    valid,
+    cam,
+    out,
+    *,
+    dlf="1d",
+    tau=1.0,
+    truncate=True,
+    mnr_dlf="alpha",
+    fill=0.0,
+    tie_tol=0.0,
+    relative=0.0,
+    bands=whole,
+):
     """D2NT with DAG gradients and MNR (``d2nt_v3``) in one sweep, into ``out`` (H, W, 3).
 
     ``tie_tol``: MNR's relative near-tie tolerance of the scale-invariant mode (see :func:`surfnorm.kernels.mnr.mnr_row`);
@@ -176,7 +293,14 @@ def d2nt_v3(z, valid, cam, out, *, dlf="1d", tau=1.0, truncate=True, mnr_dlf="al
     ``bands``: how rows are split over threads (see :mod:`surfnorm._bands`).
     """
     f = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy))
-    args = (dlf_code(dlf), kernel_tau(tau), float(relative), softmin_ratio(tau, truncate), dlf_code(mnr_dlf),
-            np.float32(tie_tol), np.float32(fill))
+    args = (
+        dlf_code(dlf),
+        kernel_tau(tau),
+        float(relative),
+        softmin_ratio(tau, truncate),
+        dlf_code(mnr_dlf),
+        np.float32(tie_tol),
+        np.float32(fill),
+    )
     bands(lambda a, b: _d2nt_v3_kernel(z, valid, *f, *args, out, a, b), z.shape[0])
     return out

@@ -42,8 +42,18 @@ from .._choices import DLF_NAMES
 from .._config import pixel, row
 from ._rows import clamp, exp32, segment, stencil, usable
 
-__all__ = ["dlf_code", "kernel_tau", "softmin_ratio", "smoothness", "softmin_pair", "fd_gradient", "dag_gradient",
-           "laplacian_row", "softmin_weights_row", "softmin_row"]
+__all__ = [
+    "dlf_code",
+    "kernel_tau",
+    "softmin_ratio",
+    "smoothness",
+    "softmin_pair",
+    "fd_gradient",
+    "dag_gradient",
+    "laplacian_row",
+    "softmin_weights_row",
+    "softmin_row",
+]
 
 # Weights of the 3x3 DLFs, as (edge neighbour weight, corner neighbour weight);
 # the centre weight is minus their sum, so nabla^2 z = sum_k w_k (z_k - z_c).
@@ -224,7 +234,14 @@ def laplacian_row(z, valid, r, runs, n_runs, dlf, axis, s):
         if b > a:
             # Views shifted so that the loop index starts at 0: Numba's negative-index
             # handling otherwise hides the address pattern and LLVM does not vectorise.
-            out, left, centre, right, above, below = s[a:b], mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
+            out, left, centre, right, above, below = (
+                s[a:b],
+                mid[a - 1 : b - 1],
+                mid[a:b],
+                mid[a + 1 : b + 1],
+                up[a:b],
+                dn[a:b],
+            )
             if dlf == 0 and axis == 0:
                 for i in range(b - a):
                     out[i] = abs((left[i] - centre[i]) + (right[i] - centre[i]))
@@ -236,7 +253,12 @@ def laplacian_row(z, valid, r, runs, n_runs, dlf, axis, s):
                     c = centre[i]
                     out[i] = abs(edge_w * ((((above[i] - c) + (below[i] - c)) + (left[i] - c)) + (right[i] - c)))
             else:
-                above_l, above_r, below_l, below_r = up[a - 1:b - 1], up[a + 1:b + 1], dn[a - 1:b - 1], dn[a + 1:b + 1]
+                above_l, above_r, below_l, below_r = (
+                    up[a - 1 : b - 1],
+                    up[a + 1 : b + 1],
+                    dn[a - 1 : b - 1],
+                    dn[a + 1 : b + 1],
+                )
                 for i in range(b - a):
                     c = centre[i]
                     lap = edge_w * ((((above[i] - c) + (below[i] - c)) + (left[i] - c)) + (right[i] - c))

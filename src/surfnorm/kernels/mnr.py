@@ -17,7 +17,6 @@ up/down with the vertical one, and p with their mean (as in the code).
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from .._bands import whole
@@ -88,8 +87,27 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
 
 
 @row
-def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, z_row, tie_tol, fill, col,
-            runs, choice, out_row):
+def mnr_row(
+    v,
+    H,
+    n_up,
+    n_mid,
+    n_dn,
+    has_up,
+    has_mid,
+    has_dn,
+    s_h,
+    s_up,
+    s_dn,
+    s_self,
+    z_row,
+    tie_tol,
+    fill,
+    col,
+    runs,
+    choice,
+    out_row,
+):
     """MNR of row v (Sec. IV-A's rule): each pixel with a normal takes the normal of the smoothest of
     [left, right, up, down, itself].
 
@@ -128,20 +146,41 @@ def mnr_row(v, H, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s
     """
     W = out_row.shape[0]
     n_runs = box_row(has_up, has_mid, has_dn, v >= 1 and v < H - 1, col, runs)
-    up_flat, mid_flat, dn_flat, out_flat = n_up.reshape(3 * W), n_mid.reshape(3 * W), n_dn.reshape(3 * W), out_row.reshape(3 * W)
+    up_flat, mid_flat, dn_flat, out_flat = (
+        n_up.reshape(3 * W),
+        n_mid.reshape(3 * W),
+        n_dn.reshape(3 * W),
+        out_row.reshape(3 * W),
+    )
     u = 0
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
         for x in range(u, a):
-            mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self,
-                      tie_tol * z_row[x], fill, out_row)
+            mnr_pixel(
+                v,
+                H,
+                x,
+                n_up,
+                n_mid,
+                n_dn,
+                has_up,
+                has_mid,
+                has_dn,
+                s_h,
+                s_up,
+                s_dn,
+                s_self,
+                tie_tol * z_row[x],
+                fill,
+                out_row,
+            )
         if b > a:  # all four neighbours have normals: branch-free argmin (views start at a: see laplacian_row)
-            s_l, s_r, s_a, s_b, s_c = s_h[a - 1:b - 1], s_h[a + 1:b + 1], s_up[a:b], s_dn[a:b], s_self[a:b]
+            s_l, s_r, s_a, s_b, s_c = s_h[a - 1 : b - 1], s_h[a + 1 : b + 1], s_up[a:b], s_dn[a:b], s_self[a:b]
             z_p = z_row[a:b]
-            n_l, n_r = mid_flat[3 * (a - 1):3 * (b - 1)], mid_flat[3 * (a + 1):3 * (b + 1)]
-            n_a, n_b, n_c = up_flat[3 * a:3 * b], dn_flat[3 * a:3 * b], mid_flat[3 * a:3 * b]
-            run_out = out_flat[3 * a:3 * b]
-            run_choice = choice[3 * a:3 * b]
+            n_l, n_r = mid_flat[3 * (a - 1) : 3 * (b - 1)], mid_flat[3 * (a + 1) : 3 * (b + 1)]
+            n_a, n_b, n_c = up_flat[3 * a : 3 * b], dn_flat[3 * a : 3 * b], mid_flat[3 * a : 3 * b]
+            run_out = out_flat[3 * a : 3 * b]
+            run_choice = choice[3 * a : 3 * b]
             for i in range(b - a):
                 best = smoothest(s_l[i], s_r[i], s_a[i], s_b[i], s_c[i], True, True, True, True, tie_tol * z_p[i])
                 run_choice[3 * i] = best
@@ -185,8 +224,27 @@ def _mnr_kernel(z, valid, has_normal, normals, dlf, tie_tol, fill, out, v0, v1):
             s_h[:] = s_v[j]
         self_smoothness_row(s_h, s_v[j], dlf == 0, s_self)
         up, dn = max(v - 1, 0), min(v + 1, H - 1)
-        mnr_row(v, H, normals[up], normals[v], normals[dn], has_normal[up], has_normal[v], has_normal[dn],
-                s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self, z[v], tie_tol, fill, col, mruns, choice, out[v])
+        mnr_row(
+            v,
+            H,
+            normals[up],
+            normals[v],
+            normals[dn],
+            has_normal[up],
+            has_normal[v],
+            has_normal[dn],
+            s_h,
+            s_v[(v - 1) % 3],
+            s_v[(v + 1) % 3],
+            s_self,
+            z[v],
+            tie_tol,
+            fill,
+            col,
+            mruns,
+            choice,
+            out[v],
+        )
 
 
 def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -107,16 +107,39 @@ def window_moments(P, valid, v, u, h):
         for q_u in range(u - h, u + h + 1):
             w = 1.0 if valid[q_v, q_u] else 0.0
             m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = add_offset(
-                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz,
-                (P[0, q_v, q_u] - p_x) * w, (P[1, q_v, q_u] - p_y) * w, (P[2, q_v, q_u] - p_z) * w, w)
+                m,
+                s_x,
+                s_y,
+                s_z,
+                s_xx,
+                s_xy,
+                s_xz,
+                s_yy,
+                s_yz,
+                s_zz,
+                (P[0, q_v, q_u] - p_x) * w,
+                (P[1, q_v, q_u] - p_y) * w,
+                (P[2, q_v, q_u] - p_z) * w,
+                w,
+            )
     return m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
 
 
 @pixel
 def add_offset(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, r_x, r_y, r_z, w):
     """The moments with one more offset r (already weighted by w): count, sums, sums of products."""
-    return (m + w, s_x + r_x, s_y + r_y, s_z + r_z, s_xx + r_x * r_x, s_xy + r_x * r_y, s_xz + r_x * r_z,
-            s_yy + r_y * r_y, s_yz + r_y * r_z, s_zz + r_z * r_z)
+    return (
+        m + w,
+        s_x + r_x,
+        s_y + r_y,
+        s_z + r_z,
+        s_xx + r_x * r_x,
+        s_xy + r_x * r_y,
+        s_xz + r_x * r_z,
+        s_yy + r_y * r_y,
+        s_yz + r_y * r_z,
+        s_zz + r_z * r_z,
+    )
 
 
 @pixel
@@ -124,8 +147,7 @@ def characteristic(a_00, a_01, a_02, a_11, a_12, a_22):
     """(t_1, t_2, t_3): det(A - l I) = t_3 - t_2 l + t_1 l^2 - l^3 for the symmetric 3x3 matrix A."""
     t_1 = a_00 + a_11 + a_22
     t_2 = a_00 * a_11 - a_01 * a_01 + a_00 * a_22 - a_02 * a_02 + a_11 * a_22 - a_12 * a_12
-    t_3 = (a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02)
-           + a_02 * (a_01 * a_12 - a_11 * a_02))
+    t_3 = a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02) + a_02 * (a_01 * a_12 - a_11 * a_02)
     return t_1, t_2, t_3
 
 
@@ -171,7 +193,12 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
     l_c = x_c * x_c + y_c * y_c + z_c * z_c
     # selects, not branches, so that loops of this vectorise
     use_b = l_b > l_a
-    n_x, n_y, n_z, l = (x_b if use_b else x_a), (y_b if use_b else y_a), (z_b if use_b else z_a), (l_b if use_b else l_a)
+    n_x, n_y, n_z, l = (
+        (x_b if use_b else x_a),
+        (y_b if use_b else y_a),
+        (z_b if use_b else z_a),
+        (l_b if use_b else l_a),
+    )
     use_c = l_c > l
     n_x, n_y, n_z, l = (x_c if use_c else n_x), (y_c if use_c else n_y), (z_c if use_c else n_z), (l_c if use_c else l)
     ok = (l > 0.0) & (l < np.inf)  # positive and finite (false for NaN)
@@ -196,8 +223,14 @@ def write_facing(out, v, u, n_x, n_y, n_z, ok, p_x, p_y, p_z, fill):
 @pixel
 def scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
     """S = sum (q - c)(q - c)^T about the centroid c, from the moments of the offsets r = q - p."""
-    return (s_xx - s_x * s_x / m, s_xy - s_x * s_y / m, s_xz - s_x * s_z / m,
-            s_yy - s_y * s_y / m, s_yz - s_y * s_z / m, s_zz - s_z * s_z / m)
+    return (
+        s_xx - s_x * s_x / m,
+        s_xy - s_x * s_y / m,
+        s_xz - s_x * s_z / m,
+        s_yy - s_y * s_y / m,
+        s_yz - s_y * s_z / m,
+        s_zz - s_z * s_z / m,
+    )
 
 
 @pixel
@@ -208,11 +241,19 @@ def plane_svd_characteristic(c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
     a_00, a_11, a_22 = s_11 * s_22 - s_12 * s_12, s_00 * s_22 - s_02 * s_02, s_00 * s_11 - s_01 * s_01  # adj(S)
     a_01, a_02, a_12 = s_02 * s_12 - s_01 * s_22, s_01 * s_12 - s_02 * s_11, s_01 * s_02 - s_00 * s_12
     t_3 = s_00 * a_00 + s_01 * a_01 + s_02 * a_02
-    g_0 = (a_00 * c_x * c_x + a_11 * c_y * c_y + a_22 * c_z * c_z
-           + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z))
+    g_0 = (
+        a_00 * c_x * c_x
+        + a_11 * c_y * c_y
+        + a_22 * c_z * c_z
+        + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z)
+    )
     c_c = c_x * c_x + c_y * c_y + c_z * c_z
-    c_s_c = (s_00 * c_x * c_x + s_11 * c_y * c_y + s_22 * c_z * c_z
-             + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z))
+    c_s_c = (
+        s_00 * c_x * c_x
+        + s_11 * c_y * c_y
+        + s_22 * c_z * c_z
+        + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z)
+    )
     g_1 = c_s_c - t_1 * c_c
     g_2 = c_c
     return t_1, t_2, t_3, g_0, g_1, g_2
@@ -258,8 +299,20 @@ def relative_moments(rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, 
     the unit of depth; measured relative to the pixel's own depth it does not, and no other pixel matters."""
     l = rel / p_z if rel > 0.0 else 1.0
     l2 = l * l
-    return (p_x * l, p_y * l, p_z * l, s_x * l, s_y * l, s_z * l, s_xx * l2, s_xy * l2, s_xz * l2, s_yy * l2, s_yz * l2,
-            s_zz * l2)
+    return (
+        p_x * l,
+        p_y * l,
+        p_z * l,
+        s_x * l,
+        s_y * l,
+        s_z * l,
+        s_xx * l2,
+        s_xy * l2,
+        s_xz * l2,
+        s_yy * l2,
+        s_yz * l2,
+        s_zz * l2,
+    )
 
 
 @pixel
@@ -270,7 +323,8 @@ def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_
     n_x = n_y = n_z = 0.0
     if kind == _PLANE_SVD:
         p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = relative_moments(
-            rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+            rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
+        )
     ok = False
     if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
         sigma = smallest_eigenvalue(s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
@@ -286,9 +340,14 @@ def fit_normal(kind, p_x, p_y, p_z, m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_
             c_z = p_z + s_z / m
             lam = plane_svd_lambda(m, c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22)
             mu = m * lam / (m - lam)
-            n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
-                                            s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
-                                            s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+            n_x, n_y, n_z, ok = null_vector(
+                s_00 - lam - mu * c_x * c_x,
+                s_01 - mu * c_x * c_y,
+                s_02 - mu * c_x * c_z,
+                s_11 - lam - mu * c_y * c_y,
+                s_12 - mu * c_y * c_z,
+                s_22 - lam - mu * c_z * c_z,
+            )
     return n_x, n_y, n_z, ok
 
 
@@ -306,8 +365,23 @@ def _window_fit_kernel(P, valid, h, kind, rel, fill, out, v0, v1):
             if valid[v, u]:
                 m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = window_moments(P, valid, v, u, h)
                 if m >= 3 and window_spans(valid, v, u, h):  # p and two other points, not on one image line
-                    n_x, n_y, n_z, ok = fit_normal(kind, P[0, v, u], P[1, v, u], P[2, v, u], m, s_x, s_y, s_z,
-                                                   s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, rel)
+                    n_x, n_y, n_z, ok = fit_normal(
+                        kind,
+                        P[0, v, u],
+                        P[1, v, u],
+                        P[2, v, u],
+                        m,
+                        s_x,
+                        s_y,
+                        s_z,
+                        s_xx,
+                        s_xy,
+                        s_xz,
+                        s_yy,
+                        s_yz,
+                        s_zz,
+                        rel,
+                    )
             write_facing(out, o_v, o_u, n_x, n_y, n_z, ok, P[0, v, u], P[1, v, u], P[2, v, u], fill)
 
 
@@ -377,8 +451,21 @@ def tile_moments(R, i):
             q = 4 * r * _PITCH + i + d_u
             w = R[q + 3 * _PITCH]
             m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = add_offset(
-                m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz,
-                (R[q] - p_x) * w, (R[q + _PITCH] - p_y) * w, (R[q + 2 * _PITCH] - p_z) * w, w)
+                m,
+                s_x,
+                s_y,
+                s_z,
+                s_xx,
+                s_xy,
+                s_xz,
+                s_yy,
+                s_yz,
+                s_zz,
+                (R[q] - p_x) * w,
+                (R[q + _PITCH] - p_y) * w,
+                (R[q + 2 * _PITCH] - p_z) * w,
+                w,
+            )
             o_u, o_v = np.float64(d_u - 1), np.float64(r - 1)
             s_u += w * o_u
             s_v += w * o_v
@@ -396,7 +483,8 @@ def tile_prepare(R, n, kind, rel, work):
         m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz, p_x, p_y, p_z, w_p, spans = tile_moments(R, i)
         if kind == _PLANE_SVD:
             p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = relative_moments(
-                rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz)
+                rel, p_x, p_y, p_z, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
+            )
         if kind == _VECTOR_SVD:  # the matrix of the offsets q - p themselves
             s_00, s_01, s_02, s_11, s_12, s_22 = s_xx, s_xy, s_xz, s_yy, s_yz, s_zz
         else:
@@ -437,9 +525,16 @@ def tile_newton(n, kind, work):
         for i in range(n):
             lam = work[_LAM * _PITCH + i]
             if kind == _PLANE_SVD:
-                step = plane_svd_step(work[_M * _PITCH + i], work[_T1 * _PITCH + i], work[_T2 * _PITCH + i],
-                                      work[_T3 * _PITCH + i], work[_G0 * _PITCH + i], work[_G1 * _PITCH + i],
-                                      work[_G2 * _PITCH + i], lam)
+                step = plane_svd_step(
+                    work[_M * _PITCH + i],
+                    work[_T1 * _PITCH + i],
+                    work[_T2 * _PITCH + i],
+                    work[_T3 * _PITCH + i],
+                    work[_G0 * _PITCH + i],
+                    work[_G1 * _PITCH + i],
+                    work[_G2 * _PITCH + i],
+                    lam,
+                )
             else:
                 step = newton_step(work[_T1 * _PITCH + i], work[_T2 * _PITCH + i], work[_T3 * _PITCH + i], lam)
             go = (work[_ACT * _PITCH + i] != 0.0) & (step > _NEWTON_TOL * lam)
@@ -466,9 +561,14 @@ def tile_finish(R, n, kind, rel, fill, work, out_flat):
             c_y = p_y * l + work[_SY * _PITCH + i] / m
             c_z = p_z * l + work[_SZ * _PITCH + i] / m
             mu = m * lam / (m - lam)
-            n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y,
-                                            s_02 - mu * c_x * c_z, s_11 - lam - mu * c_y * c_y,
-                                            s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+            n_x, n_y, n_z, ok = null_vector(
+                s_00 - lam - mu * c_x * c_x,
+                s_01 - mu * c_x * c_y,
+                s_02 - mu * c_x * c_z,
+                s_11 - lam - mu * c_y * c_y,
+                s_12 - mu * c_y * c_z,
+                s_22 - lam - mu * c_z * c_z,
+            )
         else:
             n_x, n_y, n_z, ok = null_vector(s_00 - lam, s_01, s_02, s_11 - lam, s_12, s_22 - lam)
         ok = ok & (w_p != 0.0) & (m >= 3) & (work[_SPANS * _PITCH + i] != 0.0)
@@ -494,10 +594,10 @@ def _tiled_fit_kernel(P_t, kind, rel, fill, out, v0, v1):
         n = min(W - c0, _TILE)
         for o_v in range(v0, v1):
             start = t * tile_size + o_v * 4 * _PITCH  # padded rows o_v .. o_v + 2
-            R = flat[start:start + 12 * _PITCH]
+            R = flat[start : start + 12 * _PITCH]
             tile_prepare(R, n, kind, rel, work)
             tile_newton(n, kind, work)
-            out_flat = out[o_v].reshape(3 * W)[3 * c0:3 * (c0 + n)]
+            out_flat = out[o_v].reshape(3 * W)[3 * c0 : 3 * (c0 + n)]
             tile_finish(R, n, kind, rel, fill, work, out_flat)
 
 

@@ -66,8 +66,8 @@ import numba
 import numba.extending
 import numpy as np
 
-from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from .._bands import whole
+from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from .._config import njit, pixel, select
 from ._rows import camera_facing, fill_pixel, store_unit_flat, write_unit
 from .three_filters import fronto_parallel_fallback, third_nz
@@ -215,25 +215,46 @@ def _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, g_u, g_v, e_u, e_v, 
         # Three loops per row, each of which LLVM vectorises (fused, it did not).
         for i in range(n):
             u = i + _P
-            flags = np.uint8(continuity(l_u[v, u - 1], l_u[v, u - 2]) | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
-                             | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
-                             | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6))
+            flags = np.uint8(
+                continuity(l_u[v, u - 1], l_u[v, u - 2])
+                | (continuity(l_u[v, u + 1], l_u[v, u + 2]) << 2)
+                | (continuity(l_v[v - 1, u], l_v[v - 2, u]) << 4)
+                | (continuity(l_v[v + 1, u], l_v[v + 2, u]) << 6)
+            )
             con[v, u] = select(ok[v, u], flags, np.uint8(0))
         for i in range(n):
             u = i + _P
-            g, e, st = initial_gradient(s[v, u - 1], s[v, u], s[v, u + 1], ok[v, u - 1], ok[v, u + 1],
-                                        a_u[v, u - 1], a_u[v, u], a_u[v, u + 1],
-                                        ((u == _P) & ok[v, u + 1]) | ((u == Wp - _P - 1) & ok[v, u - 1]), reflect,
-                                        tolerance_at(tol, s[v, u]))
+            g, e, st = initial_gradient(
+                s[v, u - 1],
+                s[v, u],
+                s[v, u + 1],
+                ok[v, u - 1],
+                ok[v, u + 1],
+                a_u[v, u - 1],
+                a_u[v, u],
+                a_u[v, u + 1],
+                ((u == _P) & ok[v, u + 1]) | ((u == Wp - _P - 1) & ok[v, u - 1]),
+                reflect,
+                tolerance_at(tol, s[v, u]),
+            )
             g_u[v, u] = select(ok[v, u], g, 0.0)
             e_u[v, u] = select(ok[v, u], e, _INF)
             s_u[v, u] = select(ok[v, u], st, _NO_STATE)
         for i in range(n):
             u = i + _P
-            g, e, st = initial_gradient(s[v - 1, u], s[v, u], s[v + 1, u], ok[v - 1, u], ok[v + 1, u],
-                                        a_v[v - 1, u], a_v[v, u], a_v[v + 1, u],
-                                        ((v == _P) & ok[v + 1, u]) | ((v == Hp - _P - 1) & ok[v - 1, u]), reflect,
-                                        tolerance_at(tol, s[v, u]))
+            g, e, st = initial_gradient(
+                s[v - 1, u],
+                s[v, u],
+                s[v + 1, u],
+                ok[v - 1, u],
+                ok[v + 1, u],
+                a_v[v - 1, u],
+                a_v[v, u],
+                a_v[v + 1, u],
+                ((v == _P) & ok[v + 1, u]) | ((v == Hp - _P - 1) & ok[v - 1, u]),
+                reflect,
+                tolerance_at(tol, s[v, u]),
+            )
             g_v[v, u] = select(ok[v, u], g, 0.0)
             e_v[v, u] = select(ok[v, u], e, _INF)
             s_v[v, u] = select(ok[v, u], st, _NO_STATE)
@@ -284,8 +305,7 @@ def pick(k, c0, c1, c2, c3, c4, c5, c6, c7, c8):
 
 
 @njit(noalias=True)
-def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2,
-              v0, v1):
+def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, g_v2, e_u2, e_v2, s_u2, s_v2, v0, v1):
     """One Jacobi pass of the dynamic programming, from the first set of buffers into the second.
 
     Every inner pixel of image rows v0 .. v1 - 1 of the second set is written (halo: the first set's rows
@@ -314,45 +334,75 @@ def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, 
             p_dn = a_v[v + 1, u] + e_u[v + 1, u]
             has_gv = e_v[v, u] < _INF  # candidates 5-8 use G_v at p
             e0 = a_u[v, u - 1] + B * ((state_cost(s_u[v, u], 0.0) + state_cost(s_u[v, u - 1], 0.0)) + (flags & 3))
-            e1 = a_u[v, u + 1] + B * ((state_cost(s_u[v, u], 1.0) + state_cost(s_u[v, u + 1], 1.0)) + ((flags >> 2) & 3))
+            e1 = a_u[v, u + 1] + B * (
+                (state_cost(s_u[v, u], 1.0) + state_cost(s_u[v, u + 1], 1.0)) + ((flags >> 2) & 3)
+            )
             e5 = (p_up + a_u[v - 1, u - 1]) + e_v[v - 1, u - 1]
             e6 = (p_up + a_u[v - 1, u + 1]) + e_v[v - 1, u + 1]
             e7 = (p_dn + a_u[v + 1, u - 1]) + e_v[v + 1, u - 1]
             e8 = (p_dn + a_u[v + 1, u + 1]) + e_v[v + 1, u + 1]
-            k_u, best_u = cheapest(e0, e1, e_u[v, u], 2.0 * p_up, 2.0 * p_dn, select(has_gv, e5, _INF),
-                                   select(has_gv, e6, _INF), select(has_gv, e7, _INF), select(has_gv, e8, _INF), tol_p)
-            new_gu = pick(k_u,
-                          (gu_p + c * z_p) - c * (s[v, u - 1] + g_u[v, u - 1]),
-                          (gu_p - c * z_p) + c * (s[v, u + 1] - g_u[v, u + 1]),
-                          gu_p,
-                          g_u[v - 1, u],
-                          g_u[v + 1, u],
-                          (g_u[v - 1, u] - g_v[v - 1, u - 1]) + gv_p,
-                          (g_u[v - 1, u] + g_v[v - 1, u + 1]) - gv_p,
-                          (g_u[v + 1, u] + g_v[v + 1, u - 1]) - gv_p,
-                          (g_u[v + 1, u] - g_v[v + 1, u + 1]) + gv_p)
+            k_u, best_u = cheapest(
+                e0,
+                e1,
+                e_u[v, u],
+                2.0 * p_up,
+                2.0 * p_dn,
+                select(has_gv, e5, _INF),
+                select(has_gv, e6, _INF),
+                select(has_gv, e7, _INF),
+                select(has_gv, e8, _INF),
+                tol_p,
+            )
+            new_gu = pick(
+                k_u,
+                (gu_p + c * z_p) - c * (s[v, u - 1] + g_u[v, u - 1]),
+                (gu_p - c * z_p) + c * (s[v, u + 1] - g_u[v, u + 1]),
+                gu_p,
+                g_u[v - 1, u],
+                g_u[v + 1, u],
+                (g_u[v - 1, u] - g_v[v - 1, u - 1]) + gv_p,
+                (g_u[v - 1, u] + g_v[v - 1, u + 1]) - gv_p,
+                (g_u[v + 1, u] + g_v[v + 1, u - 1]) - gv_p,
+                (g_u[v + 1, u] - g_v[v + 1, u + 1]) + gv_p,
+            )
             # ---- G_v ----
             q_l = a_u[v, u - 1] + e_v[v, u - 1]
             q_r = a_u[v, u + 1] + e_v[v, u + 1]
             has_gu = e_u[v, u] < _INF  # candidates 5-8 use G_u at p
-            e0 = a_v[v - 1, u] + B * ((state_cost(s_v[v, u], 0.0) + state_cost(s_v[v - 1, u], 0.0)) + ((flags >> 4) & 3))
-            e1 = a_v[v + 1, u] + B * ((state_cost(s_v[v, u], 1.0) + state_cost(s_v[v + 1, u], 1.0)) + ((flags >> 6) & 3))
+            e0 = a_v[v - 1, u] + B * (
+                (state_cost(s_v[v, u], 0.0) + state_cost(s_v[v - 1, u], 0.0)) + ((flags >> 4) & 3)
+            )
+            e1 = a_v[v + 1, u] + B * (
+                (state_cost(s_v[v, u], 1.0) + state_cost(s_v[v + 1, u], 1.0)) + ((flags >> 6) & 3)
+            )
             e5 = (q_l + a_v[v - 1, u - 1]) + e_u[v - 1, u - 1]
             e6 = (q_l + a_v[v + 1, u - 1]) + e_u[v + 1, u - 1]
             e7 = (q_r + a_v[v - 1, u + 1]) + e_u[v - 1, u + 1]
             e8 = (q_r + a_v[v + 1, u + 1]) + e_u[v + 1, u + 1]
-            k_v, best_v = cheapest(e0, e1, e_v[v, u], 2.0 * q_l, 2.0 * q_r, select(has_gu, e5, _INF),
-                                   select(has_gu, e6, _INF), select(has_gu, e7, _INF), select(has_gu, e8, _INF), tol_p)
-            new_gv = pick(k_v,
-                          (gv_p + c * z_p) - c * (s[v - 1, u] + g_v[v - 1, u]),
-                          (gv_p - c * z_p) + c * (s[v + 1, u] - g_v[v + 1, u]),
-                          gv_p,
-                          g_v[v, u - 1],
-                          g_v[v, u + 1],
-                          (g_v[v, u - 1] - g_u[v - 1, u - 1]) + gu_p,
-                          (g_v[v, u - 1] + g_u[v + 1, u - 1]) - gu_p,
-                          (g_v[v, u + 1] + g_u[v - 1, u + 1]) - gu_p,
-                          (g_v[v, u + 1] - g_u[v + 1, u + 1]) + gu_p)
+            k_v, best_v = cheapest(
+                e0,
+                e1,
+                e_v[v, u],
+                2.0 * q_l,
+                2.0 * q_r,
+                select(has_gu, e5, _INF),
+                select(has_gu, e6, _INF),
+                select(has_gu, e7, _INF),
+                select(has_gu, e8, _INF),
+                tol_p,
+            )
+            new_gv = pick(
+                k_v,
+                (gv_p + c * z_p) - c * (s[v - 1, u] + g_v[v - 1, u]),
+                (gv_p - c * z_p) + c * (s[v + 1, u] - g_v[v + 1, u]),
+                gv_p,
+                g_v[v, u - 1],
+                g_v[v, u + 1],
+                (g_v[v, u - 1] - g_u[v - 1, u - 1]) + gu_p,
+                (g_v[v, u - 1] + g_u[v + 1, u - 1]) - gu_p,
+                (g_v[v, u + 1] + g_u[v - 1, u + 1]) - gu_p,
+                (g_v[v, u + 1] - g_u[v + 1, u + 1]) + gu_p,
+            )
             # ---- write; an invalid pixel stays missing ----
             g_u2[v, u] = select(valid_p, new_gu, 0.0)
             e_u2[v, u] = select(valid_p, best_u, _INF)
@@ -439,8 +489,17 @@ def _run_sda(signal, valid, iterations, border, tie_tol=0.0, bands=whole):
     a_u = padded(np.float64, _INF)
     a_v = padded(np.float64, _INF)
     con = padded(np.uint8, 0)
-    sets = [[padded(np.float64, 0.0), padded(np.float64, 0.0), padded(np.float64, _INF), padded(np.float64, _INF),
-             padded(np.int8, _NO_STATE), padded(np.int8, _NO_STATE)] for _ in range(2)]
+    sets = [
+        [
+            padded(np.float64, 0.0),
+            padded(np.float64, 0.0),
+            padded(np.float64, _INF),
+            padded(np.float64, _INF),
+            padded(np.int8, _NO_STATE),
+            padded(np.int8, _NO_STATE),
+        ]
+        for _ in range(2)
+    ]
     l_u = padded(np.float64, 1.0)  # the Laplacians write every row and column but the outermost
     l_v = padded(np.float64, 1.0)
 
@@ -455,14 +514,18 @@ def _run_sda(signal, valid, iterations, border, tie_tol=0.0, bands=whole):
                 arr[:_P] = value
             if b == H:
                 arr[-_P:] = value
-        s[a + _P:b + _P, _P:-_P] = np.where(valid[a:b], signal(a, b), 0.0)  # user depth is never read where invalid
-        ok[a + _P:b + _P, _P:-_P] = valid[a:b]
+        s[a + _P : b + _P, _P:-_P] = np.where(valid[a:b], signal(a, b), 0.0)  # user depth is never read where invalid
+        ok[a + _P : b + _P, _P:-_P] = valid[a:b]
 
     bands(first, H)
     tol = _kernel_tol(tie_tol)
     # padded rows 1 .. Hp - 2: the first and last bands also cover the margin rows that the image rows' halo reads
-    bands(lambda a, b: _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v, 1 if a == 0 else a + _P,
-                                       shape[0] - 1 if b == H else b + _P), H)
+    bands(
+        lambda a, b: _sda_laplacians(
+            s, ok, tol, l_u, l_v, a_u, a_v, 1 if a == 0 else a + _P, shape[0] - 1 if b == H else b + _P
+        ),
+        H,
+    )
     reflect = border == "reflect"
     bands(lambda a, b: _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, *sets[0], a, b), H)
     cap = MAX_ITERATIONS if iterations is None else iterations
@@ -513,8 +576,9 @@ def _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill
             n_x = f_x * gu
             n_y = f_y * gv
             n_z = -((s[v + _P, u + _P] + v_c * gv) + (u - c_x) * gu)
-            store_unit_flat(out_flat, u, n_x, n_y, n_z, (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF),
-                            fill)
+            store_unit_flat(
+                out_flat, u, n_x, n_y, n_z, (e_u[v + _P, u + _P] < _INF) & (e_v[v + _P, u + _P] < _INF), fill
+            )
 
 
 @njit
@@ -544,8 +608,7 @@ def _inverse(z):
     return rows
 
 
-def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0, tie_tol=0.0,
-            bands=whole):
+def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0, tie_tol=0.0, bands=whole):
     """SDA-SNE (Ming et al., 3DV 2022): SDA gradients, then CP2TV (or 3F2N's median), into ``out``.
 
     ``tie_tol`` 0 (the paper-faithful mode) compares exactly; the scale-invariant mode passes
@@ -559,8 +622,9 @@ def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided
         reflect = border == "reflect"
         bands(lambda a, b: _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, reflect, fill32, out, a, b), z.shape[0])
     else:
-        (g_u, g_v, e_u, e_v, s), _, work = _run_sda(lambda a, b: z[a:b].astype(np.float64), valid, iterations,
-                                                    border, tie_tol, bands)
+        (g_u, g_v, e_u, e_v, s), _, work = _run_sda(
+            lambda a, b: z[a:b].astype(np.float64), valid, iterations, border, tie_tol, bands
+        )
         bands(lambda a, b: _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, *f, fill32, out, a, b), z.shape[0])
     _give(work)
     return out

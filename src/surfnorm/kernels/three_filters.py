@@ -189,8 +189,17 @@ def all_nine_valid(valid, v, u):
     H, W = valid.shape
     ok = False
     if v >= 1 and v < H - 1 and u >= 1 and u < W - 1:
-        ok = (valid[v - 1, u - 1] & valid[v - 1, u] & valid[v - 1, u + 1] & valid[v, u - 1] & valid[v, u]
-              & valid[v, u + 1] & valid[v + 1, u - 1] & valid[v + 1, u] & valid[v + 1, u + 1])
+        ok = (
+            valid[v - 1, u - 1]
+            & valid[v - 1, u]
+            & valid[v - 1, u + 1]
+            & valid[v, u - 1]
+            & valid[v, u]
+            & valid[v, u + 1]
+            & valid[v + 1, u - 1]
+            & valid[v + 1, u]
+            & valid[v + 1, u + 1]
+        )
     return ok
 
 
@@ -229,22 +238,27 @@ def interior_candidates(z, v, u, g_u, g_v, u_c, v_c):
     z_p = np.float64(z[v, u])
     zx_p = u_c * z_p
     zy_p = v_c * z_p
-    return (nz_or_inf(np.float64(z[v - 1, u - 1]), u_c - 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v - 1, u]), u_c, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v - 1, u + 1]), u_c + 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v, u - 1]), u_c - 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v, u + 1]), u_c + 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v + 1, u - 1]), u_c - 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v + 1, u]), u_c, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
-            nz_or_inf(np.float64(z[v + 1, u + 1]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p))
+    return (
+        nz_or_inf(np.float64(z[v - 1, u - 1]), u_c - 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v - 1, u]), u_c, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v - 1, u + 1]), u_c + 1.0, v_c - 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v, u - 1]), u_c - 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v, u + 1]), u_c + 1.0, v_c, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v + 1, u - 1]), u_c - 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v + 1, u]), u_c, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+        nz_or_inf(np.float64(z[v + 1, u + 1]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p),
+    )
 
 
 @pixel
 def count_finite8(a0, a1, a2, a3, a4, a5, a6, a7):
     """How many of the 8 candidates exist (are not +inf)."""
     inf = np.float32(np.inf)
-    return ((np.int64(a0 != inf) + np.int64(a1 != inf)) + (np.int64(a2 != inf) + np.int64(a3 != inf))
-            + ((np.int64(a4 != inf) + np.int64(a5 != inf)) + (np.int64(a6 != inf) + np.int64(a7 != inf))))
+    return (
+        (np.int64(a0 != inf) + np.int64(a1 != inf))
+        + (np.int64(a2 != inf) + np.int64(a3 != inf))
+        + ((np.int64(a4 != inf) + np.int64(a5 != inf)) + (np.int64(a6 != inf) + np.int64(a7 != inf)))
+    )
 
 
 @pixel
@@ -306,13 +320,15 @@ def median_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
     v_c = v - c_y
     for u in range(u0, u1):
         u_c = u - c_x
-        g_u, g_v = interior_gradients(np.float64(z[v, u - 1]), np.float64(z[v, u + 1]),
-                                      np.float64(z[v - 1, u]), np.float64(z[v + 1, u]))
+        g_u, g_v = interior_gradients(
+            np.float64(z[v, u - 1]), np.float64(z[v, u + 1]), np.float64(z[v - 1, u]), np.float64(z[v + 1, u])
+        )
         a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
         count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
         s0, s1, s2, s3, s4, s5, s6, s7 = sort8(a0, a1, a2, a3, a4, a5, a6, a7)
-        n_x, n_y, n_z = finish(f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count,
-                               u_c, v_c, f_x, f_y)
+        n_x, n_y, n_z = finish(
+            f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count, u_c, v_c, f_x, f_y
+        )
         rows[0, u] = n_x
         rows[1, u] = n_y
         rows[2, u] = n_z
@@ -322,13 +338,14 @@ def median_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
 def median_span(z, v, a, b, f_x, f_y, c_x, c_y, rows):
     """:func:`median_run` over pixels a..b-1 of row v, written on views that start at the span, so
     that the loop index starts at 0 and LLVM vectorises it wherever the span starts."""
-    up, mid, dn = z[v - 1, a - 1:b + 1], z[v, a - 1:b + 1], z[v + 1, a - 1:b + 1]  # 1-D, so contiguous
+    up, mid, dn = z[v - 1, a - 1 : b + 1], z[v, a - 1 : b + 1], z[v + 1, a - 1 : b + 1]  # 1-D, so contiguous
     rows_x, rows_y, rows_z = rows[0, a:b], rows[1, a:b], rows[2, a:b]
     v_c = v - c_y
     for i in range(b - a):
         u_c = (a + i) - c_x
-        g_u, g_v = interior_gradients(np.float64(mid[i]), np.float64(mid[i + 2]),
-                                      np.float64(up[i + 1]), np.float64(dn[i + 1]))
+        g_u, g_v = interior_gradients(
+            np.float64(mid[i]), np.float64(mid[i + 2]), np.float64(up[i + 1]), np.float64(dn[i + 1])
+        )
         # interior_candidates, on the row views
         z_p = np.float64(mid[i + 1])
         zx_p = u_c * z_p
@@ -343,8 +360,9 @@ def median_span(z, v, a, b, f_x, f_y, c_x, c_y, rows):
         a7 = nz_or_inf(np.float64(dn[i + 2]), u_c + 1.0, v_c + 1.0, g_u, g_v, zx_p, zy_p, z_p)
         count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
         s0, s1, s2, s3, s4, s5, s6, s7 = sort8(a0, a1, a2, a3, a4, a5, a6, a7)
-        n_x, n_y, n_z = finish(f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count,
-                               u_c, v_c, f_x, f_y)
+        n_x, n_y, n_z = finish(
+            f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count, u_c, v_c, f_x, f_y
+        )
         rows_x[i] = n_x
         rows_y[i] = n_y
         rows_z[i] = n_z
@@ -358,7 +376,7 @@ _MIN_FLAT_SPAN = 16
 def equal_neighbours(z, v, a, b):
     """How many pixels a..b-1 of row v have the depth of their right neighbour (a cheap bound on
     :func:`flat_pixels`: a flat span of n pixels holds n + 1 such pairs)."""
-    mid = z[v, a - 1:b + 1]
+    mid = z[v, a - 1 : b + 1]
     count = 0
     for i in range(b - a):
         count += np.int64(mid[i + 1] == mid[i + 2])
@@ -372,11 +390,19 @@ def flat_pixels(z, v, a, b, flat):
     Such a pixel has no candidate (every dZ is 0), so its 3F2N normal is the authors' fallback
     (0, 0, -1), whatever the rest of the arithmetic would give.
     """
-    up, mid, dn = z[v - 1, a - 1:b + 1], z[v, a - 1:b + 1], z[v + 1, a - 1:b + 1]
+    up, mid, dn = z[v - 1, a - 1 : b + 1], z[v, a - 1 : b + 1], z[v + 1, a - 1 : b + 1]
     for i in range(b - a):
         c = mid[i + 1]
-        flat[i] = ((up[i] == c) & (up[i + 1] == c) & (up[i + 2] == c) & (mid[i] == c) & (mid[i + 2] == c)
-                   & (dn[i] == c) & (dn[i + 1] == c) & (dn[i + 2] == c))
+        flat[i] = (
+            (up[i] == c)
+            & (up[i + 1] == c)
+            & (up[i + 2] == c)
+            & (mid[i] == c)
+            & (mid[i + 2] == c)
+            & (dn[i] == c)
+            & (dn[i + 1] == c)
+            & (dn[i + 2] == c)
+        )
 
 
 @pixel
@@ -413,7 +439,7 @@ def median_run_split(z, v, a, b, f_x, f_y, c_x, c_y, rows, flat, fronto, out):
         if s > i:
             median_span(z, v, i, s, f_x, f_y, c_x, c_y, rows)
             store_run(out, v, i, s, rows)
-        out_flat[3 * s:3 * e] = fronto[3 * s:3 * e]
+        out_flat[3 * s : 3 * e] = fronto[3 * s : 3 * e]
         i = e
 
 
@@ -425,14 +451,19 @@ def mean_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
     inf = np.float32(np.inf)
     for u in range(u0, u1):
         u_c = u - c_x
-        g_u, g_v = interior_gradients(np.float64(z[v, u - 1]), np.float64(z[v, u + 1]),
-                                      np.float64(z[v - 1, u]), np.float64(z[v + 1, u]))
+        g_u, g_v = interior_gradients(
+            np.float64(z[v, u - 1]), np.float64(z[v, u + 1]), np.float64(z[v - 1, u]), np.float64(z[v + 1, u])
+        )
         a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
         count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
-        total = ((np.float64(a0 if a0 != inf else zero) + np.float64(a1 if a1 != inf else zero))
-                 + (np.float64(a2 if a2 != inf else zero) + np.float64(a3 if a3 != inf else zero))
-                 + ((np.float64(a4 if a4 != inf else zero) + np.float64(a5 if a5 != inf else zero))
-                    + (np.float64(a6 if a6 != inf else zero) + np.float64(a7 if a7 != inf else zero))))
+        total = (
+            (np.float64(a0 if a0 != inf else zero) + np.float64(a1 if a1 != inf else zero))
+            + (np.float64(a2 if a2 != inf else zero) + np.float64(a3 if a3 != inf else zero))
+            + (
+                (np.float64(a4 if a4 != inf else zero) + np.float64(a5 if a5 != inf else zero))
+                + (np.float64(a6 if a6 != inf else zero) + np.float64(a7 if a7 != inf else zero))
+            )
+        )
         n_x, n_y, n_z = finish(f_x * g_u, f_y * g_v, total / max(count, 1), count, u_c, v_c, f_x, f_y)
         rows[0, u] = n_x
         rows[1, u] = n_y

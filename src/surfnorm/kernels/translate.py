@@ -18,14 +18,21 @@ differences they do not, which is why D2NT needs no 3D points.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, row
 from ._rows import centred_columns, fast_row, segment, stencil, store_unit, store_unit_flat
-from .gradients import (dag_gradient, dlf_code, fd_gradient, kernel_tau, laplacian_row, softmin_pair, softmin_ratio,
-                        softmin_weights_row)
+from .gradients import (
+    dag_gradient,
+    dlf_code,
+    fd_gradient,
+    kernel_tau,
+    laplacian_row,
+    softmin_pair,
+    softmin_ratio,
+    softmin_weights_row,
+)
 
 __all__ = ["d2nt", "cp2tv", "d2nt_normal", "prepare_dag_row", "dag_row"]
 
@@ -89,8 +96,8 @@ def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_r
         for x in range(u, a):
             d2nt_fd_pixel(z, valid, v, x, f_x, f_y, u_c[x], v_c, reflect, fill, out_row)
         if b > a:  # 3x3 all valid: central differences, no checks (views start at a: see laplacian_row)
-            left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
-            u_cs, run_out = u_c[a:b], out_flat[3 * a:3 * b]
+            left, centre, right, above, below = mid[a - 1 : b - 1], mid[a:b], mid[a + 1 : b + 1], up[a:b], dn[a:b]
+            u_cs, run_out = u_c[a:b], out_flat[3 * a : 3 * b]
             for i in range(b - a):
                 z_u = (right[i] - left[i]) / two
                 z_v = (below[i] - above[i]) / two
@@ -208,9 +215,9 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
         for x in range(u, a):
             ok_row[x] = dag_pixel(z, valid, v, x, p_h, p_up, p_dn, f_x, f_y, u_c[x], v_c, ratio, fill, out_row)
         if b > a:  # 3x3 all valid: both neighbours exist along both axes (views start at a: see laplacian_row)
-            left, centre, right, above, below = mid[a - 1:b - 1], mid[a:b], mid[a + 1:b + 1], up[a:b], dn[a:b]
-            p_l, p_r, p_a, p_b = p_h[a - 1:b - 1], p_h[a + 1:b + 1], p_up[a:b], p_dn[a:b]
-            u_cs, run_out, run_ok = u_c[a:b], out_flat[3 * a:3 * b], ok_row[a:b]
+            left, centre, right, above, below = mid[a - 1 : b - 1], mid[a:b], mid[a + 1 : b + 1], up[a:b], dn[a:b]
+            p_l, p_r, p_a, p_b = p_h[a - 1 : b - 1], p_h[a + 1 : b + 1], p_up[a:b], p_dn[a:b]
+            u_cs, run_out, run_ok = u_c[a:b], out_flat[3 * a : 3 * b], ok_row[a:b]
             for i in range(b - a):
                 z_p = centre[i]
                 lambda_l, lambda_r = softmin_pair(p_l[i], p_r[i], ratio)
@@ -239,23 +246,55 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
     p_v = np.empty((3, W), np.float32)
     s, p_h = np.empty(W, np.float32), np.empty(W, np.float32)
     if v0 > 0:
-        n_runs[(v0 - 1) % 3] = prepare_dag_row(z, valid, v0 - 1, dlf, tau, rel, col, runs[(v0 - 1) % 3], s, p_v[(v0 - 1) % 3])
+        n_runs[(v0 - 1) % 3] = prepare_dag_row(
+            z, valid, v0 - 1, dlf, tau, rel, col, runs[(v0 - 1) % 3], s, p_v[(v0 - 1) % 3]
+        )
     n_runs[v0 % 3] = prepare_dag_row(z, valid, v0, dlf, tau, rel, col, runs[v0 % 3], s, p_v[v0 % 3])
     for v in range(v0, v1):
         if v + 1 < H:
-            n_runs[(v + 1) % 3] = prepare_dag_row(z, valid, v + 1, dlf, tau, rel, col, runs[(v + 1) % 3], s,
-                                                  p_v[(v + 1) % 3])
+            n_runs[(v + 1) % 3] = prepare_dag_row(
+                z, valid, v + 1, dlf, tau, rel, col, runs[(v + 1) % 3], s, p_v[(v + 1) % 3]
+            )
         if dlf == 0:  # 1D DLF: the horizontal neighbours are scored with the horizontal filter
             laplacian_row(z, valid, v, runs[v % 3], n_runs[v % 3], np.int64(0), np.int64(0), s)
             softmin_weights_row(s, z[v], tau, rel, p_h)
         else:
             p_h[:] = p_v[v % 3]
-        dag_row(z, valid, v, runs[v % 3], n_runs[v % 3], p_h, p_v[(v - 1) % 3], p_v[(v + 1) % 3], f_x, f_y, u_c,
-                np.float32(v - c_y), ratio, fill, out[v], ok_row)
+        dag_row(
+            z,
+            valid,
+            v,
+            runs[v % 3],
+            n_runs[v % 3],
+            p_h,
+            p_v[(v - 1) % 3],
+            p_v[(v + 1) % 3],
+            f_x,
+            f_y,
+            u_c,
+            np.float32(v - c_y),
+            ratio,
+            fill,
+            out[v],
+            ok_row,
+        )
 
 
-def d2nt(z, valid, cam, out, *, gradient="fd", dlf="1d", tau=1.0, truncate=True, border="one-sided", fill=0.0,
-         relative=0.0, bands=whole):
+def d2nt(
+    z,
+    valid,
+    cam,
+    out,
+    *,
+    gradient="fd",
+    dlf="1d",
+    tau=1.0,
+    truncate=True,
+    border="one-sided",
+    fill=0.0,
+    relative=0.0,
+    bands=whole,
+):
     """D2NT with finite-difference (``gradient="fd"``) or DAG (``"dag"``) gradients, into ``out`` (H, W, 3).
 
     ``relative`` > 0 (the scale-invariant mode): DAG's tau is relative to each pixel's depth, tau z / relative
@@ -340,8 +379,8 @@ def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, ou
         for x in range(u, a):
             cp2tv_pixel(z, valid, v, x, f_x, f_y, c_x, c_y, reflect, fill, out_row)
         if b > a:  # central differences of back-projected neighbours, no checks (views: see laplacian_row)
-            left, right, above, below = mid[a - 1:b - 1], mid[a + 1:b + 1], up[a:b], dn[a:b]
-            uc_l, uc_r, uc_c, run_out = u_c[a - 1:b - 1], u_c[a + 1:b + 1], u_c[a:b], out_flat[3 * a:3 * b]
+            left, right, above, below = mid[a - 1 : b - 1], mid[a + 1 : b + 1], up[a:b], dn[a:b]
+            uc_l, uc_r, uc_c, run_out = u_c[a - 1 : b - 1], u_c[a + 1 : b + 1], u_c[a:b], out_flat[3 * a : 3 * b]
             for i in range(b - a):
                 z_l, z_r, z_u, z_d = left[i], right[i], above[i], below[i]
                 t_ux = (z_r * uc_r[i] / f_x64 - z_l * uc_l[i] / f_x64) / two
@@ -350,8 +389,15 @@ def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, ou
                 t_vx = (z_d * uc_c[i] / f_x64 - z_u * uc_c[i] / f_x64) / two
                 t_vy = (z_d * v_dn / f_y64 - z_u * v_up / f_y64) / two
                 t_vz = (z_d - z_u) / two
-                store_unit_flat(run_out, i, t_vy * t_uz - t_vz * t_uy, t_vz * t_ux - t_vx * t_uz,
-                                t_vx * t_uy - t_vy * t_ux, True, fill)
+                store_unit_flat(
+                    run_out,
+                    i,
+                    t_vy * t_uz - t_vz * t_uy,
+                    t_vz * t_ux - t_vx * t_uz,
+                    t_vx * t_uy - t_vy * t_ux,
+                    True,
+                    fill,
+                )
         u = b
 
 
@@ -369,7 +415,13 @@ def _cp2tv_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
 
 def cp2tv(z, valid, cam, out, *, border="one-sided", fill=0.0, bands=whole):
     """CP2TV (Nakagawa et al. 2015): cross product of finite-difference tangent vectors, into ``out``."""
-    args = (np.float32(cam.fx), np.float32(cam.fy), np.float32(cam.cx), np.float32(cam.cy), border == "reflect",
-            np.float32(fill))
+    args = (
+        np.float32(cam.fx),
+        np.float32(cam.fy),
+        np.float32(cam.cx),
+        np.float32(cam.cy),
+        border == "reflect",
+        np.float32(fill),
+    )
     bands(lambda a, b: _cp2tv_kernel(z, valid, *args, out, a, b), z.shape[0])
     return out

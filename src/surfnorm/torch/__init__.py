@@ -75,11 +75,13 @@ except ImportError as exc:  # pragma: no cover - exercised only without torch
     from ..errors import MissingDependencyError
 
     raise MissingDependencyError(
-        "surfnorm.torch needs PyTorch: install the extra with `pip install surfnorm[torch]`") from exc
+        "surfnorm.torch needs PyTorch: install the extra with `pip install surfnorm[torch]`"
+    ) from exc
 
 from ..errors import InputError
-from ..methods import methods as numpy_methods, resolve as numpy_resolve
 from ..methods import MNR_SUFFIX
+from ..methods import methods as numpy_methods
+from ..methods import resolve as numpy_resolve
 from . import _adaptive, _averaging, _ops, _plane_fit, _sda, _sne
 from ._validate import as_depth, as_intrinsics, as_mask, compute_dtype
 
@@ -110,7 +112,9 @@ _register("d2nt_v2", _d2nt_dag)
 _register("d2nt_v3", _d2nt_dag)  # + MNR (the NumPy registry marks the recipe)
 _register("cp2tv", _ops.cp2tv)
 _register("3f2n_mean", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="mean", border=border, fill=fill))
-_register("3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill))
+_register(
+    "3f2n_median", lambda g, cam, *, border, fill: _ops.three_f2n(g, cam, third="median", border=border, fill=fill)
+)
 _register("sne_roadseg", _sne.sne_roadseg)
 _register("sda_sne", _sda.sda_sne)
 _register("plane_svd", _plane_fit.plane_svd)
@@ -144,11 +148,15 @@ def _resolve(name, options: dict):
         raise InputError(f"method: expected a method name (str), got {type(name).__name__} {name!r}")
     base = name[: -len(MNR_SUFFIX)] if name.endswith(MNR_SUFFIX) else name
     if base in NUMPY_ONLY:
-        raise InputError(f"method: expected one of {', '.join(methods())} in the torch backend, got {name!r}, which "
-                         f"runs only in surfnorm.estimate (NumPy) so far")
+        raise InputError(
+            f"method: expected one of {', '.join(methods())} in the torch backend, got {name!r}, which "
+            f"runs only in surfnorm.estimate (NumPy) so far"
+        )
     if base not in _KERNELS:
-        raise InputError(f"method: expected one of {', '.join(methods())} (optionally followed by {MNR_SUFFIX!r}) "
-                         f"in the torch backend, got {name!r}")
+        raise InputError(
+            f"method: expected one of {', '.join(methods())} (optionally followed by {MNR_SUFFIX!r}) "
+            f"in the torch backend, got {name!r}"
+        )
     method, refined, clean = numpy_resolve(name, options)
     return _KERNELS[base], method.mnr, refined, clean
 

@@ -275,14 +275,18 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     step = ((z1 - z0) / (_TABLE - 1)).view(B, 1)
     zs = torch.arange(_TABLE, dtype=_F64, device=dev).view(1, -1) * step + z0.view(B, 1)
     zs = torch.cat((zs[:, :-1], z1.view(B, 1)), dim=1)
-    rho_t = torch.where(wide.view(B, 1), _interp_full(torch.log(torch.where(wide.view(B, 1), zs, 1.0)), lc, rho_bins),
-                        rho_bins[:, :1].expand(B, _TABLE))
+    rho_t = torch.where(
+        wide.view(B, 1),
+        _interp_full(torch.log(torch.where(wide.view(B, 1), zs, 1.0)), lc, rho_bins),
+        rho_bins[:, :1].expand(B, _TABLE),
+    )
     if window is None:
         radius = allowed_radii(torch.clamp(torch.ceil(ALPHA * _sqrt(rho_t)), 1, r_max), r_max)
     else:
         radius = torch.full((B, _TABLE), (window - 1) // 2, dtype=torch.int64, device=dev)
-    inv_step = torch.where(wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0),
-                           torch.zeros_like(z0))
+    inv_step = torch.where(
+        wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0), torch.zeros_like(z0)
+    )
     return NoiseTables(z0, inv_step, radius, rho_t, floor)
 
 
@@ -379,16 +383,17 @@ def dense_sums(I_pad, pad: int, H: int, W: int, r: int, dv: int, du: int, centre
     """:func:`window_sums` for every pixel of every frame, (C, B H W), from slices of the integral images
     (10, B, H + 1, W + 1) padded by ``pad`` >= 2 r + |dv| (replicated: the clipping of the windows)."""
     src = I_pad[:channels]
-    top, bottom = src[:, :, pad + dv - r: pad + dv - r + H], src[:, :, pad + dv + r + 1: pad + dv + r + 1 + H]
+    top, bottom = src[:, :, pad + dv - r : pad + dv - r + H], src[:, :, pad + dv + r + 1 : pad + dv + r + 1 + H]
     left, right = pad + du - r, pad + du + r + 1
-    c11, c01 = bottom[..., right: right + W], top[..., right: right + W]
-    c10, c00 = bottom[..., left: left + W], top[..., left: left + W]
+    c11, c01 = bottom[..., right : right + W], top[..., right : right + W]
+    c10, c00 = bottom[..., left : left + W], top[..., left : left + W]
     m = (c11 - c01) - (c10 - c00) if centred else ((c11 - c01) - c10) + c00
     return m.reshape(channels, -1)
 
 
-def _choose(I_flat, I_pad, pad, px: _Pixels, valid, z, limit, r0, ladder, r_max: int, kappa: float,
-            gather: bool) -> _Choice:
+def _choose(
+    I_flat, I_pad, pad, px: _Pixels, valid, z, limit, r0, ladder, r_max: int, kappa: float, gather: bool
+) -> _Choice:
     """The NumPy kernel's choices for every pixel ``px`` of the batch in one ascending pass over the rungs.
 
     The centred windows of a rung are summed for all pixels at once (slices of the integral images); the
@@ -484,7 +489,11 @@ def _choose(I_flat, I_pad, pad, px: _Pixels, valid, z, limit, r0, ladder, r_max:
             if q_mask is not None:
                 better = better & q_mask
             best, best_in = torch.where(better, score, best), torch.where(better, inside, best_in)
-            a_q, gu_q, gv_q = torch.where(better, a_p, a_q), torch.where(better, gu_k, gu_q), torch.where(better, gv_k, gv_q)
+            a_q, gu_q, gv_q = (
+                torch.where(better, a_p, a_q),
+                torch.where(better, gu_k, gu_q),
+                torch.where(better, gv_k, gv_q),
+            )
             dof_q, s_q = torch.where(better, dof_k, dof_q), torch.where(better, k, s_q)
         every = torch.ones_like(a_q, dtype=torch.bool)
         a, g_u, g_v = put(a, sub, every, a_q), put(g_u, sub, every, gu_q), put(g_v, sub, every, gv_q)
@@ -499,8 +508,9 @@ def _refit(I_flat, px: _Pixels, choice: _Choice):
     sv = torch.tensor([0] + [s[0] for s in _SHIFTS], device=r.device)[shift + 1]
     su = torch.tensor([0] + [s[1] for s in _SHIFTS], device=r.device)[shift + 1]
     dv, du = sv * r, su * r
-    m = torch.where(shift < 0, window_sums(I_flat, px, None, r, dv, du, True),
-                    window_sums(I_flat, px, None, r, dv, du, False))
+    m = torch.where(
+        shift < 0, window_sums(I_flat, px, None, r, dv, du, True), window_sums(I_flat, px, None, r, dv, du, False)
+    )
     a, g_u, g_v, _, _ = affine_fit(m, r, px.x + du, px.y + dv)
     return a - g_u * du - g_v * dv, g_u, g_v
 
@@ -528,8 +538,9 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
     pad = 2 * max(ladder) + 1
     with torch.no_grad():
         I_pad = F.pad(I.detach(), (pad, pad, pad, pad), mode="replicate")
-        choice = _choose(I_flat.detach(), I_pad, pad, px, valid.reshape(-1), z_p.detach(), limit, r0, ladder, r_max,
-                         KAPPA, gather)
+        choice = _choose(
+            I_flat.detach(), I_pad, pad, px, valid.reshape(-1), z_p.detach(), limit, r0, ladder, r_max, KAPPA, gather
+        )
     return px, z_p, I_flat, choice, gather
 
 
@@ -607,8 +618,11 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
     m = torch.where(have_a & ~have_b, a, torch.where(have_b & ~have_a, b, m))
     norm = torch.linalg.vector_norm(m, dim=1, keepdim=True)
     cancelled = norm < 1e-6
-    m = torch.where(cancelled, torch.where((t >= 0.5).view(B, 1, 1, 1), b, a),
-                    m / torch.where(cancelled, torch.ones_like(norm), norm))
+    m = torch.where(
+        cancelled,
+        torch.where((t >= 0.5).view(B, 1, 1, 1), b, a),
+        m / torch.where(cancelled, torch.ones_like(norm), norm),
+    )
     return torch.where(have_a | have_b, m, torch.full_like(m, fill))
 
 
@@ -633,8 +647,9 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         return _ops.mnr(grid, n, dlf="alpha", fill=fill_value)
 
     def fit(grid, z_f, c, tab, fill_value):
-        return _normals(z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value,
-                        out_dtype=grid.z.dtype)
+        return _normals(
+            z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
+        )
 
     if g.z.device.type != "cpu" or not _GATHER_ON_CPU:
         a = d2nt_v3(g, cam64, math.nan)

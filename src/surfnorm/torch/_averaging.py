@@ -37,7 +37,7 @@ def ring_offsets(P, valid, h: int = 1):
     Vp = F.pad(valid, (h, h, h, h), value=False)
 
     def at(dv, du):
-        return (Pp[..., h + dv: h + dv + H, h + du: h + du + W], Vp[..., h + dv: h + dv + H, h + du: h + du + W])
+        return (Pp[..., h + dv : h + dv + H, h + du : h + du + W], Vp[..., h + dv : h + dv + H, h + du : h + du + W])
 
     return at
 

@@ -62,6 +62,7 @@ def facing_sign(n_x, n_y, n_z, p_x, p_y, p_z):
     key = torch.where(edge_on, key, d)
     return 1.0 - 2.0 * (key > 0).to(n_x.dtype)
 
+
 # (edge weight, corner weight) of the 3x3 DLFs, as gradients._DLF_EDGE / _DLF_CORNER.
 _DLF_WEIGHTS = {"alpha": (1.0, 0.0), "beta": (1.0, 1.0), "gamma": (0.5, 0.25)}
 
@@ -79,7 +80,7 @@ class Shifted:
         self.padded = F.pad(x, (1, 1, 1, 1), value=outside)
 
     def at(self, dv: int, du: int) -> torch.Tensor:
-        return self.padded[..., 1 + dv: 1 + dv + self.H, 1 + du: 1 + du + self.W]
+        return self.padded[..., 1 + dv : 1 + dv + self.H, 1 + du : 1 + du + self.W]
 
 
 class Grid:
@@ -104,8 +105,10 @@ class Grid:
         key = (dv, du)
         if key not in self._differences:
             self._differences[key] = torch.where(
-                self.usable(dv, du), self.z_at(dv, du) - self.z,
-                torch.where(self.usable(-dv, -du), self.z_at(-dv, -du) - self.z, torch.zeros_like(self.z)))
+                self.usable(dv, du),
+                self.z_at(dv, du) - self.z,
+                torch.where(self.usable(-dv, -du), self.z_at(-dv, -du) - self.z, torch.zeros_like(self.z)),
+            )
         return self._differences[key]
 
     def smoothness(self, dlf: str, axis: int) -> torch.Tensor:
@@ -157,7 +160,9 @@ def truncated_softmin(s_1, s_2, tau: float, truncate: bool):
     the gradient flows through the difference they select.
     """
     tau_k = kernel_tau(tau)
-    if _fits_float32(tau_k) and float(np.float32(tau_k)) == tau_k:  # tau as the kernels use it (float32), the usual case
+    if (
+        _fits_float32(tau_k) and float(np.float32(tau_k)) == tau_k
+    ):  # tau as the kernels use it (float32), the usual case
         p_1 = torch.exp(-s_1 / tau_k)
         p_2 = torch.exp(-s_2 / tau_k)
     else:  # a tau beyond float32 (1e-300, 1e300): -s / tau in float64, as gradients.scaled_smoothness
@@ -174,8 +179,10 @@ def truncated_softmin(s_1, s_2, tau: float, truncate: bool):
         first = lambda_1 / (lambda_2 + SOFTMIN_EPS) > ratio
         second = ~first & (lambda_2 / (lambda_1 + SOFTMIN_EPS) > ratio)
         one, zero = torch.ones_like(lambda_1), torch.zeros_like(lambda_1)
-        lambda_1, lambda_2 = (torch.where(first, one, torch.where(second, zero, lambda_1)),
-                              torch.where(first, zero, torch.where(second, one, lambda_2)))
+        lambda_1, lambda_2 = (
+            torch.where(first, one, torch.where(second, zero, lambda_1)),
+            torch.where(first, zero, torch.where(second, one, lambda_2)),
+        )
     return lambda_1, lambda_2
 
 
@@ -317,6 +324,7 @@ def mnr(g: Grid, normals: torch.Tensor, *, dlf: str, fill: float) -> torch.Tenso
     chosen = torch.where((s_p < best_s).unsqueeze(1), normals, best_n)
     return torch.where(has_normal.unsqueeze(1), chosen, torch.full_like(chosen, fill))
 
+
 # The 8 neighbours q of p used by 3F2N's third filter (order irrelevant: mean or median).
 _EIGHT = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
@@ -365,7 +373,7 @@ def three_f2n(g: Grid, cam, *, third: str, border: str, fill: float):
     H, W = z.shape[-2:]
     candidates, keep = [], []
     for dv, du in _EIGHT:
-        zx_q, zy_q, z_q, valid_q = P[:, :, 1 + dv: 1 + dv + H, 1 + du: 1 + du + W].unbind(1)
+        zx_q, zy_q, z_q, valid_q = P[:, :, 1 + dv : 1 + dv + H, 1 + du : 1 + du + W].unbind(1)
         dZ = z - z_q
         k = (valid_q > 0) & (dZ != 0)
         safe = torch.where(k, dZ, torch.ones_like(dZ))

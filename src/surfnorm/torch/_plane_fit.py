@@ -118,8 +118,7 @@ def characteristic(a_00, a_01, a_02, a_11, a_12, a_22):
     """``plane_fit.characteristic``: (t_1, t_2, t_3) of the symmetric 3x3 matrix."""
     t_1 = a_00 + a_11 + a_22
     t_2 = a_00 * a_11 - a_01 * a_01 + a_00 * a_22 - a_02 * a_02 + a_11 * a_22 - a_12 * a_12
-    t_3 = (a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02)
-           + a_02 * (a_01 * a_12 - a_11 * a_02))
+    t_3 = a_00 * (a_11 * a_22 - a_12 * a_12) - a_01 * (a_01 * a_22 - a_12 * a_02) + a_02 * (a_01 * a_12 - a_11 * a_02)
     return t_1, t_2, t_3
 
 
@@ -132,11 +131,19 @@ def plane_svd_characteristic(S, c):
     a_00, a_11, a_22 = s_11 * s_22 - s_12 * s_12, s_00 * s_22 - s_02 * s_02, s_00 * s_11 - s_01 * s_01  # adj(S)
     a_01, a_02, a_12 = s_02 * s_12 - s_01 * s_22, s_01 * s_12 - s_02 * s_11, s_01 * s_02 - s_00 * s_12
     t_3 = s_00 * a_00 + s_01 * a_01 + s_02 * a_02
-    g_0 = (a_00 * c_x * c_x + a_11 * c_y * c_y + a_22 * c_z * c_z
-           + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z))
+    g_0 = (
+        a_00 * c_x * c_x
+        + a_11 * c_y * c_y
+        + a_22 * c_z * c_z
+        + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z)
+    )
     c_c = c_x * c_x + c_y * c_y + c_z * c_z
-    c_s_c = (s_00 * c_x * c_x + s_11 * c_y * c_y + s_22 * c_z * c_z
-             + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z))
+    c_s_c = (
+        s_00 * c_x * c_x
+        + s_11 * c_y * c_y
+        + s_22 * c_z * c_z
+        + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z)
+    )
     return t_1, t_2, t_3, g_0, c_s_c - t_1 * c_c, c_c
 
 
@@ -161,11 +168,19 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
     l_b = x_b * x_b + y_b * y_b + z_b * z_b
     l_c = x_c * x_c + y_c * y_c + z_c * z_c
     use_b = l_b > l_a
-    n_x, n_y, n_z, l = (torch.where(use_b, x_b, x_a), torch.where(use_b, y_b, y_a), torch.where(use_b, z_b, z_a),
-                        torch.where(use_b, l_b, l_a))
+    n_x, n_y, n_z, l = (
+        torch.where(use_b, x_b, x_a),
+        torch.where(use_b, y_b, y_a),
+        torch.where(use_b, z_b, z_a),
+        torch.where(use_b, l_b, l_a),
+    )
     use_c = l_c > l
-    n_x, n_y, n_z, l = (torch.where(use_c, x_c, n_x), torch.where(use_c, y_c, n_y), torch.where(use_c, z_c, n_z),
-                        torch.where(use_c, l_c, l))
+    n_x, n_y, n_z, l = (
+        torch.where(use_c, x_c, n_x),
+        torch.where(use_c, y_c, n_y),
+        torch.where(use_c, z_c, n_z),
+        torch.where(use_c, l_c, l),
+    )
     ok = (l > 0.0) & (l < float("inf"))
     norm = torch.sqrt(torch.where(ok, l, torch.ones_like(l)))
     return n_x / norm, n_y / norm, n_z / norm, ok
@@ -181,8 +196,14 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
         S = R
     else:  # the scatter about the centroid (plane_fit.scatter)
         s_xx, s_xy, s_xz, s_yy, s_yz, s_zz = R
-        S = (s_xx - s_x * s_x / m_safe, s_xy - s_x * s_y / m_safe, s_xz - s_x * s_z / m_safe,
-             s_yy - s_y * s_y / m_safe, s_yz - s_y * s_z / m_safe, s_zz - s_z * s_z / m_safe)
+        S = (
+            s_xx - s_x * s_x / m_safe,
+            s_xy - s_x * s_y / m_safe,
+            s_xz - s_x * s_z / m_safe,
+            s_yy - s_y * s_y / m_safe,
+            s_yz - s_y * s_z / m_safe,
+            s_zz - s_z * s_z / m_safe,
+        )
     if kind == "plane_svd":
         c = (p_x + s_x / m_safe, p_y + s_y / m_safe, p_z + s_z / m_safe)  # centroid
         coefficients = plane_svd_characteristic(S, c)
@@ -190,8 +211,14 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
         mu = m_safe * lam / (m_safe - lam)
         s_00, s_01, s_02, s_11, s_12, s_22 = S
         c_x, c_y, c_z = c
-        n_x, n_y, n_z, ok = null_vector(s_00 - lam - mu * c_x * c_x, s_01 - mu * c_x * c_y, s_02 - mu * c_x * c_z,
-                                        s_11 - lam - mu * c_y * c_y, s_12 - mu * c_y * c_z, s_22 - lam - mu * c_z * c_z)
+        n_x, n_y, n_z, ok = null_vector(
+            s_00 - lam - mu * c_x * c_x,
+            s_01 - mu * c_x * c_y,
+            s_02 - mu * c_x * c_z,
+            s_11 - lam - mu * c_y * c_y,
+            s_12 - mu * c_y * c_z,
+            s_22 - lam - mu * c_z * c_z,
+        )
     else:
         t = characteristic(*S)
         lam = smallest_root(newton_step, t, active)

@@ -48,7 +48,7 @@ def pad(x, value):
 def view(xp, dv: int, du: int):
     """The padded (B, H + 2P, W + 2P) ``xp`` read at (v + dv, u + du) for every pixel (v, u): (B, H, W)."""
     H, W = xp.shape[-2] - 2 * _P, xp.shape[-1] - 2 * _P
-    return xp[..., _P + dv: _P + dv + H, _P + du: _P + du + W]
+    return xp[..., _P + dv : _P + dv + H, _P + du : _P + du + W]
 
 
 def laplacian(sp, okp, dv, du):
@@ -134,9 +134,15 @@ class _Fixed:
         self.a_u = pad(torch.where(valid & has_u, lap_u.abs(), inf), _INF)
         self.a_v = pad(torch.where(valid & has_v, lap_v.abs(), inf), _INF)
         zero = torch.zeros_like(s)
-        self.con = [torch.where(valid, continuity(view(l, d1v, d1u), view(l, d2v, d2u)), zero)
-                    for l, (d1v, d1u), (d2v, d2u) in ((l_u, (0, -1), (0, -2)), (l_u, (0, 1), (0, 2)),
-                                                      (l_v, (-1, 0), (-2, 0)), (l_v, (1, 0), (2, 0)))]
+        self.con = [
+            torch.where(valid, continuity(view(l, d1v, d1u), view(l, d2v, d2u)), zero)
+            for l, (d1v, d1u), (d2v, d2u) in (
+                (l_u, (0, -1), (0, -2)),
+                (l_u, (0, 1), (0, 2)),
+                (l_v, (-1, 0), (-2, 0)),
+                (l_v, (1, 0), (2, 0)),
+            )
+        ]
         self.reflect = reflect
 
     def initial(self):
@@ -146,8 +152,14 @@ class _Fixed:
         g_v, e_v, s_v = initial_gradient(self.sp_grad, self.okp, self.a_v, 1, 0, self.reflect)
         e_u, e_v, s_u, s_v = e_u.detach(), e_v.detach(), s_u.detach(), s_v.detach()
         inf, zero, none = torch.full_like(e_u, _INF), torch.zeros_like(g_u), torch.full_like(e_u, -1.0)
-        return (torch.where(valid, g_u, zero), torch.where(valid, g_v, zero), torch.where(valid, e_u, inf),
-                torch.where(valid, e_v, inf), torch.where(valid, s_u, none), torch.where(valid, s_v, none))
+        return (
+            torch.where(valid, g_u, zero),
+            torch.where(valid, g_v, zero),
+            torch.where(valid, e_u, inf),
+            torch.where(valid, e_v, inf),
+            torch.where(valid, s_u, none),
+            torch.where(valid, s_v, none),
+        )
 
 
 def sda_pass(f: _Fixed, state, c: float):
@@ -171,16 +183,23 @@ def sda_pass(f: _Fixed, state, c: float):
     e6 = (p_up + view(a_u, -1, 1)) + view(ep_v, -1, 1)
     e7 = (p_dn + view(a_u, 1, -1)) + view(ep_v, 1, -1)
     e8 = (p_dn + view(a_u, 1, 1)) + view(ep_v, 1, 1)
-    k_u, best_u = cheapest([e0, e1, e_u, 2.0 * p_up, 2.0 * p_dn] + [torch.where(has_gv, e, inf) for e in (e5, e6, e7, e8)])
-    new_gu = pick(k_u, [(g_u + c * z_p) - c * (view(sg, 0, -1) + view(gp_u, 0, -1)),
-                        (g_u - c * z_p) + c * (view(sg, 0, 1) - view(gp_u, 0, 1)),
-                        g_u,
-                        view(gp_u, -1, 0),
-                        view(gp_u, 1, 0),
-                        (view(gp_u, -1, 0) - view(gp_v, -1, -1)) + g_v,
-                        (view(gp_u, -1, 0) + view(gp_v, -1, 1)) - g_v,
-                        (view(gp_u, 1, 0) + view(gp_v, 1, -1)) - g_v,
-                        (view(gp_u, 1, 0) - view(gp_v, 1, 1)) + g_v])
+    k_u, best_u = cheapest(
+        [e0, e1, e_u, 2.0 * p_up, 2.0 * p_dn] + [torch.where(has_gv, e, inf) for e in (e5, e6, e7, e8)]
+    )
+    new_gu = pick(
+        k_u,
+        [
+            (g_u + c * z_p) - c * (view(sg, 0, -1) + view(gp_u, 0, -1)),
+            (g_u - c * z_p) + c * (view(sg, 0, 1) - view(gp_u, 0, 1)),
+            g_u,
+            view(gp_u, -1, 0),
+            view(gp_u, 1, 0),
+            (view(gp_u, -1, 0) - view(gp_v, -1, -1)) + g_v,
+            (view(gp_u, -1, 0) + view(gp_v, -1, 1)) - g_v,
+            (view(gp_u, 1, 0) + view(gp_v, 1, -1)) - g_v,
+            (view(gp_u, 1, 0) - view(gp_v, 1, 1)) + g_v,
+        ],
+    )
     # ---- G_v ----
     q_l = view(a_u, 0, -1) + view(ep_v, 0, -1)
     q_r = view(a_u, 0, 1) + view(ep_v, 0, 1)
@@ -191,21 +210,33 @@ def sda_pass(f: _Fixed, state, c: float):
     e6 = (q_l + view(a_v, 1, -1)) + view(ep_u, 1, -1)
     e7 = (q_r + view(a_v, -1, 1)) + view(ep_u, -1, 1)
     e8 = (q_r + view(a_v, 1, 1)) + view(ep_u, 1, 1)
-    k_v, best_v = cheapest([e0, e1, e_v, 2.0 * q_l, 2.0 * q_r] + [torch.where(has_gu, e, inf) for e in (e5, e6, e7, e8)])
-    new_gv = pick(k_v, [(g_v + c * z_p) - c * (view(sg, -1, 0) + view(gp_v, -1, 0)),
-                        (g_v - c * z_p) + c * (view(sg, 1, 0) - view(gp_v, 1, 0)),
-                        g_v,
-                        view(gp_v, 0, -1),
-                        view(gp_v, 0, 1),
-                        (view(gp_v, 0, -1) - view(gp_u, -1, -1)) + g_u,
-                        (view(gp_v, 0, -1) + view(gp_u, 1, -1)) - g_u,
-                        (view(gp_v, 0, 1) + view(gp_u, -1, 1)) - g_u,
-                        (view(gp_v, 0, 1) - view(gp_u, 1, 1)) + g_u])
+    k_v, best_v = cheapest(
+        [e0, e1, e_v, 2.0 * q_l, 2.0 * q_r] + [torch.where(has_gu, e, inf) for e in (e5, e6, e7, e8)]
+    )
+    new_gv = pick(
+        k_v,
+        [
+            (g_v + c * z_p) - c * (view(sg, -1, 0) + view(gp_v, -1, 0)),
+            (g_v - c * z_p) + c * (view(sg, 1, 0) - view(gp_v, 1, 0)),
+            g_v,
+            view(gp_v, 0, -1),
+            view(gp_v, 0, 1),
+            (view(gp_v, 0, -1) - view(gp_u, -1, -1)) + g_u,
+            (view(gp_v, 0, -1) + view(gp_u, 1, -1)) - g_u,
+            (view(gp_v, 0, 1) + view(gp_u, -1, 1)) - g_u,
+            (view(gp_v, 0, 1) - view(gp_u, 1, 1)) + g_u,
+        ],
+    )
     # ---- an invalid pixel stays missing ----
     valid, zero, none = f.valid, torch.zeros_like(g_u), torch.full_like(e_u, -1.0)
-    new = (torch.where(valid, new_gu, zero), torch.where(valid, new_gv, zero),
-           torch.where(valid, best_u, inf), torch.where(valid, best_v, inf),
-           torch.where(valid & (best_u < _INF), k_u, none), torch.where(valid & (best_v < _INF), k_v, none))
+    new = (
+        torch.where(valid, new_gu, zero),
+        torch.where(valid, new_gv, zero),
+        torch.where(valid, best_u, inf),
+        torch.where(valid, best_v, inf),
+        torch.where(valid & (best_u < _INF), k_u, none),
+        torch.where(valid & (best_v < _INF), k_v, none),
+    )
     moved = (valid & ((k_u != 2) | (k_v != 2))).flatten(1).any(dim=1)  # (B,)
     return new, moved
 

@@ -58,7 +58,7 @@ def candidates(z, P, zx, zy, d_u, d_v):
     H, W = z.shape[-2:]
     out = []
     for dv, du in NEIGHBOURS:
-        zx_q, zy_q, z_q, valid_q = P[:, :, 1 + dv: 1 + dv + H, 1 + du: 1 + du + W].unbind(1)
+        zx_q, zy_q, z_q, valid_q = P[:, :, 1 + dv : 1 + dv + H, 1 + du : 1 + du + W].unbind(1)
         d_z = z - z_q
         keep = (valid_q > 0) & (d_z != 0)
         out.append((-(d_u * (zx - zx_q) + d_v * (zy - zy_q)) / torch.where(keep, d_z, torch.ones_like(d_z)), keep))

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from .._validate import MIN_SIZE
 from ..camera import Intrinsics
 from ..errors import InputError
-from .._validate import MIN_SIZE
 
 __all__ = ["as_depth", "as_mask", "as_intrinsics", "compute_dtype"]
 
@@ -33,10 +33,14 @@ def as_depth(depth) -> tuple[torch.Tensor, bool]:
         try:
             depth = torch.as_tensor(np.asarray(depth))
         except Exception as exc:
-            raise InputError(f"depth: expected a tensor of shape (B, 1, H, W) or (H, W), got {type(depth).__name__}") from exc
+            raise InputError(
+                f"depth: expected a tensor of shape (B, 1, H, W) or (H, W), got {type(depth).__name__}"
+            ) from exc
     if depth.dtype == torch.bool:
-        raise InputError(f"depth: expected real-valued depth (float or integer), got {_describe(depth)}; "
-                         "a boolean tensor is a mask, pass it as mask=")
+        raise InputError(
+            f"depth: expected real-valued depth (float or integer), got {_describe(depth)}; "
+            "a boolean tensor is a mask, pass it as mask="
+        )
     if depth.is_complex():
         raise InputError(f"depth: expected real-valued depth (float or integer), got {_describe(depth)}")
     if depth.ndim == 2:

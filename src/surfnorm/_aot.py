@@ -39,6 +39,7 @@ import json
 import os
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ LEVELS = {
 REGISTRY: dict[str, "Kernel"] = {}
 
 _lock = threading.Lock()
-_state = {"jit_only": 0, "module": None, "loaded": False, "epoch": 0}
+_state: dict[str, Any] = {"jit_only": 0, "module": None, "loaded": False, "epoch": 0}
 
 
 def source_hash(root: Path = PACKAGE) -> str:

@@ -84,12 +84,13 @@ def build(package_dir: Path, verbose: bool = True, names=None, warm_up=None) -> 
             self.release_gil = True
             self.error_model = "numpy"
 
-    pycc_compiler.Flags = Flags
+    pycc_compiler.Flags = Flags  # type: ignore[misc]
     t0 = time.perf_counter()
     (warm_up or _warm_up)()
     if verbose:
         print(f"surfnorm AOT: JIT warm-up {time.perf_counter() - t0:.1f} s", flush=True)
-    exports, kernels = [], {}
+    exports: list = []
+    kernels: dict = {}
     for name, kernel in sorted(_aot.REGISTRY.items()):
         if names is not None and name not in names:
             continue

@@ -232,7 +232,9 @@ def quantisation_step(z64: np.ndarray, valid: np.ndarray) -> float | None:
     rows, ok = z64[::4], valid[::4]  # neighbours on every 4th row: enough to meet a one-step gap
     both = ok[:, 1:] & ok[:, :-1]
     sample = np.unique(z[:: max(1, z.size // _STEP_SAMPLES)])
-    gaps = np.concatenate([np.abs(rows[:, 1:] - rows[:, :-1])[both], np.diff(sample)])
+    with np.errstate(invalid="ignore", over="ignore"):  # invalid pixels may hold inf or NaN; they are masked out
+        steps = np.abs(rows[:, 1:] - rows[:, :-1])[both]
+    gaps = np.concatenate([steps, np.diff(sample)])
     gaps = gaps[gaps > 0]
     if gaps.size == 0:
         return None

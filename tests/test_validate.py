@@ -187,7 +187,7 @@ TORCH = [
     ("K-huge-focal", dict(K=[[1e300, 0, 7.5], [0, 60, 5.5], [0, 0, 1]]), "K"),
     ("mask-shape", dict(mask=np.ones((3, 3), bool)), "mask"),
     ("method-unknown", dict(method="d2nt_v4"), "method"),
-    ("method-numpy-only", dict(method="adaptive_fit"), "method"),
+    ("window-wider-than-max_window", dict(method="adaptive_fit", window=9, max_window=5), "window"),
     ("tau-zero", dict(method="d2nt_v2", tau=0.0), "tau"),
     ("dlf-unknown", dict(method="d2nt_v3", dlf="x"), "dlf"),
     ("fill-overflows-float32", dict(fill=1e40), "fill"),

@@ -195,6 +195,10 @@ def scaled_frame(src: np.ndarray, k: int) -> np.ndarray:
 #: A frame's depths count as quantised when each lies within this share of a step of a multiple of it.
 STEP_TOLERANCE = 0.05
 
+#: Fewest valid depths in which :func:`quantisation_step` looks for a grid: each off-grid value passes its test by
+#: chance with probability 0.1, so 64 of them together with probability 1e-64.
+_STEP_MIN_VALUES = 64
+
 #: Depths sorted by :func:`quantisation_step` to find a frame's smallest gap.
 _STEP_SAMPLES = 16_384
 
@@ -224,10 +228,10 @@ def quantisation_step(z64: np.ndarray, valid: np.ndarray) -> float | None:
     :func:`_nice_steps` near g / k (float32 rounding can make a gap a power of two near a decimal step).
     The first accepted: every valid depth lies within ``STEP_TOLERANCE`` of a step of a multiple of it
     (for depth off a grid, each value does so by chance with probability 0.1), and the largest multiple is
-    below 2^24 (exact in float32).
+    below 2^24 (exact in float32). Frames with fewer than 64 valid depths are left as they are.
     """
     z = z64[valid]
-    if z.size < 2:
+    if z.size < _STEP_MIN_VALUES:  # too few values to tell a grid from chance
         return None
     rows, ok = z64[::4], valid[::4]  # neighbours on every 4th row: enough to meet a one-step gap
     both = ok[:, 1:] & ok[:, :-1]

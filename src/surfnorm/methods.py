@@ -104,6 +104,9 @@ class Method:
     # the result is the same to the bit (see surfnorm._bands). False: one frame runs on one thread.
     bands: bool = False
     kernel: str = ""  # where the kernel lives: "surfnorm.kernels.<module>.<function>"
+    # Checks between options (each option's own checker sees only its value): raises InputError. Called by
+    # resolve, so both backends share it.
+    check_options: Callable[[dict], None] | None = None
 
 
 @dataclass(frozen=True)
@@ -183,6 +186,8 @@ def resolve(name, options: dict) -> tuple[Method, bool, dict]:
             f"options of method {name!r}: expected some of {', '.join(sorted(specs))}, got unknown option(s) {', '.join(unknown)}"
         )
     clean = {k: spec.check(k, options[k]) if k in options else spec.default for k, spec in specs.items()}
+    if method.check_options is not None:
+        method.check_options(clean)
     return method, refined, clean
 
 
@@ -494,12 +499,14 @@ ADAPTIVE_OPTIONS = {
 }
 
 
+def _window_within_max(options: dict) -> None:
+    window, max_window = options["window"], options["max_window"]
+    if window is not None and window > max_window:  # the kernel's radius tables stop at max_window
+        raise InputError(f"window: expected at most max_window ({max_window}), got {window}")
+
+
 def _run_adaptive_fit(z, valid, cam, out, **options):
     from .kernels.adaptive_fit import adaptive_fit
-
-    window, max_window = options.get("window"), options.get("max_window", 31)
-    if window is not None and window > max_window:  # the kernel's tables stop at max_window
-        raise InputError(f"window: expected at most max_window ({max_window}), got {window}")
 
     return adaptive_fit(z, valid, cam, out, **options)
 
@@ -520,6 +527,7 @@ register(
         _run_adaptive_fit,
         ADAPTIVE_OPTIONS,
         kernel="surfnorm.kernels.adaptive_fit.adaptive_fit",
+        check_options=_window_within_max,
     )
 )
 register(

@@ -526,6 +526,7 @@ register(
         "plane fit of inverse depth, support sized from the depth's own noise; for sensor depth",
         _run_adaptive_fit,
         ADAPTIVE_OPTIONS,
+        bands=True,
         kernel="surfnorm.kernels.adaptive_fit.adaptive_fit",
         check_options=_window_within_max,
     )

@@ -71,9 +71,21 @@ from typing import NamedTuple
 import numpy as np
 
 from .._aot import ahead_of_time
+from .._bands import whole
 from .._config import njit, pixel, select
+from ._spare import Spares
 
-__all__ = ["adaptive_fit", "noise_profile", "NoiseProfile", "radius_table", "ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW"]
+__all__ = [
+    "adaptive_fit",
+    "noise_profile",
+    "NoiseProfile",
+    "radius_table",
+    "release",
+    "ALPHA",
+    "KAPPA",
+    "RHO_FLOOR",
+    "MAX_WINDOW",
+]
 
 #: Radius gain of the starting window: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors
 #: (``python benchmarks/sensor_sim.py``), with KAPPA.
@@ -216,8 +228,14 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
 @ahead_of_time
 @njit
 def _clipped_rms(xs, bins, n, nbins, rounds, sigmas, rms, counts):
-    """Per bin: RMS of xs[:n], then ``rounds`` times the RMS of those within ``sigmas`` times it."""
+    """Per bin: RMS of xs[:n], then ``rounds`` times the RMS of those within ``sigmas`` times it.
+
+    The kept sets only shrink from round to round (dropping values above sigmas >= 1 times the RMS
+    lowers the RMS, and so the bound), so a round that keeps as many values as the one before
+    kept the same ones, and every later round would too: the loop stops there, with the same result.
+    """
     sums = np.zeros(nbins)
+    before = np.full(nbins, -1, np.int64)
     for b in range(nbins):
         rms[b] = np.inf
     for _ in range(rounds + 1):
@@ -231,6 +249,9 @@ def _clipped_rms(xs, bins, n, nbins, rounds, sigmas, rms, counts):
                 counts[b] += 1
         for b in range(nbins):
             rms[b] = math.sqrt(sums[b] / counts[b]) if counts[b] > 0 else 0.0
+        if np.array_equal(counts, before):
+            break
+        before[:] = counts
 
 
 def _samples(z, valid, f):
@@ -297,6 +318,16 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     if not ok.any():
         return NoiseProfile(centres, np.zeros(N_BINS), floor)
     return NoiseProfile(centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor)
+
+
+#: Rings of integral rows kept for the next frame (a 640-pixel row's takes 3.2 MB: mapping its pages in
+#: afresh cost about 1 ms a frame); :func:`release` lets them go.
+_rings = Spares(64 << 20)
+
+
+def release() -> None:
+    """Free the rings of integral rows kept for the next frame."""
+    _rings.release()
 
 
 #: Entries of the depth -> (radius, rho) look-up table, linear in depth between the nearest and farthest.
@@ -586,7 +617,15 @@ def _adaptive_fit_kernel(
     fill,
     ring,
     out,
+    v0,
+    v1,
 ):
+    """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`).
+
+    Integral rows are sums from row 0 down, so a band starting at v0 first runs the integral rows
+    above it through its ring (no fits): the same additions in the same order as one sweep, so the
+    same bits; the price is that integral pass over rows 0 .. v0 + 2 ``r_max``.
+    """
     H, W = z.shape
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
@@ -623,13 +662,17 @@ def _adaptive_fit_kernel(
     rss3 = np.empty(W)
     dof3 = np.empty(W)
     r_next = np.empty(W, np.int64)
+    r_try_f = np.empty(W)
+    need = np.empty(W)
+    tried = np.empty(W, np.bool_)
     present = np.zeros(r_max + 2, np.bool_)
+    widened = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)
     n_table = r_table.shape[0]
     out_flat = out.reshape(H, 3 * W)
     ring[0, :, :] = 0.0
     made = 0  # the last integral row made
-    for v in range(H):
+    for v in range(v0, v1):
         while made < min(H, v + 2 * r_max + 1):
             made += 1
             integral_row(z[made - 1], valid[made - 1], made - 1 - 0.5 * H, ring[slot[made - 1]], ring[slot[made]])
@@ -644,9 +687,11 @@ def _adaptive_fit_kernel(
         for u in range(W):
             t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
             t_row[u] = t
-            r_row[u] = r_table[t]
+            r0 = r_table[t]
+            r_row[u] = r0
+            need[u] = (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))
             if valid_row[u]:
-                present[r_table[t]] = True
+                present[r0] = True
         first = True
         for r in range(1, r_max + 1):
             if not present[r]:
@@ -661,17 +706,18 @@ def _adaptive_fit_kernel(
             first = False
             if r == r_max:
                 continue
+            # Sparse depth: grow (x1.5) until the window's valid pixels pin the slope at least half as
+            # well as the full window of the noise's radius r0 (sum of squared offsets ~ n r (r + 1) / 3,
+            # ``need``), with at least MIN_POINTS of them.
+            r_big = grow[r]
+            spread = float(r * (r + 1))
+            grew = False
             for u in range(W):
-                # Sparse depth: grow (x1.5) until the window's valid pixels pin the slope at least
-                # half as well as the full window of the noise's radius r0 (sum of squared offsets
-                # ~ n r (r + 1) / 3), with at least MIN_POINTS of them.
-                r0 = r_table[t_row[u]]
-                if pick[u] and (
-                    m_row[0, u] < MIN_POINTS
-                    or 2.0 * m_row[0, u] * (r * (r + 1)) < (2 * r0 + 1) * (2 * r0 + 1) * (r0 * (r0 + 1))
-                ):
-                    r_row[u] = grow[r]
-                    present[grow[r]] = True
+                sparse = pick[u] & ((m_row[0, u] < MIN_POINTS) | (2.0 * m_row[0, u] * spread < need[u]))
+                r_row[u] = select(sparse, r_big, r_row[u])
+                grew |= sparse
+            if grew:
+                present[r_big] = True
         for u in range(W):
             r_float[u] = r_row[u]
         fit_row(m_row, m_coords, r_float, x_row, y, g_u, g_v, a, rss, dof)
@@ -685,33 +731,41 @@ def _adaptive_fit_kernel(
         # Wider where the data allow: a fit that passes is tried on a window twice as wide, kept
         # while it still passes (planes get wide windows, curved surfaces and edges keep theirs).
         for _ in range(n_widen):
-            present[:] = False
-            more = False
+            # ``present``: the radii of the windows just fitted, so those of the passing pixels.
             for u in range(W):
-                r_try[u] = widen[r_row[u]]
-                if passed[u] and r_try[u] > r_row[u]:
-                    present[r_try[u]] = True
-                    more = True
-                else:
-                    passed[u] = False
-            if not more:
-                break
+                tried[u] = False
+            widened[:] = False
             m_try = m_c
             m_old = m_d
             first = True
             for r in range(1, r_max + 1):
-                if present[r]:
-                    for u in range(W):
-                        pick[u] = passed[u] & (r_try[u] == r)
-                    m_try, m_old = m_old, m_try
-                    top = ring[slot[max(v - r, 0)]]
-                    bottom = ring[slot[min(v + r + 1, H)]]
-                    box_row(top, bottom, r, pick, first, m_old, m_try)
-                    coordinate_sums(top, bottom, r, pick, m_try[0], m_coords2)
-                    first = False
+                r2 = widen[r]
+                if not present[r] or r2 <= r:
+                    continue
+                r2_f = float(r2)
+                count = 0
+                for u in range(W):
+                    p = passed[u] & (r_row[u] == r)
+                    pick[u] = p
+                    tried[u] |= p
+                    r_try[u] = select(p, r2, r_try[u])
+                    r_try_f[u] = select(p, r2_f, r_try_f[u])
+                    count += p
+                if count == 0:
+                    continue
+                widened[r2] = True
+                m_try, m_old = m_old, m_try
+                top = ring[slot[max(v - r2, 0)]]
+                bottom = ring[slot[min(v + r2 + 1, H)]]
+                box_row(top, bottom, r2, pick, first, m_old, m_try)
+                coordinate_sums(top, bottom, r2, pick, m_try[0], m_coords2)
+                first = False
+            if first:
+                break
+            present, widened = widened, present
             for u in range(W):
-                r_float[u] = r_try[u]
-            fit_row(m_try, m_coords2, r_float, x_row, y, g_u2, g_v2, a2, rss2, dof2)
+                passed[u] = tried[u]
+            fit_row(m_try, m_coords2, r_try_f, x_row, y, g_u2, g_v2, a2, rss2, dof2)
             keep_row(
                 passed,
                 limit,
@@ -793,6 +847,7 @@ def adaptive_fit(
     kappa: float = KAPPA,
     fill: float = 0.0,
     profile: NoiseProfile | None = None,
+    bands=whole,
 ) -> np.ndarray:
     """Adaptive plane fit of inverse depth; fills ``out`` (H, W, 3) float32 and returns it.
 
@@ -819,31 +874,45 @@ def adaptive_fit(
         Value of pixels without a normal.
     profile : NoiseProfile, optional
         The frame's :func:`noise_profile`, when the caller has it already.
+    bands : callable
+        How rows are split over threads (see :mod:`surfnorm._bands`); each band has its own ring of
+        integral rows.
     """
     f = math.sqrt(cam.fx * cam.fy)
     depths, rho, _ = profile if profile is not None else noise_profile(z, valid, f)
     z0, inv_step, r_table, rho_table = radius_table(depths, rho, alpha=alpha, window=window, max_window=max_window)
     r_max = (max_window - 1) // 2
-    ring = np.empty((4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1))
-    _adaptive_fit_kernel(
-        z,
-        valid,
-        z0,
-        inv_step,
-        r_table,
-        rho_table,
-        growth_table(r_max),
-        widen_table(r_max),
-        N_WIDEN,
-        float(cam.fx),
-        float(cam.fy),
-        float(cam.cx),
-        float(cam.cy),
-        float(kappa),
-        RHO_FLOOR,
-        r_max,
-        np.float32(fill),
-        ring,
-        out,
-    )
+    grow, widen = growth_table(r_max), widen_table(r_max)
+
+    shape = (4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1)
+
+    def rows(v0, v1):
+        kept = _rings.take(shape)
+        ring = kept[0] if kept is not None else np.empty(shape)
+        _adaptive_fit_kernel(
+            z,
+            valid,
+            z0,
+            inv_step,
+            r_table,
+            rho_table,
+            grow,
+            widen,
+            N_WIDEN,
+            float(cam.fx),
+            float(cam.fy),
+            float(cam.cx),
+            float(cam.cy),
+            float(kappa),
+            RHO_FLOOR,
+            r_max,
+            np.float32(fill),
+            ring,
+            out,
+            v0,
+            v1,
+        )
+        _rings.give(shape, (ring,))
+
+    bands(rows, z.shape[0])
     return out

@@ -94,18 +94,18 @@ def auto(
     ``tau`` is d2nt_v3's (in depth units, as there), an option so that the paper-faithful mode's range rescale
     of extreme depth (:mod:`surfnorm.units`) scales it with the depth.
     ``tie_tol`` and ``relative`` are the scale-invariant mode's, passed on to ``d2nt_v3``
-    (``adaptive_fit`` does not depend on the unit of depth); so are the row ``bands`` of one frame
-    on several threads (``adaptive_fit`` runs on one).
+    (``adaptive_fit`` does not depend on the unit of depth); the row ``bands`` of one frame on several
+    threads go to both.
     """
     from .d2nt_v3 import d2nt_v3
 
     profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
     t = adaptive_weight(profile)
     if t == 1.0:
-        return adaptive_fit(z, valid, cam, out, fill=fill, profile=profile)
+        return adaptive_fit(z, valid, cam, out, fill=fill, profile=profile, **bands)
     d2nt_options = dict(dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", tie_tol=tie_tol, relative=relative, **bands)
     if t == 0.0:
         return d2nt_v3(z, valid, cam, out, fill=fill, **d2nt_options)
     a = d2nt_v3(z, valid, cam, np.empty_like(out), fill=np.nan, **d2nt_options)
-    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile)
+    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile, **bands)
     return blend(a, b, t, fill, out)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -139,6 +140,33 @@ class TestSensorBench:
         assert "## Absent peers" in text and "- nolib_peer: ImportError" in text
         assert "- broken_peer on a_exact: RuntimeError: boom" in text
         assert "| broken_peer | failed |" in text
+
+    def test_entries_run_on_one_thread_unless_they_say_threads(self, folder, monkeypatch):
+        """Timing is one thread per library: surfnorm's entries pass threads=1 to estimate (its own default is
+        every core), an entry may name threads=N or threads=all, and the default method also runs on every
+        core where there are several."""
+        from surfnorm import _api
+
+        seen = []
+        real = _api._workers
+        monkeypatch.setattr(_api, "_workers", lambda threads: seen.append(threads) or real(threads))
+        entries, _ = make_entries(["adaptive_fit", "adaptive_fit:threads=3", "auto:threads=all"])
+        assert [e.label for e in entries] == [
+            "adaptive_fit",
+            "adaptive_fit threads=3",
+            f"auto threads={os.cpu_count()}",
+        ]
+        frame = read_sensor_frame(folder / "b_steps")
+        one, three, every = (e.normals(frame.depth, frame.K, frame.depth > 0) for e in entries)
+        assert seen == [1, 3, os.cpu_count()]
+        np.testing.assert_array_equal(one, three)  # row bands: the same bits
+        with pytest.raises(InputError, match="threads=N"):
+            make_entries(["auto:threads=0"])
+        monkeypatch.setattr(os, "cpu_count", lambda: 4)
+        labels = [e.label for e in make_entries(None, peer_libraries=[])[0]]
+        assert labels.count("auto threads=4") == 1 and "auto" in labels
+        monkeypatch.setattr(os, "cpu_count", lambda: 1)
+        assert not [x for x in (e.label for e in make_entries(None, peer_libraries=[])[0]) if "threads" in x]
 
     def test_cli(self, folder, tmp_path):
         out = tmp_path / "R"

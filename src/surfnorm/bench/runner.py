@@ -300,7 +300,7 @@ def _time_one_frame(frame, specs: list[Spec], peer_runs, repeats: int) -> dict[s
             calls[spec.key] = lambda run=run: run(frame.depth, frame.K, frame.mask, clean=False)
         else:
             opts = dict(spec.options)
-            calls[spec.key] = lambda m=spec.method, o=opts: estimate(frame.depth, frame.K, method=m, **o)
+            calls[spec.key] = lambda m=spec.method, o=opts: estimate(frame.depth, frame.K, method=m, threads=1, **o)
     times: dict[str, list[float]] = {}
     wanted, errors = {}, {}
     for key, call in calls.items():

@@ -16,13 +16,15 @@ appears here once registered) with its defaults, a few variants
 a peer whose library does not import is reported as absent, not as a failure.
 A method name may carry options: ``plane_pca:window=11``.
 
-Time: one thread for every library (:func:`surfnorm.bench.peers.single_thread`),
-after a warm-up call; a peer's time is its own library call (its conversion to
+Time: one thread for every library (:func:`surfnorm.bench.peers.single_thread`,
+and ``threads=1`` for surfnorm, unless an entry names ``threads``: see
+:data:`VARIANTS`), after a warm-up call; a peer's time is its own library call (its conversion to
 unit, camera-facing normals is not timed).
 """
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +35,7 @@ import numpy as np
 from .. import metrics
 from ..camera import Intrinsics
 from ..errors import InputError
+from ..methods import DEFAULT_METHOD
 
 __all__ = [
     "Entry",
@@ -50,7 +53,9 @@ __all__ = [
     "sensor_bench",
 ]
 
-#: Variants run beside the registered methods' defaults: (method, options).
+#: Variants run beside the registered methods' defaults: (method, options). ``threads`` is ``estimate``'s
+#: (default 1 in the benchmark, "all": every core); on a machine with several cores the default method
+#: is also run as a user calls it, on every core.
 VARIANTS = (("plane_pca", {"window": 11}),)
 
 
@@ -96,17 +101,30 @@ def label_of(method: str, options: dict) -> str:
     return method + "".join(f" {k}={v}" for k, v in options.items())
 
 
+def _threads(value) -> int:
+    """An entry's ``threads``: a positive integer, or "all" (every core, as ``estimate``'s default)."""
+    if value == "all":
+        return os.cpu_count() or 1
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise InputError(f"methods: expected threads=N (a positive integer) or threads=all, got threads={value!r}")
+    return value
+
+
 def _surfnorm_entry(method: str, options: dict) -> Entry:
+    """``estimate`` on one thread, unless the options hold ``threads`` (N or "all": one frame in row bands)."""
     from .._api import estimate
     from ..methods import resolve
 
+    options = dict(options)
+    threads = _threads(options.pop("threads", 1))
     resolve(method, dict(options))  # a bad name or option is an InputError now, not on the first frame
 
-    def call(depth, cam, valid, method=method, options=dict(options)):  # noqa: B006 (binds a copy, never mutated)
-        return estimate(depth, cam, method=method, **options)
+    def call(depth, cam, valid, method=method, options=options):
+        return estimate(depth, cam, method=method, threads=threads, **options)
 
-    info_summary = f"surfnorm.estimate(method={method!r}" + "".join(f", {k}={v!r}" for k, v in options.items()) + ")"
-    return Entry(label_of(method, options), "surfnorm", info_summary, call)
+    shown = dict(options, threads=threads) if threads != 1 else options
+    info_summary = f"surfnorm.estimate(method={method!r}" + "".join(f", {k}={v!r}" for k, v in shown.items()) + ")"
+    return Entry(label_of(method, shown), "surfnorm", info_summary, call)
 
 
 def _peer_entry(peer, run) -> Entry:
@@ -134,6 +152,8 @@ def make_entries(
     peer_keys = [p.name for p in SENSOR_PEERS]
     if names is None:
         wanted: list = [(m, {}) for m in registered] + [(m, o) for m, o in VARIANTS if m in registered]
+        if (os.cpu_count() or 1) > 1:  # the default call as a user makes it: one frame on every core
+            wanted.append((DEFAULT_METHOD, {"threads": "all"}))
         libs = {p.library for p in SENSOR_PEERS}
         for lib in peer_libraries or []:
             if lib not in libs:
@@ -492,7 +512,8 @@ def folder_markdown(result: dict) -> str:
         "",
         f"Frames: {len(frames)} in {result['root']}. Cells: mean folded angle in degrees to the reference planes "
         "(plane metric) or to the ground truth (e_A, frames marked *), and in brackets the median time of a warm "
-        f"call in ms at one thread ({result['repeats']} calls, {SLOW_REPEATS} for calls over {SLOW_MS:g} ms). "
+        f"call in ms at one thread, or on N threads where an entry says threads=N ({result['repeats']} calls, "
+        f"{SLOW_REPEATS} for calls over {SLOW_MS:g} ms). "
         "Best angle per frame in bold. Medians over frames in the last columns.",
         "",
         "## Angle (ms)",
@@ -550,7 +571,7 @@ def folder_figure(path, result: dict) -> Path:
             ax.annotate(r["entry"], (r["ms"], r["angle"]), fontsize=5, xytext=(2, 2), textcoords="offset points")
         ax.set_xscale("log")
         ax.set_title(f, fontsize=9)
-        ax.set_xlabel("ms (one thread)", fontsize=8)
+        ax.set_xlabel("ms (one thread unless the entry says threads=N)", fontsize=8)
         ax.set_ylabel("angle (deg)", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
@@ -598,7 +619,8 @@ def sensor_bench(
     repeats: int = 5,
     progress=None,
 ) -> tuple[dict, dict[str, Path]]:
-    """``surfnorm bench --sensor ROOT --out OUT``: one thread everywhere, every entry, the report. Returns (result, paths)."""
+    """``surfnorm bench --sensor ROOT --out OUT``: one thread everywhere (and the default method also on every
+    core), every entry, the report. Returns (result, paths)."""
     import platform
 
     from .peers import peer_versions, single_thread

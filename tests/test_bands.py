@@ -47,7 +47,7 @@ def option_sets(name):
 def interleaved_bands(parts):
     """A ``bands`` function that runs the given row bands one after another, last band first."""
 
-    def bands(stage, n_rows):
+    def bands(stage, n_rows, weights=None):
         spans = [(a, min(b, n_rows)) for a, b in parts if a < n_rows]
         results = {}
         for a, b in reversed(spans):
@@ -135,12 +135,25 @@ def test_bands_really_split_one_frame(monkeypatch):
 
 
 def test_spans_cover_every_row_once():
+    rng = np.random.default_rng(0)
     for n_rows in (1, 31, 64, 65, 960, 2161):
+        weightings = [None, rng.random(n_rows), np.r_[np.zeros(n_rows // 2), np.ones(n_rows - n_rows // 2)]]
         for workers in (1, 2, 3, 16):
-            parts = _bands.spans(n_rows, workers)
-            assert parts[0][0] == 0 and parts[-1][1] == n_rows
-            assert all(a < b for a, b in parts) and all(p[1] == q[0] for p, q in zip(parts, parts[1:]))
-            assert len(parts) <= workers and (len(parts) == 1 or min(b - a for a, b in parts) >= _bands.MIN_ROWS)
+            for weights in weightings:
+                parts = _bands.spans(n_rows, workers, weights=weights)
+                assert parts[0][0] == 0 and parts[-1][1] == n_rows
+                assert all(a < b for a, b in parts) and all(p[1] == q[0] for p, q in zip(parts, parts[1:]))
+                assert len(parts) <= workers
+                assert len(parts) == 1 or min(b - a for a, b in parts) >= _bands.MIN_ROWS
+
+
+def test_weighted_spans_share_the_work():
+    """Rows weighted by their cost (a frame whose upper half is empty): the bands carry equal sums of it."""
+    weights = np.r_[np.zeros(480), np.ones(480)]
+    assert _bands.spans(960, 2, weights=weights) == [(0, 720), (720, 960)]
+    assert _bands.spans(960, 2) == [(0, 480), (480, 960)]
+    # all the work in the last rows: every band still has MIN_ROWS rows
+    assert _bands.spans(200, 3, weights=np.r_[np.zeros(199), 1.0]) == [(0, 136), (136, 168), (168, 200)]
 
 
 @pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2"])

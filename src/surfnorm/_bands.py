@@ -1,9 +1,11 @@
 """One frame on several threads: row bands.
 
 A method that declares ``bands=True`` (see :class:`surfnorm.methods.Method`)
-takes a keyword ``bands``: a function ``bands(stage, H)`` that calls
-``stage(start, stop)`` for row bands that cover rows 0 .. H - 1 and returns
-their results in order, on several threads at once. Each stage of the method
+takes a keyword ``bands``: a function ``bands(stage, H, weights=None)`` that
+calls ``stage(start, stop)`` for row bands that cover rows 0 .. H - 1 and
+returns their results in order, on several threads at once (bands of equal
+rows, or of equal sums of ``weights``, a cost per row, where the stage gives
+them). Each stage of the method
 (a Numba kernel that releases the GIL) is written to compute rows
 ``start .. stop - 1`` of the *whole* frame: it reads the rows around the band
 that it needs (its halo: one row for a 3x3 stencil, three for d2nt_v3's DAG
@@ -26,6 +28,8 @@ from __future__ import annotations
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
 
 #: Fewest rows in a band: a band costs a task on the thread pool (tens of microseconds) and the
 #: rows that a rolling-buffer kernel primes; below this a frame stays on fewer threads.
@@ -62,16 +66,29 @@ def map_threads(func, n: int, workers: int) -> None:
     list(pool.map(func, range(n)))
 
 
-def spans(n_rows: int, workers: int, min_rows: int | None = None) -> list[tuple[int, int]]:
+def spans(n_rows: int, workers: int, min_rows: int | None = None, weights=None) -> list[tuple[int, int]]:
     """Row bands [start, stop) covering ``n_rows`` rows: at most ``workers``, each at least ``min_rows``
-    (default :data:`MIN_ROWS`; one band if there are fewer rows), as equal as possible."""
-    n = max(1, min(workers, n_rows // max(1, MIN_ROWS if min_rows is None else min_rows)))
-    edges = [n_rows * i // n for i in range(n + 1)]
+    (default :data:`MIN_ROWS`; one band if there are fewer rows), as equal as possible: in rows, or in the
+    sum of ``weights`` (one non-negative number per row: its cost) where given.
+
+    Weights matter where the work is uneven: a LiDAR frame's upper rows are nearly empty, and equal row
+    counts gave one thread a third of the work and the other two thirds.
+    """
+    least = max(1, MIN_ROWS if min_rows is None else min_rows)
+    n = max(1, min(workers, n_rows // least))
+    if weights is None or n == 1:
+        edges = [n_rows * i // n for i in range(n + 1)]
+    else:
+        cum = np.cumsum(np.asarray(weights, np.float64))
+        # band i ends after the first row where the running cost reaches i / n of the total
+        edges = [0] + [int(np.searchsorted(cum, cum[-1] * i / n)) + 1 for i in range(1, n)] + [n_rows]
+        for i in range(1, n):  # each band at least ``least`` rows, as many as the bands after it need
+            edges[i] = min(max(edges[i], edges[i - 1] + least), n_rows - (n - i) * least)
     return [(edges[i], edges[i + 1]) for i in range(n)]
 
 
-def whole(stage, n_rows: int) -> list:
-    """``bands`` on one thread: the stage over every row at once."""
+def whole(stage, n_rows: int, weights=None) -> list:
+    """``bands`` on one thread: the stage over every row at once (``weights``: see :func:`spans`)."""
     return [stage(0, n_rows)]
 
 
@@ -80,8 +97,8 @@ def on_threads(workers: int):
     if workers <= 1:
         return whole
 
-    def bands(stage, n_rows: int) -> list:
-        parts = spans(n_rows, workers)
+    def bands(stage, n_rows: int, weights=None) -> list:
+        parts = spans(n_rows, workers, weights=weights)
         if len(parts) == 1:
             return [stage(0, n_rows)]
         results = [None] * len(parts)

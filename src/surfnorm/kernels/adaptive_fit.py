@@ -914,5 +914,7 @@ def adaptive_fit(
         )
         _rings.give(shape, (ring,))
 
-    bands(rows, z.shape[0])
+    # A row costs its integral row and bookkeeping (every pixel) and its fits (valid pixels): sparse rows
+    # (a LiDAR frame's upper part) are cheap, so bands of equal cost, not of equal rows.
+    bands(rows, z.shape[0], weights=np.count_nonzero(valid, axis=1) + 0.25 * z.shape[1])
     return out

@@ -414,15 +414,6 @@ def _sda_step(s, ok, c, tol, a_u, a_v, con, g_u, g_v, e_u, e_v, s_u, s_v, g_u2, 
     return moved > 0
 
 
-def _padded(shape, dtype, margin_value):
-    arr = np.empty(shape, dtype=dtype)  # the inner part is written by the kernels
-    arr[:_P] = margin_value
-    arr[-_P:] = margin_value
-    arr[:, :_P] = margin_value
-    arr[:, -_P:] = margin_value
-    return arr
-
-
 def _kernel_tol(tie_tol):
     """The kernels' ``tol``: None for exact comparisons (tie_tol 0), which Numba compiles without the tolerance."""
     return float(tie_tol) if tie_tol else None
@@ -463,97 +454,6 @@ def release() -> None:
     """Free the working arrays kept for the next frame (see :func:`_give`)."""
     with _spare_lock:
         _spare.clear()
-
-
-def _run_sda(signal, valid, iterations, border, tie_tol=0.0, bands=whole):
-    """The dynamic programming on padded arrays. Returns [g_u, g_v, e_u, e_v, signal] padded, the passes applied,
-    and the working arrays (for :func:`_give` once the caller is done with the first ones).
-
-    ``signal(a, b)``: rows a .. b - 1 of the signal, float64. Every stage runs in row bands
-    (``bands``, see :mod:`surfnorm._bands`); a pass waits for the previous one.
-    """
-    H, W = valid.shape
-    shape = (H + 2 * _P, W + 2 * _P)
-    margins = []
-    reuse = _take(shape)
-
-    def padded(dtype, margin_value):
-        # the margin is written below, band by band (every call: some kernels write into it); the inner part by the
-        # kernels, which read no element of it that this call has not written
-        arr = reuse[len(margins)] if reuse is not None else np.empty(shape, dtype=dtype)
-        margins.append((arr, margin_value))
-        return arr
-
-    s = padded(np.float64, 0.0)
-    ok = padded(np.bool_, False)
-    a_u = padded(np.float64, _INF)
-    a_v = padded(np.float64, _INF)
-    con = padded(np.uint8, 0)
-    sets = [
-        [
-            padded(np.float64, 0.0),
-            padded(np.float64, 0.0),
-            padded(np.float64, _INF),
-            padded(np.float64, _INF),
-            padded(np.int8, _NO_STATE),
-            padded(np.int8, _NO_STATE),
-        ]
-        for _ in range(2)
-    ]
-    l_u = padded(np.float64, 1.0)  # the Laplacians write every row and column but the outermost
-    l_v = padded(np.float64, 1.0)
-
-    def first(a, b):
-        # Each band writes the margin of its own rows (the first and last bands also the margin rows), then its
-        # rows of the signal: on every band's thread at once (a new array's pages are first touched here).
-        r0, r1 = (0 if a == 0 else a + _P), (shape[0] if b == H else b + _P)
-        for arr, value in margins:
-            arr[r0:r1, :_P] = value
-            arr[r0:r1, -_P:] = value
-            if a == 0:
-                arr[:_P] = value
-            if b == H:
-                arr[-_P:] = value
-        s[a + _P : b + _P, _P:-_P] = np.where(valid[a:b], signal(a, b), 0.0)  # user depth is never read where invalid
-        ok[a + _P : b + _P, _P:-_P] = valid[a:b]
-
-    bands(first, H)
-    tol = _kernel_tol(tie_tol)
-    # padded rows 1 .. Hp - 2: the first and last bands also cover the margin rows that the image rows' halo reads
-    bands(
-        lambda a, b: _sda_laplacians(
-            s, ok, tol, l_u, l_v, a_u, a_v, 1 if a == 0 else a + _P, shape[0] - 1 if b == H else b + _P
-        ),
-        H,
-    )
-    reflect = border == "reflect"
-    bands(lambda a, b: _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, *sets[0], a, b), H)
-    cap = MAX_ITERATIONS if iterations is None else iterations
-    passes = 0
-    cur = 0
-    for i in range(1, cap + 1):
-        c, old, new = 1.0 / (i + 1), sets[cur], sets[1 - cur]
-        if not any(bands(lambda a, b: _sda_step(s, ok, c, tol, a_u, a_v, con, *old, *new, a, b), H)):
-            break
-        cur = 1 - cur
-        passes = i
-    return sets[cur][:4] + [s], passes, [arr for arr, _ in margins]
-
-
-def sda_gradients(signal, valid, *, iterations=3, border="one-sided", tie_tol=0.0):
-    """SDA gradients of ``signal`` (H, W) along u and v, and the number of passes that ran.
-
-    Returns ``(g_u, g_v, passes)``: float64 (H, W) arrays, NaN where a pixel
-    has no gradient, and how many passes of the dynamic programming were
-    applied (the pass whose stop test fired is not counted). ``iterations``
-    None runs until stable, at most :data:`MAX_ITERATIONS` passes. ``tie_tol``: see :data:`surfnorm.units.TIE_TOLERANCE`.
-    """
-    signal = np.asarray(signal, dtype=np.float64)
-    (g_u, g_v, e_u, e_v, _), passes, work = _run_sda(lambda a, b: signal[a:b], valid, iterations, border, tie_tol)
-    inner = (slice(_P, -_P), slice(_P, -_P))
-    out = (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
-    _give(work)
-    return out
 
 
 @njit(noalias=True)
@@ -600,12 +500,244 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect,
                 fill_pixel(out, v, u, fill)
 
 
-def _inverse(z):
-    def rows(a, b):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 1.0 / z[a:b].astype(np.float64)  # read only where valid
+# ---- the stages of one frame, fused ----------------------------------------------------------------------------
+#
+# One frame is a sequence of stages, each a sweep over the rows: load (the signal and validity into the padded
+# arrays, and every array's margin), the Laplacians, the initial gradients, the passes of the dynamic programming,
+# the normals. Stage after stage over the whole frame, the working arrays (135 MB at 1280x960) stream through
+# memory once per stage: on two cores the memory bus, not the cores, was then the limit (each stage 1.3-1.5x faster
+# on two threads than on one). A stage reads only the rows next to the one it writes (its halo: 1 row for the
+# Laplacians and a pass, 2 for the initial gradients, 0 for load and normals), so :func:`_sda_sweep` runs them as a
+# wavefront instead: stage k computes row t - C_k at step t (C_k: the halos of the stages before it, added up),
+# while the rows that it reads are still in the cache. A pass writes into the set of arrays that the pass before
+# the previous one wrote; at step t it overwrites a row that the stage between read for the last time at that
+# same step, earlier (stages run in their order within a step), so the wavefront computes what stage after stage
+# computes, bit for bit.
+#
+# Row bands (threads): a band computes, per stage, the rows that need no row of another band (a trapezoid,
+# C_k rows less at each inner edge); after a barrier, the rows around each inner edge (C_k rows either side)
+# follow, in the same wavefront order. The rows that they read are either theirs or the trapezoids' rows, which
+# the trapezoids' later passes have not overwritten (a pass overwrites rows C_k + 1 and further from the edge).
+# Bands shorter than 2 C + 2 rows (tests split frames into one-row bands) run the stages one by one instead.
 
-    return rows
+_LOAD, _LAPLACIANS, _INIT, _PASS, _NORMALS = 0, 1, 2, 3, 4
+_HALO = (0, 1, 2, 1, 0)  # rows of the stage before that a stage reads above and below the row it writes
+
+
+@njit
+def _margin(a, v, value, whole_row):
+    """The margin of padded row ``v`` of ``a``: the whole row, or its first and last _P columns."""
+    Wp = a.shape[1]
+    if whole_row:
+        a[v, :] = value
+    else:
+        for u in range(_P):
+            a[v, u] = value
+            a[v, Wp - 1 - u] = value
+
+
+@njit
+def _margins(v, whole_row, s, ok, l_u, l_v, a_u, a_v, con, x, y):
+    """The margin values of every working array at padded row ``v``: missing (see :func:`_sda_laplacians`)."""
+    _margin(s, v, 0.0, whole_row)
+    _margin(ok, v, False, whole_row)
+    _margin(l_u, v, 1.0, whole_row)
+    _margin(l_v, v, 1.0, whole_row)
+    _margin(a_u, v, _INF, whole_row)
+    _margin(a_v, v, _INF, whole_row)
+    _margin(con, v, 0, whole_row)
+    for g in (x, y):
+        _margin(g[0], v, 0.0, whole_row)
+        _margin(g[1], v, 0.0, whole_row)
+        _margin(g[2], v, _INF, whole_row)
+        _margin(g[3], v, _INF, whole_row)
+        _margin(g[4], v, _NO_STATE, whole_row)
+        _margin(g[5], v, _NO_STATE, whole_row)
+
+
+@njit
+def _load_row(z, valid, inverse, s, ok, r):
+    """Image row r of the signal (depth, or its inverse), 0 where invalid (user depth is never read there)."""
+    v = r + _P
+    for u in range(z.shape[1]):
+        x = np.float64(z[r, u])
+        if inverse:
+            x = 1.0 / x
+        s[v, u + _P] = select(valid[r, u], x, 0.0)
+        ok[v, u + _P] = valid[r, u]
+
+
+@njit
+def _sda_sweep(
+    z, valid, inverse, reflect, tol, s, ok, l_u, l_v, a_u, a_v, con, x, y,
+    first_pass, n_passes, base, f_x, f_y, c_x, c_y, fill, out, j0, j1, lo, hi, edge, moved,
+):  # fmt: skip
+    """Stages j0 .. j1 - 1 of one frame (see above) as a wavefront over image rows. The stages: 0 load, 1 the
+    Laplacians, 2 the initial gradients (into set ``x``), then passes ``first_pass`` .. ``first_pass + n_passes - 1``
+    (pass i reads set x for odd i and writes set y, the other way round for even i; a set is the tuple g_u, g_v, e_u,
+    e_v, s_u, s_v), then the normals from the last pass's set (``base`` 1: CP2TV, 2: 3F2N's median; 0: none).
+
+    ``edge`` False: band lo .. hi - 1 (without the rows next to an inner edge that need another band's rows);
+    True: the rows around the inner band edge ``lo``. ``moved[k]`` counts the rows in which pass first_pass + k
+    moved a pixel.
+    """
+    H = z.shape[0]
+    n_all = 3 + n_passes + (1 if base else 0)
+    kind = np.empty(n_all, np.int64)
+    reach = np.zeros(n_all, np.int64)  # C_k: the halos of the stages j0 + 1 .. k, added up
+    start = np.zeros(n_all, np.int64)
+    stop = np.zeros(n_all, np.int64)
+    t0, t1 = H + n_all * 2, 0
+    for k in range(j0, j1):
+        kind[k] = k if k < 3 else (_PASS if k < 3 + n_passes else _NORMALS)
+        if k > j0:
+            reach[k] = reach[k - 1] + _HALO[kind[k]]
+        if edge:
+            start[k], stop[k] = max(0, lo - reach[k]), min(H, lo + reach[k])
+        else:
+            start[k] = lo if lo == 0 else lo + reach[k]
+            stop[k] = hi if hi == H else hi - reach[k]
+        if start[k] < stop[k]:
+            t0 = min(t0, start[k] + reach[k])
+            t1 = max(t1, stop[k] + reach[k])
+    final = y if (first_pass + n_passes - 1) % 2 == 1 else x  # the last pass's set (first_pass - 1's if none)
+    for t in range(t0, t1):
+        for k in range(j0, j1):
+            r = t - reach[k]
+            if r < start[k] or r >= stop[k]:
+                continue
+            what = kind[k]
+            if what == _LOAD:
+                if r == 0:
+                    for v in range(_P):
+                        _margins(v, True, s, ok, l_u, l_v, a_u, a_v, con, x, y)
+                if r == H - 1:
+                    for v in range(H + _P, H + 2 * _P):
+                        _margins(v, True, s, ok, l_u, l_v, a_u, a_v, con, x, y)
+                _margins(r + _P, False, s, ok, l_u, l_v, a_u, a_v, con, x, y)
+                _load_row(z, valid, inverse, s, ok, r)
+            elif what == _LAPLACIANS:
+                _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v, r + _P, r + _P + 1)
+            elif what == _INIT:
+                _sda_init(s, ok, reflect, tol, l_u, l_v, a_u, a_v, con, *x, r, r + 1)
+            elif what == _PASS:
+                i = first_pass + k - 3
+                old, new = (x, y) if i % 2 == 1 else (y, x)
+                if _sda_step(s, ok, 1.0 / (i + 1), tol, a_u, a_v, con, *old, *new, r, r + 1):
+                    moved[k - 3] += 1
+            elif base == 1:
+                _gradients_to_normals_kernel(s, *final[:4], f_x, f_y, c_x, c_y, fill, out, r, r + 1)
+            else:
+                _tf2n_base_kernel(z, valid, *final[:4], f_x, f_y, c_x, c_y, reflect, fill, out, r, r + 1)
+
+
+_NO_OUT = np.empty((1, 1, 3), np.float32)  # ``out`` of a sweep without normals (never written)
+
+
+def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=False, normals=None):
+    """SDA on padded working arrays, from depth ``z`` (its inverse with ``inverse``), then the normals into
+    ``normals = (base, (f_x, f_y, c_x, c_y), fill, out)`` (base 1 CP2TV, 2 3F2N's median) if given.
+
+    Returns the result [g_u, g_v, e_u, e_v] (padded; a gradient with infinite energy does not exist), the passes
+    applied, and the working arrays (for :func:`_give` once the caller is done with the first ones). Every stage
+    runs in row bands (``bands``, see :mod:`surfnorm._bands`), fused into one sweep with a few passes (see
+    :func:`_sda_sweep`), whose stop test comes at its end. A pass in which no pixel moves leaves every gradient and
+    energy as it was (only the states become 2), so its set holds the result of the pass before: a sweep of 3
+    passes keeps the result unless its first pass is the one that stops (then the stages run again one by one, each
+    pass's stop test before the next), and sweeps of 2 (``iterations=None``) always keep it.
+    """
+    H, W = valid.shape
+    shape = (H + 2 * _P, W + 2 * _P)
+    arrays = _take(shape)
+    if arrays is None:  # every element, margins included, is written by a stage before any stage reads it
+        kinds = [np.float64, np.bool_] + [np.float64] * 4 + [np.uint8] + 2 * ([np.float64] * 4 + [np.int8] * 2)
+        arrays = [np.empty(shape, dt) for dt in kinds]
+    s, ok, l_u, l_v, a_u, a_v, con = arrays[:7]
+    sets = (tuple(arrays[7:13]), tuple(arrays[13:19]))
+    base, f, fill, out = normals if normals is not None else (0, (0.0, 0.0, 0.0, 0.0), np.float32(0), _NO_OUT)
+    common = (z, valid, inverse, border == "reflect", _kernel_tol(tie_tol), s, ok, l_u, l_v, a_u, a_v, con, *sets)
+    cap = MAX_ITERATIONS if iterations is None else iterations
+
+    def sweep(first, n, base_, j0, j1):
+        """Stages j0 .. j1 - 1 on row bands; whether each of the n passes moved a pixel, or None where a band is too
+        short for the stages to run fused."""
+        reach = sum(_HALO[k if k < 3 else _PASS if k < 3 + n else _NORMALS] for k in range(j0 + 1, j1))
+        parts = []
+
+        def band(a, b):
+            if b - a < 2 * reach + 2 and reach and (a > 0 or b < H):
+                return None
+            parts.append((a, b))
+            moved = np.zeros(max(n, 1), np.int64)
+            _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, a, b, False, moved)
+            return moved
+
+        done = bands(band, H)
+        if any(m is None for m in done):
+            return None
+        edges = [b for _, b in parts if b < H]
+        if edges and reach:
+
+            def around(a, b):
+                moved = np.zeros(max(n, 1), np.int64)
+                for edge in edges:
+                    if a < edge <= b:
+                        _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, edge, edge, True, moved)
+                return moved
+
+            done += bands(around, H)
+        return np.sum(done, axis=0)[:n] > 0
+
+    def fused():
+        """(passes, which set holds the result, normals written), or None to run the stages one by one."""
+        passes, per = 0, (2 if iterations is None else 3)
+        while True:
+            n = min(per, cap - passes)
+            last = passes + n == cap
+            base_ = base if last else 0
+            moved = sweep(passes + 1, n, base_, 0 if passes == 0 else 3, 3 + n + (1 if base_ else 0))
+            if moved is None:
+                return None
+            if moved.all():
+                passes += n
+                if last:
+                    return passes, passes % 2, bool(base_)
+                continue
+            j = passes + 1 + int(np.argmin(moved))  # the first pass that moved nothing: its set is pass j - 1's result
+            if j < passes + n - 1:  # pass j + 2 overwrote it
+                return None
+            return j - 1, j % 2, bool(base_) and j == passes + n
+
+    def staged():
+        for k in range(3):
+            sweep(1, 0, 0, k, k + 1)
+        passes = 0
+        for i in range(1, cap + 1):
+            if not sweep(i, 1, 0, 3, 4)[0]:
+                break
+            passes = i
+        return passes, passes % 2, False
+
+    passes, which, written = fused() or staged()
+    if base and not written:  # the normals from the result set (a sweep without passes: first_pass - 1's set)
+        sweep(which + 1, 0, base, 3, 4)
+    return list(sets[which][:4]), passes, arrays
+
+
+def sda_gradients(signal, valid, *, iterations=3, border="one-sided", tie_tol=0.0):
+    """SDA gradients of ``signal`` (H, W) along u and v, and the number of passes that ran.
+
+    Returns ``(g_u, g_v, passes)``: float64 (H, W) arrays, NaN where a pixel
+    has no gradient, and how many passes of the dynamic programming were
+    applied (the pass whose stop test fired is not counted). ``iterations``
+    None runs until stable, at most :data:`MAX_ITERATIONS` passes. ``tie_tol``: see :data:`surfnorm.units.TIE_TOLERANCE`.
+    """
+    signal = np.asarray(signal, dtype=np.float64)
+    (g_u, g_v, e_u, e_v), passes, work = _run_sda(signal, valid, iterations, border, tie_tol)
+    inner = (slice(_P, -_P), slice(_P, -_P))
+    out = (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
+    _give(work)
+    return out
 
 
 def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided", fill=0.0, tie_tol=0.0, bands=whole):
@@ -614,17 +746,10 @@ def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided
     ``tie_tol`` 0 (the paper-faithful mode) compares exactly; the scale-invariant mode passes
     :data:`surfnorm.units.TIE_TOLERANCE` (see there). ``bands``: how rows are split over threads
     (see :mod:`surfnorm._bands`): the dynamic programming is a sequence of Jacobi passes (each pixel
-    from the previous pass only), so every pass runs in row bands side by side, then the next."""
+    from the previous pass only), so every pass runs in row bands side by side (see :func:`_sda_sweep`)."""
     f = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
-    fill32 = np.float32(fill)
-    if base == "3f2n":
-        (g_u, g_v, e_u, e_v, _), _, work = _run_sda(_inverse(z), valid, iterations, border, tie_tol, bands)
-        reflect = border == "reflect"
-        bands(lambda a, b: _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, *f, reflect, fill32, out, a, b), z.shape[0])
-    else:
-        (g_u, g_v, e_u, e_v, s), _, work = _run_sda(
-            lambda a, b: z[a:b].astype(np.float64), valid, iterations, border, tie_tol, bands
-        )
-        bands(lambda a, b: _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, *f, fill32, out, a, b), z.shape[0])
+    inverse = base == "3f2n"  # the demo's SDA + 3F2N: the dynamic programming on inverse depth
+    normals = (2 if inverse else 1, f, np.float32(fill), out)
+    _, _, work = _run_sda(z, valid, iterations, border, tie_tol, bands, inverse, normals)
     _give(work)
     return out

@@ -662,30 +662,26 @@ def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=Fal
         """Stages j0 .. j1 - 1 on row bands; whether each of the n passes moved a pixel, or None where a band is too
         short for the stages to run fused."""
         reach = sum(_HALO[k if k < 3 else _PASS if k < 3 + n else _NORMALS] for k in range(j0 + 1, j1))
-        parts = []
+        parts, lock = [], threading.Lock()
 
         def band(a, b):
-            if b - a < 2 * reach + 2 and reach and (a > 0 or b < H):
-                return None
-            parts.append((a, b))
+            # The band that finishes last (its thread is running) computes the rows around every inner edge:
+            # no second round of tasks on the pool, whose threads take a while to wake.
+            short = b - a < 2 * reach + 2 and reach and (a > 0 or b < H)
             moved = np.zeros(max(n, 1), np.int64)
-            _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, a, b, False, moved)
-            return moved
+            if not short:
+                _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, a, b, False, moved)
+            with lock:
+                parts.append((a, b, short))
+                last = sum(q - p for p, q, _ in parts) == H
+            if last and reach and not any(x for _, _, x in parts):
+                for edge in sorted(q for _, q, _ in parts if q < H):
+                    _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, edge, edge, True, moved)
+            return None if short else moved
 
         done = bands(band, H)
         if any(m is None for m in done):
             return None
-        edges = [b for _, b in parts if b < H]
-        if edges and reach:
-
-            def around(a, b):
-                moved = np.zeros(max(n, 1), np.int64)
-                for edge in edges:
-                    if a < edge <= b:
-                        _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, edge, edge, True, moved)
-                return moved
-
-            done += bands(around, H)
         return np.sum(done, axis=0)[:n] > 0
 
     def fused():

@@ -525,10 +525,11 @@ _HALO = (0, 1, 2, 1, 0)  # rows of the stage before that a stage reads above and
 
 
 @njit
-def _margin(a, v, value, whole_row):
-    """The margin of padded row ``v`` of ``a``: the whole row, or its first and last _P columns."""
-    Wp = a.shape[1]
-    if whole_row:
+def _margin(a, v, value):
+    """The margin of padded row ``v`` of ``a``: the whole row in the first and last _P rows, else the first and
+    last _P columns."""
+    Hp, Wp = a.shape
+    if v < _P or v >= Hp - _P:
         a[v, :] = value
     else:
         for u in range(_P):
@@ -537,22 +538,22 @@ def _margin(a, v, value, whole_row):
 
 
 @njit
-def _margins(v, whole_row, s, ok, l_u, l_v, a_u, a_v, con, x, y):
-    """The margin values of every working array at padded row ``v``: missing (see :func:`_sda_laplacians`)."""
-    _margin(s, v, 0.0, whole_row)
-    _margin(ok, v, False, whole_row)
-    _margin(l_u, v, 1.0, whole_row)
-    _margin(l_v, v, 1.0, whole_row)
-    _margin(a_u, v, _INF, whole_row)
-    _margin(a_v, v, _INF, whole_row)
-    _margin(con, v, 0, whole_row)
+def _margins(v, s, ok, l_u, l_v, a_u, a_v, con, x, y):
+    """The margin of every working array at padded row ``v``: missing (see :func:`_sda_laplacians`)."""
+    _margin(s, v, 0.0)
+    _margin(ok, v, False)
+    _margin(l_u, v, 1.0)
+    _margin(l_v, v, 1.0)
+    _margin(a_u, v, _INF)
+    _margin(a_v, v, _INF)
+    _margin(con, v, np.uint8(0))
     for g in (x, y):
-        _margin(g[0], v, 0.0, whole_row)
-        _margin(g[1], v, 0.0, whole_row)
-        _margin(g[2], v, _INF, whole_row)
-        _margin(g[3], v, _INF, whole_row)
-        _margin(g[4], v, _NO_STATE, whole_row)
-        _margin(g[5], v, _NO_STATE, whole_row)
+        _margin(g[0], v, 0.0)
+        _margin(g[1], v, 0.0)
+        _margin(g[2], v, _INF)
+        _margin(g[3], v, _INF)
+        _margin(g[4], v, _NO_STATE)
+        _margin(g[5], v, _NO_STATE)
 
 
 @njit
@@ -570,12 +571,13 @@ def _load_row(z, valid, inverse, s, ok, r):
 @njit
 def _sda_sweep(
     z, valid, inverse, reflect, tol, s, ok, l_u, l_v, a_u, a_v, con, x, y,
-    first_pass, n_passes, base, f_x, f_y, c_x, c_y, fill, out, j0, j1, lo, hi, edge, moved,
+    first_pass, n_passes, base, normals, f_x, f_y, c_x, c_y, fill, out, j0, j1, lo, hi, edge, moved,
 ):  # fmt: skip
     """Stages j0 .. j1 - 1 of one frame (see above) as a wavefront over image rows. The stages: 0 load, 1 the
     Laplacians, 2 the initial gradients (into set ``x``), then passes ``first_pass`` .. ``first_pass + n_passes - 1``
     (pass i reads set x for odd i and writes set y, the other way round for even i; a set is the tuple g_u, g_v, e_u,
-    e_v, s_u, s_v), then the normals from the last pass's set (``base`` 1: CP2TV, 2: 3F2N's median; 0: none).
+    e_v, s_u, s_v), then, where ``base``, the normals from the last pass's set (``normals``: :func:`_cp2tv_rows` or
+    :func:`_tf2n_rows`, a function argument, so that only the one used is compiled).
 
     ``edge`` False: band lo .. hi - 1 (without the rows next to an inner edge that need another band's rows);
     True: the rows around the inner band edge ``lo``. ``moved[k]`` counts the rows in which pass first_pass + k
@@ -608,13 +610,8 @@ def _sda_sweep(
                 continue
             what = kind[k]
             if what == _LOAD:
-                if r == 0:
-                    for v in range(_P):
-                        _margins(v, True, s, ok, l_u, l_v, a_u, a_v, con, x, y)
-                if r == H - 1:
-                    for v in range(H + _P, H + 2 * _P):
-                        _margins(v, True, s, ok, l_u, l_v, a_u, a_v, con, x, y)
-                _margins(r + _P, False, s, ok, l_u, l_v, a_u, a_v, con, x, y)
+                for v in range(0 if r == 0 else r + _P, H + 2 * _P if r == H - 1 else r + _P + 1):
+                    _margins(v, s, ok, l_u, l_v, a_u, a_v, con, x, y)
                 _load_row(z, valid, inverse, s, ok, r)
             elif what == _LAPLACIANS:
                 _sda_laplacians(s, ok, tol, l_u, l_v, a_u, a_v, r + _P, r + _P + 1)
@@ -625,10 +622,23 @@ def _sda_sweep(
                 old, new = (x, y) if i % 2 == 1 else (y, x)
                 if _sda_step(s, ok, 1.0 / (i + 1), tol, a_u, a_v, con, *old, *new, r, r + 1):
                     moved[k - 3] += 1
-            elif base == 1:
-                _gradients_to_normals_kernel(s, *final[:4], f_x, f_y, c_x, c_y, fill, out, r, r + 1)
             else:
-                _tf2n_base_kernel(z, valid, *final[:4], f_x, f_y, c_x, c_y, reflect, fill, out, r, r + 1)
+                normals(z, valid, s, *final[:4], f_x, f_y, c_x, c_y, reflect, fill, out, r, r + 1)
+
+
+@njit
+def _cp2tv_rows(z, valid, s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1)
+
+
+@njit
+def _tf2n_rows(z, valid, s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1)
+
+
+@njit
+def _no_rows(z, valid, s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
+    pass  # a sweep without normals (sda_gradients)
 
 
 _NO_OUT = np.empty((1, 1, 3), np.float32)  # ``out`` of a sweep without normals (never written)
@@ -655,6 +665,7 @@ def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=Fal
     s, ok, l_u, l_v, a_u, a_v, con = arrays[:7]
     sets = (tuple(arrays[7:13]), tuple(arrays[13:19]))
     base, f, fill, out = normals if normals is not None else (0, (0.0, 0.0, 0.0, 0.0), np.float32(0), _NO_OUT)
+    rows = (_no_rows, _cp2tv_rows, _tf2n_rows)[base]
     common = (z, valid, inverse, border == "reflect", _kernel_tol(tie_tol), s, ok, l_u, l_v, a_u, a_v, con, *sets)
     cap = MAX_ITERATIONS if iterations is None else iterations
 
@@ -670,13 +681,13 @@ def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=Fal
             short = b - a < 2 * reach + 2 and reach and (a > 0 or b < H)
             moved = np.zeros(max(n, 1), np.int64)
             if not short:
-                _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, a, b, False, moved)
+                _sda_sweep(*common, first, n, base_, rows, *f, fill, out, j0, j1, a, b, False, moved)
             with lock:
                 parts.append((a, b, short))
                 last = sum(q - p for p, q, _ in parts) == H
             if last and reach and not any(x for _, _, x in parts):
                 for edge in sorted(q for _, q, _ in parts if q < H):
-                    _sda_sweep(*common, first, n, base_, *f, fill, out, j0, j1, edge, edge, True, moved)
+                    _sda_sweep(*common, first, n, base_, rows, *f, fill, out, j0, j1, edge, edge, True, moved)
             return None if short else moved
 
         done = bands(band, H)

@@ -515,8 +515,8 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect,
 # computes, bit for bit.
 #
 # Row bands (threads): a band computes, per stage, the rows that need no row of another band (a trapezoid,
-# C_k rows less at each inner edge); after a barrier, the rows around each inner edge (C_k rows either side)
-# follow, in the same wavefront order. The rows that they read are either theirs or the trapezoids' rows, which
+# C_k rows less at each inner edge); once every band is done, the band that finished last computes the rows
+# around each inner edge (C_k rows either side), in the same wavefront order. The rows that they read are either theirs or the trapezoids' rows, which
 # the trapezoids' later passes have not overwritten (a pass overwrites rows C_k + 1 and further from the edge).
 # Bands shorter than 2 C + 2 rows (tests split frames into one-row bands) run the stages one by one instead.
 

@@ -246,7 +246,7 @@ def test_faithful_on_all_twelve_frames(shared_sample):
 
 def _poison(value, code):
     """Overwrite every kept working array (its inner part and its margin) with ``value`` / ``code``."""
-    for sets in sda._spare.values():
+    for sets in sda._working._sets.values():
         for arrays in sets:
             for a in arrays:
                 a.fill(value if a.dtype.kind == "f" else code if a.dtype.kind in "iu" else bool(code % 2))
@@ -268,7 +268,7 @@ def test_working_arrays_kept_for_the_next_frame_give_the_same_bits(threads):
         runs = {}
         for i, z in enumerate(frames):  # each frame after another's arrays
             runs[i] = [surfnorm.estimate(z, K, method="sda_sne", threads=threads, **kwargs)]
-        assert sda._spare, "the working arrays were kept"
+        assert sda._working._sets, "the working arrays were kept"
         for value, code in ((np.nan, 5), (-1e300, 3), (0.0, 0)):
             for i, z in enumerate(frames):
                 _poison(value, code)

@@ -70,6 +70,7 @@ from .._bands import whole
 from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from .._config import njit, pixel, select
 from ._rows import camera_facing, fill_pixel, store_unit_flat, write_unit
+from ._spare import Spares
 from .three_filters import fronto_parallel_fallback, third_nz
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
@@ -419,41 +420,19 @@ def _kernel_tol(tie_tol):
     return float(tie_tol) if tie_tol else None
 
 
-#: Most bytes of working arrays kept for the next frame (see :func:`_give`): 1280x960 takes 135 MB.
+#: Most bytes of working arrays kept for the next frame: 1280x960 takes 135 MB.
 KEEP_BYTES = 256 << 20
-_spare: dict = {}  # padded shape -> list of working sets (lists of arrays), at most KEEP_BYTES in all
-_spare_lock = threading.Lock()
-
-
-def _take(shape):
-    """A working set of the padded ``shape`` left by an earlier call, or None."""
-    with _spare_lock:
-        sets = _spare.get(shape)
-        return sets.pop() if sets else None
-
-
-def _give(arrays) -> None:
-    """Keep a call's working arrays for the next frame of the same size (the latest ones, at most
-    :data:`KEEP_BYTES` in all).
-
-    Allocated new for every frame, their pages were mapped in afresh each time, and on two threads the
-    allocator returned them to the system after almost every frame (7100 page faults per 1280x960 frame
-    instead of 500): 60 of the 147 ms of CPU time that one frame cost on two threads. Reused, a frame on two
-    threads costs the CPU time of one thread, and no pages are faulted in. :func:`release` lets them go.
-    """
-    nbytes = sum(a.nbytes for a in arrays)
-    with _spare_lock:
-        kept = sum(a.nbytes for sets in _spare.values() for arrays_ in sets for a in arrays_)
-        if kept + nbytes > KEEP_BYTES:
-            _spare.clear()
-        if nbytes <= KEEP_BYTES:
-            _spare.setdefault(arrays[0].shape, []).append(arrays)
+#: A call's working arrays, kept for the next frame of the same size (the latest ones, at most
+#: :data:`KEEP_BYTES` in all). Allocated new for every frame, their pages were mapped in afresh each time, and on
+#: two threads the allocator returned them to the system after almost every frame (7100 page faults per 1280x960
+#: frame instead of 500): 60 of the 147 ms of CPU time that one frame cost on two threads. Reused, a frame on two
+#: threads costs the CPU time of one thread, and no pages are faulted in. :func:`release` lets them go.
+_working = Spares(KEEP_BYTES)
 
 
 def release() -> None:
-    """Free the working arrays kept for the next frame (see :func:`_give`)."""
-    with _spare_lock:
-        _spare.clear()
+    """Free the working arrays kept for the next frame."""
+    _working.release()
 
 
 @njit(noalias=True)
@@ -649,7 +628,7 @@ def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=Fal
     ``normals = (base, (f_x, f_y, c_x, c_y), fill, out)`` (base 1 CP2TV, 2 3F2N's median) if given.
 
     Returns the result [g_u, g_v, e_u, e_v] (padded; a gradient with infinite energy does not exist), the passes
-    applied, and the working arrays (for :func:`_give` once the caller is done with the first ones). Every stage
+    applied, and the working arrays (to keep for the next frame once the caller is done with the first ones). Every stage
     runs in row bands (``bands``, see :mod:`surfnorm._bands`), fused into one sweep with a few passes (see
     :func:`_sda_sweep`), whose stop test comes at its end. A pass in which no pixel moves leaves every gradient and
     energy as it was (only the states become 2), so its set holds the result of the pass before: a sweep of 3
@@ -658,7 +637,7 @@ def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=Fal
     """
     H, W = valid.shape
     shape = (H + 2 * _P, W + 2 * _P)
-    arrays = _take(shape)
+    arrays = _working.take(shape)
     if arrays is None:  # every element, margins included, is written by a stage before any stage reads it
         kinds = [np.float64, np.bool_] + [np.float64] * 4 + [np.uint8] + 2 * ([np.float64] * 4 + [np.int8] * 2)
         arrays = [np.empty(shape, dt) for dt in kinds]
@@ -743,7 +722,7 @@ def sda_gradients(signal, valid, *, iterations=3, border="one-sided", tie_tol=0.
     (g_u, g_v, e_u, e_v), passes, work = _run_sda(signal, valid, iterations, border, tie_tol)
     inner = (slice(_P, -_P), slice(_P, -_P))
     out = (np.where(e_u[inner] < _INF, g_u[inner], np.nan), np.where(e_v[inner] < _INF, g_v[inner], np.nan), passes)
-    _give(work)
+    _working.give(work[0].shape, work)
     return out
 
 
@@ -758,5 +737,5 @@ def sda_sne(z, valid, cam, out, *, iterations=3, base="cp2tv", border="one-sided
     inverse = base == "3f2n"  # the demo's SDA + 3F2N: the dynamic programming on inverse depth
     normals = (2 if inverse else 1, f, np.float32(fill), out)
     _, _, work = _run_sda(z, valid, iterations, border, tie_tol, bands, inverse, normals)
-    _give(work)
+    _working.give(work[0].shape, work)
     return out

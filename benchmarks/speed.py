@@ -302,6 +302,29 @@ print(tracemalloc.get_traced_memory()[1], 0, n.nbytes)
 """
 
 
+def _batch_row(method, t1, t2, r1, r2, repeats):
+    """One row of the batch table (seconds for 16 frames: a new output on 1 and 2 threads, then into ``out=``),
+    printed as it is made."""
+    print(
+        f"  batch of 16 {method:11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
+        f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x",
+        flush=True,
+    )
+    return {
+        "method": method,
+        "frames": 16,
+        "one_thread_ms": t1 * 1e3,
+        "two_threads_ms": t2 * 1e3,
+        "speed_up": t1 / t2,
+        "frames_per_s_2_threads": 16 / t2,
+        "out_one_thread_ms": r1 * 1e3,
+        "out_two_threads_ms": r2 * 1e3,
+        "out_speed_up": r1 / r2,
+        "out_frames_per_s_2_threads": 16 / r2,
+        "repeats": repeats,
+    }
+
+
 def time_batches(repeats, quick):
     """A stack of 16 frames on 1 and 2 threads, into a new output per call and into a reused one (``out=``).
 
@@ -330,26 +353,7 @@ def time_batches(repeats, quick):
         [lambda: floor(1, None), lambda: floor(2, None), lambda: floor(1, buffer), lambda: floor(2, buffer)], repeats
     )
     pool.shutdown()
-    rows.append(
-        {
-            "method": "memory floor",
-            "frames": 16,
-            "one_thread_ms": t1 * 1e3,
-            "two_threads_ms": t2 * 1e3,
-            "speed_up": t1 / t2,
-            "frames_per_s_2_threads": 16 / t2,
-            "out_one_thread_ms": r1 * 1e3,
-            "out_two_threads_ms": r2 * 1e3,
-            "out_speed_up": r1 / r2,
-            "out_frames_per_s_2_threads": 16 / r2,
-            "repeats": repeats,
-        }
-    )
-    print(
-        f"  batch of 16 {'memory floor':11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
-        f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x",
-        flush=True,
-    )
+    rows.append(_batch_row("memory floor", t1, t2, r1, r2, repeats))
     for method in ["d2nt_v3"] if quick else ["d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv"]:
         options = METHODS[method]
         t1, t2, r1, r2 = interleaved(
@@ -361,26 +365,7 @@ def time_batches(repeats, quick):
             ],
             repeats,
         )
-        rows.append(
-            {
-                "method": method,
-                "frames": 16,
-                "one_thread_ms": t1 * 1e3,
-                "two_threads_ms": t2 * 1e3,
-                "speed_up": t1 / t2,
-                "frames_per_s_2_threads": 16 / t2,
-                "out_one_thread_ms": r1 * 1e3,
-                "out_two_threads_ms": r2 * 1e3,
-                "out_speed_up": r1 / r2,
-                "out_frames_per_s_2_threads": 16 / r2,
-                "repeats": repeats,
-            }
-        )
-        print(
-            f"  batch of 16 {method:11s} new output: 1 thread {t1 * 1e3:6.1f} ms, 2 threads {t2 * 1e3:6.1f} ms, "
-            f"{t1 / t2:4.2f}x | out=: {r1 * 1e3:6.1f} ms, {r2 * 1e3:6.1f} ms, {r1 / r2:4.2f}x",
-            flush=True,
-        )
+        rows.append(_batch_row(method, t1, t2, r1, r2, repeats))
     return rows
 
 

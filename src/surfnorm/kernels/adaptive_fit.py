@@ -916,5 +916,6 @@ def adaptive_fit(
 
     # A row costs its integral row and bookkeeping (every pixel) and its fits (valid pixels): sparse rows
     # (a LiDAR frame's upper part) are cheap, so bands of equal cost, not of equal rows.
-    bands(rows, z.shape[0], weights=np.count_nonzero(valid, axis=1) + 0.25 * z.shape[1])
+    weights = None if bands is whole else np.count_nonzero(valid, axis=1) + 0.25 * z.shape[1]
+    bands(rows, z.shape[0], weights=weights)
     return out

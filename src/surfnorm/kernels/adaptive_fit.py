@@ -227,31 +227,63 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
 
 @ahead_of_time
 @njit
-def _clipped_rms(xs, bins, n, nbins, rounds, sigmas, rms, counts):
-    """Per bin: RMS of xs[:n], then ``rounds`` times the RMS of those within ``sigmas`` times it.
+def _clipped_rms(xs, starts, rounds, sigmas, rms):
+    """Per row i of ``xs`` and bin b: the RMS of xs[i, starts[b]:starts[b + 1]], then ``rounds`` times the
+    RMS of those within ``sigmas`` times it, into rms[i, b] (0 for an empty bin).
 
-    The kept sets only shrink from round to round (dropping values above sigmas >= 1 times the RMS
-    lowers the RMS, and so the bound), so a round that keeps as many values as the one before
-    kept the same ones, and every later round would too: the loop stops there, with the same result.
+    ``xs`` holds each bin's samples together (see :func:`_by_bin`). The kept sets only shrink from round to
+    round (dropping values above sigmas >= 1 times the RMS lowers the RMS, and so the bound), so a round
+    that keeps as many values as the one before kept the same ones, and every later round would too: the
+    loop stops once that holds for every row and bin, with the same result. Each bin's squares are summed
+    in the order of its samples, three rows at once (independent chains of additions).
     """
-    sums = np.zeros(nbins)
-    before = np.full(nbins, -1, np.int64)
-    for b in range(nbins):
-        rms[b] = np.inf
+    n_rows = xs.shape[0]
+    nbins = starts.shape[0] - 1
+    counts = np.zeros((n_rows, nbins), np.int64)
+    before = np.full((n_rows, nbins), -1, np.int64)
+    rms[:, :] = np.inf
     for _ in range(rounds + 1):
-        sums[:] = 0.0
-        counts[:] = 0
-        for i in range(n):
-            b = bins[i]
-            x = xs[i]
-            if abs(x) <= sigmas * rms[b]:
-                sums[b] += x * x
-                counts[b] += 1
         for b in range(nbins):
-            rms[b] = math.sqrt(sums[b] / counts[b]) if counts[b] > 0 else 0.0
+            for i0 in range(0, n_rows, 3):
+                i1 = min(i0 + 1, n_rows - 1)
+                i2 = min(i0 + 2, n_rows - 1)
+                x0, x1, x2 = xs[i0], xs[i1], xs[i2]
+                l0, l1, l2 = sigmas * rms[i0, b], sigmas * rms[i1, b], sigmas * rms[i2, b]
+                s0 = s1 = s2 = 0.0
+                c0 = c1 = c2 = 0
+                for j in range(starts[b], starts[b + 1]):
+                    k0, k1, k2 = abs(x0[j]) <= l0, abs(x1[j]) <= l1, abs(x2[j]) <= l2
+                    s0 += select(k0, x0[j] * x0[j], 0.0)
+                    s1 += select(k1, x1[j] * x1[j], 0.0)
+                    s2 += select(k2, x2[j] * x2[j], 0.0)
+                    c0 += k0
+                    c1 += k1
+                    c2 += k2
+                for i, s, c in ((i0, s0, c0), (i1, s1, c1), (i2, s2, c2)):
+                    rms[i, b] = math.sqrt(s / c) if c > 0 else 0.0
+                    counts[i, b] = c
         if np.array_equal(counts, before):
             break
-        before[:] = counts
+        before[:, :] = counts
+
+
+@ahead_of_time
+@njit
+def _by_bin(xs, bins, nbins):
+    """The columns of ``xs`` grouped by bin, in their order within each bin, and each bin's start (nbins + 1)."""
+    starts = np.zeros(nbins + 1, np.int64)
+    for b in bins:
+        starts[b + 1] += 1
+    for b in range(nbins):
+        starts[b + 1] += starts[b]
+    at = starts[:-1].copy()
+    grouped = np.empty_like(xs)
+    for j in range(bins.shape[0]):
+        k = at[bins[j]]
+        at[bins[j]] = k + 1
+        for i in range(xs.shape[0]):
+            grouped[i, k] = xs[i, j]
+    return grouped, starts
 
 
 def _samples(z, valid, f):
@@ -307,9 +339,7 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
         return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
     floor = float(np.median(np.abs(xs[0]))) / 0.6745
     ms = np.empty((3, N_BINS))
-    counts = np.zeros(N_BINS, np.int64)
-    for i in range(3):
-        _clipped_rms(np.ascontiguousarray(xs[i]), bins, n, N_BINS, _CLIP_ROUNDS, _CLIP_SIGMAS, ms[i], counts)
+    _clipped_rms(*_by_bin(xs, bins, N_BINS), _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
     ms **= 2
     rho = np.sqrt(np.maximum(np.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
     edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)

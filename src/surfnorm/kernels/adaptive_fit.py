@@ -458,13 +458,14 @@ def integral_row(z_row, valid_row, y, prev, row):
 
 
 @pixel
-def window_sums(ring, slot, H, W, v, u, r, m):
-    """Moment sums of the window rows v-r..v+r, columns u-r..u+r (clipped to the image) into m."""
+def window_sums(ring, slot, H, W, v, u, r, channels, m):
+    """Moment sums ``channels`` of the window rows v-r..v+r, columns u-r..u+r (clipped to the image) into
+    m[c] for c in ``channels``."""
     v0 = slot[min(max(v - r, 0), H)]
     v1 = slot[min(max(v + r + 1, 0), H)]
     u0 = min(max(u - r, 0), W)
     u1 = min(max(u + r + 1, 0), W)
-    for c in range(_N_MOMENTS):
+    for c in channels:
         m[c] = ring[v1, c, u1] - ring[v0, c, u1] - ring[v1, c, u0] + ring[v0, c, u0]
 
 
@@ -473,6 +474,9 @@ def window_sums(ring, slot, H, W, v, u, r, m):
 #: square (:func:`coordinate_sums`), since :func:`affine_fit` replaces them by their known values there.
 _BOXED = (0, 6, 7, 8, 9)
 _COORDS = (1, 2, 3, 4, 5)
+#: The count, and the other channels of ``_BOXED``: the edge test reads the count of a window first.
+_COUNT = (0,)
+_W_SUMS = (6, 7, 8, 9)
 
 
 @njit(noalias=True, _nrt=False)
@@ -659,7 +663,7 @@ def _adaptive_fit_kernel(
     H, W = z.shape
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
-    m = np.empty(_N_MOMENTS)
+    m = np.zeros(_N_MOMENTS)
     m_a = np.zeros((len(_BOXED), W))
     m_b = np.zeros((len(_BOXED), W))
     m_coords = np.zeros((len(_COORDS), W))
@@ -844,9 +848,14 @@ def _adaptive_fit_kernel(
             for k in range(_SHIFTS.shape[0]):
                 dv = _SHIFTS[k, 0] * r
                 du = _SHIFTS[k, 1] * r
-                window_sums(ring, slot, H, W, v + dv, u + du, r, m)
+                # The count first: a window with too few points needs no more; a full square needs no
+                # coordinate sums (affine_fit knows them).
+                window_sums(ring, slot, H, W, v + dv, u + du, r, _COUNT, m)
                 if m[0] < n_min:
                     continue
+                window_sums(ring, slot, H, W, v + dv, u + du, r, _W_SUMS, m)
+                if m[0] != (2 * r + 1) * (2 * r + 1):
+                    window_sums(ring, slot, H, W, v + dv, u + du, r, _COORDS, m)
                 a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(
                     m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], r, x + du, y + dv
                 )

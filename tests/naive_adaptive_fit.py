@@ -2,7 +2,8 @@
 
 Written from the module docstring of surfnorm.adaptive_fit, not from its kernels: the
 noise profile from the second differences of inverse depth at strides a, 2a, 4a, the
-radius ladder, the sparse growth, the noise test, the widening and the quadrant windows.
+radius ladder, the sparse growth, the noise test, the widening, the quadrant windows, and the rows
+between fitted rows (stride 2).
 """
 
 from __future__ import annotations
@@ -82,8 +83,24 @@ def _fit(z, valid, v, u, vc, uc, r):
     return n, True, coef[0], coef[1], coef[2], rss
 
 
+def stride_for(valid, max_unreached=0.01):
+    """2 unless more than ``max_unreached`` of the valid pixels on odd rows have no valid pixel among the
+    six next to them on the even rows above and below."""
+    H, W = valid.shape
+    total = unreached = 0
+    for v in range(1, H, 2):
+        for u in range(W):
+            if not valid[v, u]:
+                continue
+            total += 1
+            near = [(v + dv, u + du) for dv in (-1, 1) for du in (-1, 0, 1)]
+            if not any(0 <= a < H and 0 <= b < W and valid[a, b] for a, b in near):
+                unreached += 1
+    return 2 if unreached <= max_unreached * max(total, 1) else 1
+
+
 def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_window=31, n_widen=3,
-                 min_points=12, table=512, fill=0.0):
+                 min_points=12, table=512, fill=0.0, stride=None):
     z = np.asarray(z, dtype=np.float64)
     valid = (np.isfinite(z) & (z > 0)) if valid is None else valid
     H, W = z.shape
@@ -96,7 +113,9 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
     rho_t = np.interp(np.log(zs), np.log(centres), rho_bins)
     inv_step = (table - 1) / (centres[-1] - centres[0])
     out = np.full((H, W, 3), fill, dtype=np.float32)
-    for v in range(H):
+    stride = stride_for(valid) if stride is None else stride
+    planes = {}  # (v, u) -> (a at the pixel, g_u, g_v) of the fitted rows
+    for v in range(0, H, stride):
         for u in range(W):
             if not valid[v, u]:
                 continue
@@ -134,10 +153,38 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                     # a better class, or the same class with a residual lower by more than the tie margin
                     if inside > best_in or (inside == best_in and score < (1 - 1e-3) * best):
                         best, best_in, ok, a, gu, gv = score, inside, True, ak, guk, gvk
-            if not ok:
+            if ok:
+                planes[v, u] = (a, gu, gv)
+    # the rows between fitted rows: the plane above or below that predicts the pixel's w closer (a tie, to
+    # a thousandth, goes to the one above); with neither, the closest diagonal one, in the order above-left,
+    # above-right, below-left, below-right
+    for v in range(H):
+        for u in range(W):
+            if not valid[v, u]:
                 continue
+            if v % stride == 0:
+                if (v, u) not in planes:
+                    continue
+                a, gu, gv = planes[v, u]
+            else:
+                wp = 1.0 / z32[v, u]
+                pick = None
+                for group in ([(-1, 0), (1, 0)], [(-1, -1), (-1, 1), (1, -1), (1, 1)]):
+                    best = np.inf
+                    for dv, du in group:
+                        if (v + dv, u + du) not in planes:
+                            continue
+                        ac, guc, gvc = planes[v + dv, u + du]
+                        ap = ac - guc * du - gvc * dv
+                        if (ap - wp) ** 2 < best * (1 - 1e-3):
+                            best, pick = (ap - wp) ** 2, (ap, guc, gvc)
+                    if pick is not None:
+                        break
+                if pick is None:
+                    continue
+                a, gu, gv = pick
             if not a > 0:
-                a = 1.0 / zp
+                a = 1.0 / z32[v, u]
             nvec = np.array([fx * gu, fy * gv, a - gu * (u - cx) - gv * (v - cy)])
             out[v, u] = -nvec / np.linalg.norm(nvec)
     return out

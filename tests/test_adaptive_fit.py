@@ -53,11 +53,12 @@ def test_noise_profile_matches_naive(seed):
     assert got.floor == pytest.approx(floor, rel=1e-12)
 
 
+@pytest.mark.parametrize("stride", [None, 1, 2])
 @pytest.mark.parametrize("seed", range(6))
-def test_matches_naive_reference(seed):
+def test_matches_naive_reference(seed, stride):
     z, K = scene(seed, holes=0.05 + 0.05 * seed)
-    got = surfnorm.estimate(z, K, method="adaptive_fit")
-    ref = naive.adaptive_fit(z, K)
+    got = surfnorm.estimate(z, K, method="adaptive_fit", stride=stride)
+    ref = naive.adaptive_fit(z, K, stride=stride)
     has_got = np.any(got != 0, axis=-1)
     has_ref = np.any(ref != 0, axis=-1)
     assert (has_got == has_ref).mean() >= 0.995
@@ -254,6 +255,55 @@ def test_row_window_sums_are_the_box_formula_where_picked(r):
     fill = pick & (counts != (2 * r + 1) ** 2)
     np.testing.assert_array_equal(coords[:, fill], box[list(_COORDS)][:, fill])
     assert np.isnan(coords[:, ~fill]).all()
+
+
+def test_stride_follows_the_density_of_the_depth():
+    """Every other row is fitted where the rows between have fitted pixels next to them (dense depth), every
+    row where many do not (LiDAR scanlines); the rule agrees with the naive one on random masks."""
+    from surfnorm.kernels.adaptive_fit import choose_stride
+
+    rng = np.random.default_rng(3)
+    dense = rng.random((60, 80)) > 0.3
+    assert choose_stride(dense) == 2
+    scanlines = np.zeros((60, 80), bool)
+    scanlines[1::2] = rng.random((30, 80)) > 0.2  # valid only on the odd rows: none of them is reachable
+    assert choose_stride(scanlines) == 1
+    for holes in (0.1, 0.4, 0.5, 0.6, 0.8):
+        for shape in ((7, 9), (8, 9), (31, 40)):
+            valid = rng.random(shape) > holes
+            assert choose_stride(valid) == naive.stride_for(valid), (holes, shape)
+    assert choose_stride(np.ones((1, 5), bool)) == 1
+
+
+@pytest.mark.parametrize("stride", [1, 2])
+def test_a_band_writes_its_own_rows_only(stride):
+    """Bands split a frame between threads: each writes its rows and nothing else, and together they give the
+    whole frame's bits (odd band ends: a band reads the fitted row below it, and must not write it)."""
+    from surfnorm.kernels.adaptive_fit import adaptive_fit
+
+    z, K = scene(2, holes=0.1)
+    valid = z > 0
+    cam = Intrinsics.from_matrix(K)
+    whole = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), stride=stride)
+    H = z.shape[0]
+    out = np.full(z.shape + (3,), 7.0, np.float32)
+    for v0, v1 in ((0, 17), (17, 30), (30, H)):
+
+        def one_band(stage, n_rows, weights=None, v0=v0, v1=v1):
+            return [stage(v0, v1)]
+
+        part = np.full(z.shape + (3,), 7.0, np.float32)
+        adaptive_fit(z, valid, cam, part, stride=stride, bands=one_band)
+        assert (part[:v0] == 7.0).all() and (part[v1:] == 7.0).all(), (v0, v1)
+        out[v0:v1] = part[v0:v1]
+    np.testing.assert_array_equal(out, whole)
+
+
+@pytest.mark.parametrize("stride", [0, 3, 1.0, True, "2"])
+def test_stride_checked(stride):
+    z, K = scene(0)
+    with pytest.raises(InputError, match=r"stride: expected 1, 2 or None, got"):
+        surfnorm.estimate(z, K, method="adaptive_fit", stride=stride)
 
 
 def test_a_fixed_window_wider_than_max_window_is_refused():

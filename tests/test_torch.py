@@ -316,6 +316,15 @@ class TestAdaptive:
         masks = np.random.default_rng(seed).random(depth.shape) > 0.1
         assert_parity(depth, masks, Ks, method + "+mnr", {"fill": -3.0}, names)
 
+    @pytest.mark.parametrize("stride", [1, 2])
+    def test_strides(self, stride):
+        # every frame at the same stride, whatever its density (the default chooses per frame: above)
+        from surfnorm.kernels.adaptive_fit import choose_stride
+
+        depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, holes=0.5), sensor_like(seed=7, holes=0.2)])
+        assert [choose_stride(d > 0) for d in depth] == [2, 1, 2]  # otherwise the default shows nothing new
+        assert_parity(depth, None, np.stack([K, K, K]), "adaptive_fit", {"stride": stride}, ["a", "sparse", "b"])
+
     def test_auto_chooses_per_frame(self):
         from surfnorm.camera import Intrinsics
         from surfnorm.kernels.auto import choose

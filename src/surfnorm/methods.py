@@ -489,6 +489,14 @@ def _check_window_or_none(name, value):
     return None if value is None else check_window(name, value)
 
 
+def _check_stride(name, value):
+    if value is None:
+        return None
+    if isinstance(value, int) and not isinstance(value, bool) and value in (1, 2):
+        return value
+    raise InputError(f"{name}: expected 1, 2 or None, got {value!r}")
+
+
 ADAPTIVE_OPTIONS = {
     "window": Option(
         None,
@@ -496,6 +504,12 @@ ADAPTIVE_OPTIONS = {
         "side of the fitted window (odd, >= 3); None: chosen per pixel from the frame's noise and the pixel's depth",
     ),
     "max_window": Option(31, check_window, "largest window side (odd, >= 3), also for sparse depth"),
+    "stride": Option(
+        None,
+        _check_stride,
+        "1: every pixel's own window; 2: windows on every other row, the rows between taking the closer plane "
+        "above or below (half the work); None: 2 unless the depth is sparse",
+    ),
 }
 
 

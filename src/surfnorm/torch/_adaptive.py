@@ -62,6 +62,7 @@ _CLIP_SIGMAS = 5.0
 _CLIP_ROUNDS = 5
 _TABLE = 512
 TIE = 1e-3
+MAX_UNREACHED = 0.01
 CLEAN_FLOOR = 0.10
 NOISY_FLOOR = 0.20
 #: The quadrant windows (dv, du) / r, in the NumPy kernel's order.
@@ -553,8 +554,88 @@ def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tupl
     return px.flat, choice
 
 
-def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fill: float, out_dtype):
-    """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables."""
+def choose_stride(valid: torch.Tensor) -> torch.Tensor:
+    """``adaptive_fit.choose_stride`` per frame of valid (B, H, W): 2 unless more than MAX_UNREACHED of the
+    valid pixels of the odd rows have no valid pixel among the six next to them in the even rows; (B,) int64."""
+    B, H, W = valid.shape
+    if H < 2:
+        return torch.ones(B, dtype=torch.int64, device=valid.device)
+    odd = valid[:, 1::2]
+    n = odd.shape[1]
+    up = valid[:, 0 : 2 * n : 2]
+    down = torch.zeros_like(odd)
+    down[:, : valid[:, 2::2].shape[1]] = valid[:, 2::2]
+    near = up | down
+    near[:, :, 1:] |= up[:, :, :-1] | down[:, :, :-1]
+    near[:, :, :-1] |= up[:, :, 1:] | down[:, :, 1:]
+    unreached = (odd & ~near).sum(dim=(1, 2)).to(_F64)
+    total = torch.clamp_min(odd.sum(dim=(1, 2)), 1).to(_F64)
+    return torch.where(unreached <= MAX_UNREACHED * total, 2, 1)
+
+
+def _between_rows(a, g_u, g_v, ok, w, stride2):
+    """``adaptive_fit.between_row`` for the odd rows of the frames where ``stride2``: each pixel takes the
+    plane of the pixel above or below that predicts its w closer (ties within TIE: above), else the closest
+    diagonal one (above-left, above-right, below-left, below-right). a, g_u, g_v, w (B, H, W) float64, ok
+    (B, H, W) where a pixel of an even row has a plane. Returns (a, g_u, g_v, ok) with the odd rows replaced."""
+    B, H, W = a.shape
+    n = H // 2  # odd rows
+    inf = torch.full((B, n, W), math.inf, dtype=_F64, device=a.device)
+
+    def below_rows(t):  # the even rows below the odd ones; the last odd row of an even H has none (zeros)
+        out = torch.zeros((B, n, W), dtype=t.dtype, device=t.device)
+        part = t[:, 2::2]
+        out[:, : part.shape[1]] = part
+        return out
+
+    above = tuple(t[:, 0 : 2 * n : 2] for t in (a, g_u, g_v, ok))
+    below = tuple(below_rows(t) for t in (a, g_u, g_v, ok))
+    w_p = w[:, 1::2]
+    a_1 = above[0] + above[2]
+    a_2 = below[0] - below[2]
+    e_1 = torch.where(above[3], (a_1 - w_p) * (a_1 - w_p), inf)
+    e_2 = torch.where(below[3], (a_2 - w_p) * (a_2 - w_p), inf)
+    two = e_2 < e_1 * (1.0 - TIE)
+    a_o = torch.where(two, a_2, a_1)
+    gu_o = torch.where(two, below[1], above[1])
+    gv_o = torch.where(two, below[2], above[2])
+    ok_o = above[3] | below[3]
+    best = inf
+    got = torch.zeros_like(ok_o)
+    for k in range(4):
+        src = above if k < 2 else below
+        dv = 1.0 if k < 2 else -1.0
+        du = 1 - 2 * (k % 2)
+        # the fitted pixel at column u - du: shift the row by du (columns without one have none)
+        a_c, gu_c, gv_c, ok_c = (torch.roll(t, du, dims=2) for t in src)
+        edge = torch.zeros(W, dtype=torch.bool, device=a.device)
+        edge[0 if du > 0 else W - 1] = True
+        ok_c = ok_c & ~edge
+        a_k = a_c + gu_c * du + gv_c * dv
+        e = (a_k - w_p) * (a_k - w_p)
+        better = ~ok_o & ok_c & (e < best * (1.0 - TIE))
+        best = torch.where(better, e, best)
+        a_o, gu_o, gv_o = (
+            torch.where(better, a_k, a_o),
+            torch.where(better, gu_c, gu_o),
+            torch.where(better, gv_c, gv_o),
+        )
+        got = got | better
+    ok_o = ok_o | got
+    s2 = stride2.view(B, 1, 1)
+    a, g_u, g_v, ok = a.clone(), g_u.clone(), g_v.clone(), ok.clone()
+    a[:, 1::2] = torch.where(s2, a_o, a[:, 1::2])
+    g_u[:, 1::2] = torch.where(s2, gu_o, g_u[:, 1::2])
+    g_v[:, 1::2] = torch.where(s2, gv_o, g_v[:, 1::2])
+    ok[:, 1::2] = torch.where(s2, ok_o, ok[:, 1::2])
+    return a, g_u, g_v, ok
+
+
+def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fill: float, out_dtype, stride=None):
+    """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables.
+
+    ``stride`` 2: the odd rows take their planes from the even rows (:func:`_between_rows`); None: per
+    frame (:func:`choose_stride`). Every row is fitted all the same (the work is done for all pixels at once)."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
     px, z_p, I_flat, choice, _ = _setup(z, valid, cam, tables, window=window, max_window=max_window)
@@ -563,6 +644,13 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     else:
         a, g_u, g_v = choice.a, choice.g_u, choice.g_v
     ok = (choice.dof > 0.0) & valid.reshape(-1)
+    stride2 = choose_stride(valid) == 2 if stride is None else torch.full((B,), stride == 2, device=z.device)
+    # (on the CPU, skipped where no frame has stride 2; elsewhere not asked: no host synchronisation)
+    if H > 1 and (z.device.type != "cpu" or bool(stride2.any())):
+        a3, gu3, gv3, ok3 = (t.view(B, H, W) for t in (a, g_u, g_v, ok))
+        a3, gu3, gv3, ok3 = _between_rows(a3, gu3, gv3, ok3, torch.reciprocal(z_p).view(B, H, W), stride2)
+        a, g_u, g_v, ok = a3.reshape(-1), gu3.reshape(-1), gv3.reshape(-1), ok3.reshape(-1)
+        ok = ok & valid.reshape(-1)
     a = torch.where(a > 0.0, a, torch.reciprocal(z_p))  # a fit that passes behind the camera: the pixel's own w
     n_x = fx[px.b] * g_u
     n_y = fy[px.b] * g_v
@@ -585,14 +673,16 @@ def _cameras64(cam, batch: int):
     return tuple(c.to(_F64).expand(batch, 1, 1) for c in cam)
 
 
-def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float):
+def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float, stride=None):
     """Adaptive plane fit of inverse depth (``surfnorm.adaptive_fit``); ``cam`` in float64."""
     z = g.z.to(_F64)
     cam = _cameras64(cam, z.shape[0])
     r_max = (max_window - 1) // 2
     with torch.no_grad():
         tables = noise_tables(z.detach(), g.valid, _sqrt(cam[0] * cam[1]).reshape(-1), window=window, r_max=r_max)
-    return _normals(z, g.valid, cam, tables, window=window, max_window=max_window, fill=fill, out_dtype=g.z.dtype)
+    return _normals(
+        z, g.valid, cam, tables, window=window, max_window=max_window, fill=fill, out_dtype=g.z.dtype, stride=stride
+    )
 
 
 def adaptive_weight(floor: torch.Tensor) -> torch.Tensor:

@@ -155,9 +155,10 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                         best, best_in, ok, a, gu, gv = score, inside, True, ak, guk, gvk
             if ok:
                 planes[v, u] = (a, gu, gv)
-    # the rows between fitted rows: the plane above or below that predicts the pixel's w closer (a tie, to
-    # a thousandth, goes to the one above); with neither, the closest diagonal one, in the order above-left,
-    # above-right, below-left, below-right
+    # the rows between fitted rows: the mean of the planes above and below where both predict the pixel's w
+    # within the noise test's limit, else the one that predicts it closer (a tie, to a thousandth, goes to the
+    # one above); with neither, the closest diagonal one, in the order above-left, above-right, below-left,
+    # below-right
     for v in range(H):
         for u in range(W):
             if not valid[v, u]:
@@ -168,8 +169,15 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                 a, gu, gv = planes[v, u]
             else:
                 wp = 1.0 / z32[v, u]
+                t = min(max(int((z32[v, u] - centres[0]) * inv_step), 0), table - 1)
+                limit = (kappa * max(rho_t[t], rho_floor) / (z32[v, u] * f)) ** 2
+                vertical = [planes.get((v + dv, u)) for dv in (-1, 1)]
+                preds = [None if p is None else p[0] - p[2] * dv for p, dv in zip(vertical, (-1, 1))]
                 pick = None
-                for group in ([(-1, 0), (1, 0)], [(-1, -1), (-1, 1), (1, -1), (1, 1)]):
+                if all(p is not None and (p - wp) ** 2 <= limit for p in preds):
+                    (_, gu1, gv1), (_, gu2, gv2) = vertical
+                    pick = ((preds[0] + preds[1]) / 2, (gu1 + gu2) / 2, (gv1 + gv2) / 2)
+                for group in ([(-1, 0), (1, 0)], [(-1, -1), (-1, 1), (1, -1), (1, 1)]) if pick is None else ():
                     best = np.inf
                     for dv, du in group:
                         if (v + dv, u + du) not in planes:

@@ -56,13 +56,12 @@ lie on a line (they fix no plane), or with fewer than 4 of them, gives no fit;
 a pixel without any fit gets the fill value.
 
 Every other row. Windows of a few pixels' radius or more, centred one row apart, share most of their
-pixels, and so their planes. By default (``stride`` 2) the windows are fitted on the even rows only, and
-a pixel of an odd row takes the plane of the pixel directly above or below it, the one that predicts its
-own w closer (so a pixel at an edge takes its own side's plane); where neither has a plane, the closest
-of the four diagonal ones. That halves the fits; on the simulated structured-light, stereo and ToF
-cameras e_A fell by 0.08-0.14 degrees, and on the real frames of the sensor benchmark the angle moved by
--0.03 to +0.10 degrees. Depth whose odd rows have too few valid neighbours in the even rows (LiDAR
-scanlines: :func:`choose_stride`) is fitted on every row (``stride`` 1, also on request).
+pixels, and so their planes. By default (``stride`` 2) the windows are fitted on the even rows only. A
+pixel of an odd row takes the mean of the planes of the pixels directly above and below it where both
+predict its own w within the noise test's limit (on a smooth surface, the plane half-way), and otherwise
+the one that predicts it closer (at an edge, its own side's); where neither has a plane, the closest of
+the four diagonal ones. That halves the fits. Depth whose odd rows have too few valid neighbours in the
+even rows (LiDAR scanlines: :func:`choose_stride`) is fitted on every row (``stride`` 1, also on request).
 
 Not local: the noise profile is a statistic of the whole frame, so masking a
 region (or a hole) changes the samples it is measured from and can move the
@@ -660,12 +659,27 @@ def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_
 
 
 @njit(noalias=True, _nrt=False)
-def between_row(z_row, valid_row, above, below, fit):
-    """A row between two fitted rows: each pixel takes the plane of the pixel directly above or below it
-    (``above``, ``below``: a, g_u, g_v and dof of each pixel; dof 0 where none) that predicts its
-    w = 1/z closer (by more than TIE of the squared error; else the one above); where neither has a
-    plane, the closest of the four diagonal ones (above-left, above-right, below-left, below-right, in
-    that order). ``fit`` gets the plane at the pixel: a (w there), g_u, g_v, and dof 1 (0 without one).
+def noise_limits(z_row, z0, inv_step, rho_table, f, kappa, rho_floor, limit):
+    """The noise test's limit of each pixel of a row: (kappa sigma_w)^2, sigma_w = rho / (z f) the noise of
+    w (rho from the depth table, at least ``rho_floor``), as the fitted rows compute it."""
+    n_table = rho_table.shape[0]
+    for u in range(z_row.shape[0]):
+        t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
+        zf = z_row[u] * f
+        s_w = kappa * max(rho_table[t], rho_floor)
+        limit[u] = (s_w * s_w) / (zf * zf)
+
+
+@njit(noalias=True, _nrt=False)
+def between_row(z_row, valid_row, limit, above, below, fit):
+    """A row between two fitted rows: each pixel takes the planes of the pixels directly above and below it
+    (``above``, ``below``: a, g_u, g_v and dof of each pixel; dof 0 where none). Where both predict its
+    w = 1/z within the noise (squared error at most ``limit``, the noise test's), their mean: the plane
+    half-way, as the pixel's own window would give on a smooth surface. Otherwise the one that predicts
+    it closer (by more than TIE of the squared error; else the one above): at an edge, its own side's.
+    Where neither has a plane, the closest of the four diagonal ones (above-left, above-right,
+    below-left, below-right, in that order). ``fit`` gets the plane at the pixel: a (w there), g_u, g_v,
+    and dof 1 (0 without one).
     """
     W = z_row.shape[0]
     for u in range(W):  # the pixels above and below (selects: the loop vectorises)
@@ -675,9 +689,10 @@ def between_row(z_row, valid_row, above, below, fit):
         e_1 = select(above[3, u] > 0.0, (a_1 - w_p) * (a_1 - w_p), np.inf)
         e_2 = select(below[3, u] > 0.0, (a_2 - w_p) * (a_2 - w_p), np.inf)
         two = e_2 < e_1 * (1.0 - TIE)
-        fit[0, u] = select(two, a_2, a_1)
-        fit[1, u] = select(two, below[1, u], above[1, u])
-        fit[2, u] = select(two, below[2, u], above[2, u])
+        mean = (e_1 <= limit[u]) & (e_2 <= limit[u])
+        fit[0, u] = select(mean, 0.5 * (a_1 + a_2), select(two, a_2, a_1))
+        fit[1, u] = select(mean, 0.5 * (above[1, u] + below[1, u]), select(two, below[1, u], above[1, u]))
+        fit[2, u] = select(mean, 0.5 * (above[2, u] + below[2, u]), select(two, below[2, u], above[2, u]))
         fit[3, u] = select(valid_row[u] & ((above[3, u] > 0.0) | (below[3, u] > 0.0)), 1.0, 0.0)
     for u in range(W):  # the few with neither: the diagonal ones
         if not valid_row[u] or fit[3, u] > 0.0:
@@ -968,14 +983,16 @@ def _adaptive_fit_kernel(
                 below[3, u] = select(valid_row[u], dof[u], 0.0)
             o = v - 1  # the row between this one and the last
             if o >= v0:
-                between_row(z[o], valid[o], above, below, between)
+                noise_limits(z[o], z0, inv_step, rho_table, f, kappa, rho_floor, limit)
+                between_row(z[o], valid[o], limit, above, below, between)
                 normal_row(
                     z[o], valid[o], o, between[1], between[2], between[0], between[3], fx, fy, cx, cy, fill, out_flat[o]
                 )
     if stride > 1 and H % 2 == 0 and v0 <= H - 1 < v1:  # the last row has no fitted row below it
         above, below = below, above
         below[3, :] = 0.0
-        between_row(z[H - 1], valid[H - 1], above, below, between)
+        noise_limits(z[H - 1], z0, inv_step, rho_table, f, kappa, rho_floor, limit)
+        between_row(z[H - 1], valid[H - 1], limit, above, below, between)
         normal_row(
             z[H - 1],
             valid[H - 1],

@@ -517,7 +517,8 @@ def _refit(I_flat, px: _Pixels, choice: _Choice):
 
 
 def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
-    """The pixels to fit, their depth and noise limit, the integral images, and the choices (:func:`_choose`)."""
+    """The pixels to fit, their depth, the integral images, the choices (:func:`_choose`) and the noise test's
+    limit of each pixel."""
     B, H, W = z.shape
     dev = z.device
     r_max = (max_window - 1) // 2
@@ -542,7 +543,7 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
         choice = _choose(
             I_flat.detach(), I_pad, pad, px, valid.reshape(-1), z_p.detach(), limit, r0, ladder, r_max, KAPPA, gather
         )
-    return px, z_p, I_flat, choice, gather
+    return px, z_p, I_flat, choice, limit
 
 
 def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tuple[torch.Tensor, _Choice]:
@@ -573,11 +574,12 @@ def choose_stride(valid: torch.Tensor) -> torch.Tensor:
     return torch.where(unreached <= MAX_UNREACHED * total, 2, 1)
 
 
-def _between_rows(a, g_u, g_v, ok, w, stride2):
+def _between_rows(a, g_u, g_v, ok, w, limit, stride2):
     """``adaptive_fit.between_row`` for the odd rows of the frames where ``stride2``: each pixel takes the
-    plane of the pixel above or below that predicts its w closer (ties within TIE: above), else the closest
-    diagonal one (above-left, above-right, below-left, below-right). a, g_u, g_v, w (B, H, W) float64, ok
-    (B, H, W) where a pixel of an even row has a plane. Returns (a, g_u, g_v, ok) with the odd rows replaced."""
+    mean of the planes of the pixels above and below where both predict its w within the noise (``limit``),
+    else the one that predicts it closer (ties within TIE: above), else the closest diagonal one (above-left,
+    above-right, below-left, below-right). a, g_u, g_v, w, limit (B, H, W) float64, ok (B, H, W) where a pixel
+    of an even row has a plane. Returns (a, g_u, g_v, ok) with the odd rows replaced."""
     B, H, W = a.shape
     n = H // 2  # odd rows
     inf = torch.full((B, n, W), math.inf, dtype=_F64, device=a.device)
@@ -596,9 +598,11 @@ def _between_rows(a, g_u, g_v, ok, w, stride2):
     e_1 = torch.where(above[3], (a_1 - w_p) * (a_1 - w_p), inf)
     e_2 = torch.where(below[3], (a_2 - w_p) * (a_2 - w_p), inf)
     two = e_2 < e_1 * (1.0 - TIE)
-    a_o = torch.where(two, a_2, a_1)
-    gu_o = torch.where(two, below[1], above[1])
-    gv_o = torch.where(two, below[2], above[2])
+    lim = limit[:, 1::2]
+    mean = (e_1 <= lim) & (e_2 <= lim)
+    a_o = torch.where(mean, 0.5 * (a_1 + a_2), torch.where(two, a_2, a_1))
+    gu_o = torch.where(mean, 0.5 * (above[1] + below[1]), torch.where(two, below[1], above[1]))
+    gv_o = torch.where(mean, 0.5 * (above[2] + below[2]), torch.where(two, below[2], above[2]))
     ok_o = above[3] | below[3]
     best = inf
     got = torch.zeros_like(ok_o)
@@ -638,7 +642,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     frame (:func:`choose_stride`). Every row is fitted all the same (the work is done for all pixels at once)."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
-    px, z_p, I_flat, choice, _ = _setup(z, valid, cam, tables, window=window, max_window=max_window)
+    px, z_p, I_flat, choice, limit = _setup(z, valid, cam, tables, window=window, max_window=max_window)
     if torch.is_grad_enabled() and z.requires_grad:
         a, g_u, g_v = _refit(I_flat, px, choice)
     else:
@@ -648,7 +652,8 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     # (on the CPU, skipped where no frame has stride 2; elsewhere not asked: no host synchronisation)
     if H > 1 and (z.device.type != "cpu" or bool(stride2.any())):
         a3, gu3, gv3, ok3 = (t.view(B, H, W) for t in (a, g_u, g_v, ok))
-        a3, gu3, gv3, ok3 = _between_rows(a3, gu3, gv3, ok3, torch.reciprocal(z_p).view(B, H, W), stride2)
+        w3, lim3 = torch.reciprocal(z_p).view(B, H, W), limit.view(B, H, W)
+        a3, gu3, gv3, ok3 = _between_rows(a3, gu3, gv3, ok3, w3, lim3, stride2)
         a, g_u, g_v, ok = a3.reshape(-1), gu3.reshape(-1), gv3.reshape(-1), ok3.reshape(-1)
         ok = ok & valid.reshape(-1)
     a = torch.where(a > 0.0, a, torch.reciprocal(z_p))  # a fit that passes behind the camera: the pixel's own w

@@ -507,8 +507,8 @@ ADAPTIVE_OPTIONS = {
     "stride": Option(
         None,
         _check_stride,
-        "1: every pixel's own window; 2: windows on every other row, the rows between taking the closer plane "
-        "above or below (half the work); None: 2 unless the depth is sparse",
+        "1: every pixel's own window; 2: windows on every other row, the rows between taking the planes above "
+        "and below (their mean, or the closer at an edge; half the work); None: 2 unless the depth is sparse",
     ),
 }
 

@@ -1052,9 +1052,9 @@ def adaptive_fit(
         The frame's :func:`noise_profile`, when the caller has it already.
     stride : 1, 2 or None
         1: every pixel's own window. 2: windows on every other row (the even ones); a pixel of the rows
-        between takes the plane of the pixel above or below it that passes closer to its depth
-        (:func:`between_row`), half the work. None (default): 2 unless the depth is sparse
-        (:func:`choose_stride`).
+        between takes the planes of the pixels above and below it: their mean where both pass through its
+        depth within the noise, the closer one otherwise (:func:`between_row`); half the work. None
+        (default): 2 unless the depth is sparse (:func:`choose_stride`).
     bands : callable
         How rows are split over threads (see :mod:`surfnorm._bands`); each band has its own ring of
         integral rows.

@@ -21,6 +21,9 @@ Same rule as the NumPy kernel, step for step (its module docstring explains the 
    (the Kuwahara fallback). Each step is element-wise over pixels: on the CPU over the pixels concerned
    (gathered: a minority at every rung but the first), elsewhere over all pixels with masks, so that
    nothing waits for the device.
+4. With ``stride`` 2 (the default where the depth is dense: :func:`choose_stride`, per frame), the odd rows
+   take their planes from the even rows above and below (:func:`_between_rows`). Every row is still fitted
+   here (all pixels at once); only the NumPy kernel saves the odd rows' fits.
 
 Gradients: the choices (the noise profile, each pixel's radius, widening, quadrant, and ``auto``'s choice)
 are piecewise constant in depth and carry none; given them, the normal is a differentiable function of

@@ -165,6 +165,7 @@ class TestParity:
             "_CLIP_ROUNDS",
             "_TABLE",
             "TIE",
+            "MAX_UNREACHED",
         ):
             assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name
         assert _adaptive._SHIFTS == tuple(map(tuple, adaptive_fit._SHIFTS.tolist()))

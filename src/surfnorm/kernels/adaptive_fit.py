@@ -658,16 +658,27 @@ def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_
         out_row[3 * u + 2] = select(ok, np.float32(nz * inv_norm), fill)
 
 
+@pixel
+def table_entry(zp, z0, inv_step, n_table):
+    """The entry of the depth table (:func:`radius_table`) for depth ``zp``."""
+    return min(max(int((zp - z0) * inv_step), 0), n_table - 1)
+
+
+@pixel
+def noise_limit(zp, rho, f, kappa, rho_floor):
+    """The noise test's limit at depth ``zp``: (kappa sigma_w)^2, sigma_w = sigma_z / z^2 = rho / (z f) the noise
+    of w (rho at least ``rho_floor``). A fit passes when its residual per degree of freedom is at most that."""
+    zf = zp * f
+    s_w = kappa * max(rho, rho_floor)
+    return (s_w * s_w) / (zf * zf)
+
+
 @njit(noalias=True, _nrt=False)
 def noise_limits(z_row, z0, inv_step, rho_table, f, kappa, rho_floor, limit):
-    """The noise test's limit of each pixel of a row: (kappa sigma_w)^2, sigma_w = rho / (z f) the noise of
-    w (rho from the depth table, at least ``rho_floor``), as the fitted rows compute it."""
-    n_table = rho_table.shape[0]
+    """:func:`noise_limit` of each pixel of a row, rho from the depth table."""
     for u in range(z_row.shape[0]):
-        t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
-        zf = z_row[u] * f
-        s_w = kappa * max(rho_table[t], rho_floor)
-        limit[u] = (s_w * s_w) / (zf * zf)
+        t = table_entry(z_row[u], z0, inv_step, rho_table.shape[0])
+        limit[u] = noise_limit(z_row[u], rho_table[t], f, kappa, rho_floor)
 
 
 @njit(noalias=True, _nrt=False)
@@ -714,6 +725,18 @@ def between_row(z_row, valid_row, limit, above, below, fit):
                 fit[1, u] = rows[1, c]
                 fit[2, u] = rows[2, c]
                 fit[3, u] = 1.0
+
+
+@njit(noalias=True, _nrt=False)
+def _row_between(
+    z, valid, o, above, below, z0, inv_step, rho_table, f, kappa, rho_floor, cam, fill, limit, plane, out_flat
+):
+    """The normals of row ``o``, between the fitted rows whose fits are ``above`` and ``below`` (see
+    :func:`between_row`); ``cam`` is (fx, fy, cx, cy); ``limit`` (W) and ``plane`` (4, W) are scratch."""
+    noise_limits(z[o], z0, inv_step, rho_table, f, kappa, rho_floor, limit)
+    between_row(z[o], valid[o], limit, above, below, plane)
+    fx, fy, cx, cy = cam
+    normal_row(z[o], valid[o], o, plane[1], plane[2], plane[0], plane[3], fx, fy, cx, cy, fill, out_flat[o])
 
 
 #: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner.
@@ -801,10 +824,11 @@ def _adaptive_fit_kernel(
     out_flat = out.reshape(H, 3 * W)
     ring[0, :, :] = 0.0
     made = 0  # the last integral row made
-    # the fits (a, g_u, g_v, dof) of the last two fitted rows, and of a row between them
+    # the fits (a, g_u, g_v, dof) of the last two fitted rows
     above = np.zeros((4, W))
     below = np.zeros((4, W))
-    between = np.zeros((4, W))
+    plane = np.zeros((4, W))
+    cam = (fx, fy, cx, cy)
     v_first = v0 - v0 % stride  # the fitted rows: every stride-th row of the frame, whatever the band
     v_last = min(v1 - 1 + (stride - (v1 - 1) % stride) % stride, H - 1)
     for v in range(v_first, v_last + 1, stride):
@@ -820,7 +844,7 @@ def _adaptive_fit_kernel(
         m_src = m_a
         m_row = m_b
         for u in range(W):
-            t = min(max(int((z_row[u] - z0) * inv_step), 0), n_table - 1)
+            t = table_entry(z_row[u], z0, inv_step, n_table)
             t_row[u] = t
             r0 = r_table[t]
             r_row[u] = r0
@@ -857,11 +881,9 @@ def _adaptive_fit_kernel(
             r_float[u] = r_row[u]
         fit_row(m_row, m_coords, r_float, x_row, y, g_u, g_v, a, rss, dof)
         # The noise test: a fit is consistent with the noise when its residual per degree of
-        # freedom is at most (kappa sigma_w)^2, sigma_w = sigma_z / z^2 = rho / (z f) the noise of w.
+        # freedom is at most the limit (kappa sigma_w)^2.
         for u in range(W):
-            zf = z_row[u] * f
-            s_w = kappa * max(rho_table[t_row[u]], rho_floor)
-            limit[u] = (s_w * s_w) / (zf * zf)
+            limit[u] = noise_limit(z_row[u], rho_table[t_row[u]], f, kappa, rho_floor)
             passed[u] = valid_row[u] & (dof[u] > 0.0) & (rss[u] <= limit[u] * dof[u])
         # Wider where the data allow: a fit that passes is tried on a window twice as wide, kept
         # while it still passes (planes get wide windows, curved surfaces and edges keep theirs).
@@ -983,30 +1005,44 @@ def _adaptive_fit_kernel(
                 below[3, u] = select(valid_row[u], dof[u], 0.0)
             o = v - 1  # the row between this one and the last
             if o >= v0:
-                noise_limits(z[o], z0, inv_step, rho_table, f, kappa, rho_floor, limit)
-                between_row(z[o], valid[o], limit, above, below, between)
-                normal_row(
-                    z[o], valid[o], o, between[1], between[2], between[0], between[3], fx, fy, cx, cy, fill, out_flat[o]
+                _row_between(
+                    z,
+                    valid,
+                    o,
+                    above,
+                    below,
+                    z0,
+                    inv_step,
+                    rho_table,
+                    f,
+                    kappa,
+                    rho_floor,
+                    cam,
+                    fill,
+                    limit,
+                    plane,
+                    out_flat,
                 )
     if stride > 1 and H % 2 == 0 and v0 <= H - 1 < v1:  # the last row has no fitted row below it
         above, below = below, above
         below[3, :] = 0.0
-        noise_limits(z[H - 1], z0, inv_step, rho_table, f, kappa, rho_floor, limit)
-        between_row(z[H - 1], valid[H - 1], limit, above, below, between)
-        normal_row(
-            z[H - 1],
-            valid[H - 1],
+        _row_between(
+            z,
+            valid,
             H - 1,
-            between[1],
-            between[2],
-            between[0],
-            between[3],
-            fx,
-            fy,
-            cx,
-            cy,
+            above,
+            below,
+            z0,
+            inv_step,
+            rho_table,
+            f,
+            kappa,
+            rho_floor,
+            cam,
             fill,
-            out_flat[H - 1],
+            limit,
+            plane,
+            out_flat,
         )
 
 

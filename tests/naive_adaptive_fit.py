@@ -2,8 +2,8 @@
 
 Written from the module docstring of surfnorm.adaptive_fit, not from its kernels: the
 noise profile from the second differences of inverse depth at strides a, 2a, 4a, the
-radius ladder, the sparse growth, the noise test, the widening, the quadrant windows, and the rows
-between fitted rows (stride 2).
+radius ladder, the sparse growth, the noise test, the widening, the quadrant windows, and the pixels
+between the fitted ones (stride 2: fits on the even rows and columns only).
 """
 
 from __future__ import annotations
@@ -84,17 +84,19 @@ def _fit(z, valid, v, u, vc, uc, r):
 
 
 def stride_for(valid, max_unreached=0.01):
-    """2 unless more than ``max_unreached`` of the valid pixels on odd rows have no valid pixel among the
-    six next to them on the even rows above and below."""
+    """2 unless more than ``max_unreached`` of the valid pixels off the even rows and columns have no valid
+    pixel of an even row and column within two rows and two columns of them."""
     H, W = valid.shape
+    if H < 2 or W < 2:
+        return 1
     total = unreached = 0
-    for v in range(1, H, 2):
+    for v in range(H):
         for u in range(W):
-            if not valid[v, u]:
+            if not valid[v, u] or (v % 2 == 0 and u % 2 == 0):
                 continue
             total += 1
-            near = [(v + dv, u + du) for dv in (-1, 1) for du in (-1, 0, 1)]
-            if not any(0 <= a < H and 0 <= b < W and valid[a, b] for a, b in near):
+            near = [(p, q) for p in range(v - 2, v + 3) for q in range(u - 2, u + 3) if p % 2 == 0 and q % 2 == 0]
+            if not any(0 <= p < H and 0 <= q < W and valid[p, q] for p, q in near):
                 unreached += 1
     return 2 if unreached <= max_unreached * max(total, 1) else 1
 
@@ -114,9 +116,9 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
     inv_step = (table - 1) / (centres[-1] - centres[0])
     out = np.full((H, W, 3), fill, dtype=np.float32)
     stride = stride_for(valid) if stride is None else stride
-    planes = {}  # (v, u) -> (a at the pixel, g_u, g_v) of the fitted rows
+    planes = {}  # (v, u) -> (a at the pixel, g_u, g_v, the noise limit there) of the fitted pixels
     for v in range(0, H, stride):
-        for u in range(W):
+        for u in range(0, W, stride):
             if not valid[v, u]:
                 continue
             zp = z32[v, u]
@@ -154,40 +156,46 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                     if inside > best_in or (inside == best_in and score < (1 - 1e-3) * best):
                         best, best_in, ok, a, gu, gv = score, inside, True, ak, guk, gvk
             if ok:
-                planes[v, u] = (a, gu, gv)
-    # the rows between fitted rows: the mean of the planes above and below where both predict the pixel's w
-    # within the noise test's limit, else the one that predicts it closer (a tie, to a thousandth, goes to the
-    # one above); with neither, the closest diagonal one, in the order above-left, above-right, below-left,
-    # below-right
+                planes[v, u] = (a, gu, gv, limit)
+    # every other pixel: the fitted pixels in its 3x3 neighbourhood (left and right, above and below, or the
+    # four diagonal ones, in reading order) whose plane predicts its w within that pixel's noise limit give
+    # their mean; if none does, the one predicting it closest (a tie, to a thousandth, goes to the earlier);
+    # if none of them has a plane, the closest of the fitted pixels two rows or columns further out
     for v in range(H):
         for u in range(W):
             if not valid[v, u]:
                 continue
-            if v % stride == 0:
+            if v % stride == 0 and u % stride == 0:
                 if (v, u) not in planes:
                     continue
-                a, gu, gv = planes[v, u]
+                a, gu, gv, _ = planes[v, u]
             else:
                 wp = 1.0 / z32[v, u]
-                t = min(max(int((z32[v, u] - centres[0]) * inv_step), 0), table - 1)
-                limit = (kappa * max(rho_t[t], rho_floor) / (z32[v, u] * f)) ** 2
-                vertical = [planes.get((v + dv, u)) for dv in (-1, 1)]
-                preds = [None if p is None else p[0] - p[2] * dv for p, dv in zip(vertical, (-1, 1))]
+                first = [(v + dv, u + du) for dv in (-1, 0, 1) for du in (-1, 0, 1) if (v + dv) % 2 == 0 and (u + du) % 2 == 0]
+                if v % 2 == 0:
+                    further = [(v - 2, u - 1), (v - 2, u + 1), (v + 2, u - 1), (v + 2, u + 1)]
+                elif u % 2 == 0:
+                    further = [(v - 1, u - 2), (v - 1, u + 2), (v + 1, u - 2), (v + 1, u + 2)]
+                else:
+                    further = []
                 pick = None
-                if all(p is not None and (p - wp) ** 2 <= limit for p in preds):
-                    (_, gu1, gv1), (_, gu2, gv2) = vertical
-                    pick = ((preds[0] + preds[1]) / 2, (gu1 + gu2) / 2, (gv1 + gv2) / 2)
-                for group in ([(-1, 0), (1, 0)], [(-1, -1), (-1, 1), (1, -1), (1, 1)]) if pick is None else ():
-                    best = np.inf
-                    for dv, du in group:
-                        if (v + dv, u + du) not in planes:
-                            continue
-                        ac, guc, gvc = planes[v + dv, u + du]
-                        ap = ac - guc * du - gvc * dv
-                        if (ap - wp) ** 2 < best * (1 - 1e-3):
-                            best, pick = (ap - wp) ** 2, (ap, guc, gvc)
-                    if pick is not None:
-                        break
+                for group, averaged in ((first, True), (further, False)):
+                    found = []
+                    for p, q in group:
+                        if (p, q) in planes:
+                            ac, guc, gvc, lim = planes[p, q]
+                            found.append((ac + guc * (u - q) + gvc * (v - p), guc, gvc, lim))
+                    if not found:
+                        continue
+                    within = [f for f in found if (f[0] - wp) ** 2 <= f[3]] if averaged else []
+                    if within:
+                        pick = tuple(sum(f[i] for f in within) / len(within) for i in range(3))
+                    else:
+                        best = np.inf
+                        for ap, guc, gvc, _ in found:
+                            if (ap - wp) ** 2 < best * (1 - 1e-3):
+                                best, pick = (ap - wp) ** 2, (ap, guc, gvc)
+                    break
                 if pick is None:
                     continue
                 a, gu, gv = pick

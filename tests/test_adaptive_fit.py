@@ -227,39 +227,47 @@ def test_window_ties_go_the_same_way_in_every_unit():
     assert differing <= 1e-5 * total, (differing, total)
 
 
+@pytest.mark.parametrize("W", [50, 51])
+@pytest.mark.parametrize("stride", [1, 2])
 @pytest.mark.parametrize("r", [1, 2, 4, 15, 40])
-def test_row_window_sums_are_the_box_formula_where_picked(r):
-    """box_row and coordinate_sums (the row path of the window sums) give, for every picked pixel, exactly
-    (bottom - top at column u + r + 1) - (bottom - top at column u - r), clipped; box_row keeps src elsewhere
+def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
+    """box_row and coordinate_sums (the row path of the window sums) give, for every picked fitted pixel
+    (column u = stride i), exactly (bottom - top at column u + r + 1) - (bottom - top at column u - r),
+    clipped, with the integral columns where integral_positions places them; box_row keeps src elsewhere
     unless ``first``, and coordinate_sums fills only windows that are not the full square. The kernel's
     outputs rest on these bits (the windows' fits and every decision made from them)."""
-    from surfnorm.kernels.adaptive_fit import _BOXED, _COORDS, box_row, coordinate_sums
+    from surfnorm.kernels.adaptive_fit import _BOXED, _COORDS, box_row, coordinate_sums, integral_positions
 
     rng = np.random.default_rng(r)
-    W = 50
-    top, bottom = rng.normal(0, 1e3, (2, 10, W + 1))
-    pick = rng.random(W) < 0.6
-    u = np.arange(W)
+    n_fit = (W + stride - 1) // stride
+    by_column = rng.normal(0, 1e3, (2, 10, W + 1))
+    pos = integral_positions(W, stride)
+    assert sorted(pos) == list(range(W + 1))
+    top, bottom = np.empty_like(by_column[0]), np.empty_like(by_column[1])
+    top[:, pos], bottom[:, pos] = by_column  # column u of the integral row at pos[u]
+    pick = rng.random(n_fit) < 0.6
+    u = stride * np.arange(n_fit)
     u0, u1 = np.clip(u - r, 0, W), np.clip(u + r + 1, 0, W)
-    box = (bottom[:, u1] - top[:, u1]) - (bottom[:, u0] - top[:, u0])  # (10, W), same operations in NumPy
-    src = rng.normal(size=(len(_BOXED), W))
+    t, b = by_column
+    box = (b[:, u1] - t[:, u1]) - (b[:, u0] - t[:, u0])  # (10, n_fit), same operations in NumPy
+    src = rng.normal(size=(len(_BOXED), n_fit))
     for first in (False, True):
-        dst = np.full((len(_BOXED), W), np.nan)
-        box_row(top, bottom, r, pick, first, src, dst)
+        dst = np.full((len(_BOXED), n_fit), np.nan)
+        box_row(top, bottom, r, stride, pos, pick, first, src, dst)
         np.testing.assert_array_equal(dst[:, pick], box[list(_BOXED)][:, pick])
         if not first:
             np.testing.assert_array_equal(dst[:, ~pick], src[:, ~pick])
-    counts = np.where(rng.random(W) < 0.5, float((2 * r + 1) ** 2), box[0])
-    coords = np.full((len(_COORDS), W), np.nan)
-    coordinate_sums(top, bottom, r, pick, counts, coords)
+    counts = np.where(rng.random(n_fit) < 0.5, float((2 * r + 1) ** 2), box[0])
+    coords = np.full((len(_COORDS), n_fit), np.nan)
+    coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords)
     fill = pick & (counts != (2 * r + 1) ** 2)
     np.testing.assert_array_equal(coords[:, fill], box[list(_COORDS)][:, fill])
     assert np.isnan(coords[:, ~fill]).all()
 
 
 def test_stride_follows_the_density_of_the_depth():
-    """Every other row is fitted where the rows between have fitted pixels next to them (dense depth), every
-    row where many do not (LiDAR scanlines); the rule agrees with the naive one on random masks."""
+    """Every other row and column is fitted where the pixels between have fitted pixels near them (dense depth),
+    every pixel where many do not (LiDAR scanlines); the rule agrees with the naive one on random masks."""
     from surfnorm.kernels.adaptive_fit import choose_stride
 
     rng = np.random.default_rng(3)
@@ -268,11 +276,11 @@ def test_stride_follows_the_density_of_the_depth():
     scanlines = np.zeros((60, 80), bool)
     scanlines[1::2] = rng.random((30, 80)) > 0.2  # valid only on the odd rows: none of them is reachable
     assert choose_stride(scanlines) == 1
-    for holes in (0.1, 0.4, 0.5, 0.6, 0.8):
+    for holes in (0.1, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9):
         for shape in ((7, 9), (8, 9), (31, 40)):
             valid = rng.random(shape) > holes
             assert choose_stride(valid) == naive.stride_for(valid), (holes, shape)
-    assert choose_stride(np.ones((1, 5), bool)) == 1
+    assert choose_stride(np.ones((1, 5), bool)) == choose_stride(np.ones((5, 1), bool)) == 1
 
 
 @pytest.mark.parametrize("stride", [1, 2])

@@ -197,6 +197,18 @@ def test_mirroring_mirrors_n_x(method, scene):
         if 0.0 < t < 1.0:
             return
         method = "d2nt_v3" if t == 0.0 else "adaptive_fit"
+    if method == "adaptive_fit" and w % 2 == 0:
+        # stride 2 fits the even columns: mirrored, an even width makes them odd ones, which take the planes of
+        # their neighbours instead (the same normals to within that interpolation, not to the bit)
+        from surfnorm.kernels.adaptive_fit import choose_stride
+
+        valid = np.isfinite(z) & (z > 0) & (np.ones(z.shape, bool) if mask is None else mask)
+        if choose_stride(valid) == 2:
+            n = surfnorm.estimate(z, cam, method=method, mask=mask, fill=np.nan, stride=1)
+            m = surfnorm.estimate(
+                z[:, ::-1], cam.flipped_lr(w), method=method, mask=mask[:, ::-1], fill=np.nan, stride=1
+            )
+            m = m[:, ::-1]
     assert_same_or_mnr_candidate(method, m * flip, n, raw_normals(method, z, mask, cam), 2e-5, cam)
     if mnr_recipe(method):  # before MNR, exactly equivariant
         raw_m = raw_normals(method, z[:, ::-1], mask[:, ::-1], cam.flipped_lr(w))[:, ::-1]

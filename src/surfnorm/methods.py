@@ -507,8 +507,9 @@ ADAPTIVE_OPTIONS = {
     "stride": Option(
         None,
         _check_stride,
-        "1: every pixel's own window; 2: windows on every other row, the rows between taking the planes above "
-        "and below (their mean, or the closer at an edge; half the work); None: 2 unless the depth is sparse",
+        "1: every pixel's own window; 2: windows on every other row and column, the pixels between taking the "
+        "planes of the fitted pixels next to them (their mean, or the closest at an edge; a quarter of the fits); "
+        "None: 2 unless the depth is sparse",
     ),
 }
 

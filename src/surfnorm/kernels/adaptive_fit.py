@@ -55,13 +55,15 @@ windows, curved surfaces and edges keep small ones. A window whose valid pixels
 lie on a line (they fix no plane), or with fewer than 4 of them, gives no fit;
 a pixel without any fit gets the fill value.
 
-Every other row. Windows of a few pixels' radius or more, centred one row apart, share most of their
-pixels, and so their planes. By default (``stride`` 2) the windows are fitted on the even rows only. A
-pixel of an odd row takes the mean of the planes of the pixels directly above and below it where both
-predict its own w within the noise test's limit (on a smooth surface, the plane half-way), and otherwise
-the one that predicts it closer (at an edge, its own side's); where neither has a plane, the closest of
-the four diagonal ones. That halves the fits. Depth whose odd rows have too few valid neighbours in the
-even rows (LiDAR scanlines: :func:`choose_stride`) is fitted on every row (``stride`` 1, also on request).
+Every other row and column. Windows of a few pixels' radius or more, centred a pixel apart, share most of
+their pixels, and so their planes. By default (``stride`` 2) the windows are fitted on the pixels of the even
+rows and even columns only, a quarter of them. Every other pixel takes the planes of the fitted pixels next
+to it (its 3x3 neighbourhood: the two on its left and right, or above and below, or the four diagonal
+ones): the mean of those that predict its own w within the noise test's limit (on a smooth surface, the
+plane interpolated to the pixel), or, where none does, the one that predicts it closest (at an edge, its own
+side's); where none of them has a plane, the closest of the fitted pixels of its 5x5 neighbourhood. Depth
+with too many pixels that no fitted pixel reaches (LiDAR scanlines: :func:`choose_stride`) is fitted at
+every pixel (``stride`` 1, also on request).
 
 Not local: the noise profile is a statistic of the whole frame, so masking a
 region (or a hole) changes the samples it is measured from and can move the
@@ -359,28 +361,33 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     return NoiseProfile(centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor)
 
 
-#: Largest share of the valid pixels of the rows between fitted rows that may have no fitted pixel next to
-#: them (above, below or diagonally) for ``stride`` 2: such a pixel gets no normal. Dense sensor depth has
-#: 0.000-0.07 % (the real frames of the sensor benchmark) and up to 0.5 % (3F2N frames through the
-#: simulated cameras, small objects with ragged edges); LiDAR 5.6 % (the KITTI frame) and 45-68 % (simulated).
+#: Largest share of the valid pixels that are not fitted with ``stride`` 2 that may have no valid fitted pixel
+#: (even row and column) in their 5x5 neighbourhood: such a pixel gets no normal. The real frames of the
+#: sensor benchmark have 0-0.16 % (NYU's Kinect v1 frame the most), 3F2N frames through the simulated
+#: cameras at most 0.6 %; LiDAR 7.5 % (the KITTI frame) and 40-60 % (simulated).
 MAX_UNREACHED = 0.01
 
 
+def _reached(valid: np.ndarray) -> np.ndarray:
+    """Where a pixel has a valid fitted pixel (even row and column) in its 5x5 neighbourhood."""
+    H, W = valid.shape
+    fit = np.zeros((H + 4, W + 4), np.bool_)
+    fit[2 : H + 2 : 2, 2 : W + 2 : 2] = valid[::2, ::2]
+    rows = fit[:, :-4] | fit[:, 1:-3] | fit[:, 2:-2] | fit[:, 3:-1] | fit[:, 4:]
+    return rows[:-4] | rows[1:-3] | rows[2:-2] | rows[3:-1] | rows[4:]
+
+
 def choose_stride(valid: np.ndarray) -> int:
-    """The default ``stride``: 2, unless more than MAX_UNREACHED of the valid pixels of the odd rows have no
-    valid pixel among the six next to them in the even rows (sparse depth: LiDAR), then 1."""
-    H = valid.shape[0]
-    if H < 2:
+    """The default ``stride``: 2, unless more than MAX_UNREACHED of the valid pixels that are not fitted (not
+    on an even row and column) have no valid fitted pixel in their 5x5 neighbourhood (sparse depth: LiDAR),
+    then 1."""
+    H, W = valid.shape
+    if H < 2 or W < 2:
         return 1
-    odd = valid[1::2]
-    up = valid[0 : 2 * odd.shape[0] : 2]
-    down = np.zeros_like(odd)
-    down[: valid[2::2].shape[0]] = valid[2::2]
-    near = up | down
-    near[:, 1:] |= up[:, :-1] | down[:, :-1]
-    near[:, :-1] |= up[:, 1:] | down[:, 1:]
-    unreached = np.count_nonzero(odd & ~near)
-    return 2 if unreached <= MAX_UNREACHED * max(np.count_nonzero(odd), 1) else 1
+    others = valid.copy()
+    others[::2, ::2] = False
+    unreached = np.count_nonzero(others & ~_reached(valid))
+    return 2 if unreached <= MAX_UNREACHED * max(np.count_nonzero(others), 1) else 1
 
 
 #: Rings of integral rows kept for the next frame (a 640-pixel row's takes 3.2 MB: mapping its pages in
@@ -446,15 +453,31 @@ def growth_table(r_max: int) -> np.ndarray:
 
 # --- the fit ---------------------------------------------------------------------------------------
 #
-# Integral rows live in a ring of 4 r_max + 3 rows, channel-major: ring[slot[i], c, u] is moment c of
+# Integral rows live in a ring of 4 r_max + 3 rows, channel-major: ring[slot[i], c, pos[u]] is moment c of
 # integral row i at column u. A row of the image needs integral rows v - 2 r .. v + 2 r + 1 (the centred
 # windows and the shifted ones), so the moments stay in cache instead of a full-size image.
+#
+# ``pos`` (:func:`integral_positions`) places the columns: in order for ``stride`` 1; for ``stride`` 2 the even
+# columns first, then the odd ones. A window centred on an even column u has one edge column of each
+# parity (u - r and u + r + 1), so along a row of fitted pixels (u = 0, 2, 4, ...) both edges move one
+# place at a time: the row's window sums read two contiguous runs (see :func:`box_row`).
+
+
+@njit
+def integral_positions(W, stride):
+    """pos[u] for the integral columns u = 0 .. W (see above)."""
+    pos = np.arange(W + 1, dtype=np.int64)
+    if stride == 2:
+        n_even = W // 2 + 1
+        pos[0::2] = np.arange(n_even)
+        pos[1::2] = n_even + np.arange((W + 1) // 2)
+    return pos
 
 
 @njit(noalias=True, _nrt=False)
-def integral_row(z_row, valid_row, y, prev, row):
+def integral_row(z_row, valid_row, y, pos, prev, row):
     """Integral row i from row i - 1 (``prev``), adding image row i - 1 (``z_row``, ``valid_row``, at
-    centred ordinate ``y``).
+    centred ordinate ``y``); column u at ``pos[u]``.
 
     Integral row i holds, per column u (0..W), the sums over the valid pixels of image rows < i
     and columns < u of (1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww), with u' = u - W/2,
@@ -462,7 +485,7 @@ def integral_row(z_row, valid_row, y, prev, row):
     """
     W = z_row.shape[0]
     for c in range(_N_MOMENTS):
-        row[c, 0] = 0.0
+        row[c, pos[0]] = 0.0
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = 0.0
     for u in range(W):
         if valid_row[u]:
@@ -478,26 +501,27 @@ def integral_row(z_row, valid_row, y, prev, row):
             s7 += x * w
             s8 += y * w
             s9 += w * w
-        row[0, u + 1] = prev[0, u + 1] + s0
-        row[1, u + 1] = prev[1, u + 1] + s1
-        row[2, u + 1] = prev[2, u + 1] + s2
-        row[3, u + 1] = prev[3, u + 1] + s3
-        row[4, u + 1] = prev[4, u + 1] + s4
-        row[5, u + 1] = prev[5, u + 1] + s5
-        row[6, u + 1] = prev[6, u + 1] + s6
-        row[7, u + 1] = prev[7, u + 1] + s7
-        row[8, u + 1] = prev[8, u + 1] + s8
-        row[9, u + 1] = prev[9, u + 1] + s9
+        j = pos[u + 1]
+        row[0, j] = prev[0, j] + s0
+        row[1, j] = prev[1, j] + s1
+        row[2, j] = prev[2, j] + s2
+        row[3, j] = prev[3, j] + s3
+        row[4, j] = prev[4, j] + s4
+        row[5, j] = prev[5, j] + s5
+        row[6, j] = prev[6, j] + s6
+        row[7, j] = prev[7, j] + s7
+        row[8, j] = prev[8, j] + s8
+        row[9, j] = prev[9, j] + s9
 
 
 @pixel
-def window_sums(ring, slot, H, W, v, u, r, channels, m):
+def window_sums(ring, slot, pos, H, W, v, u, r, channels, m):
     """Moment sums ``channels`` of the window rows v-r..v+r, columns u-r..u+r (clipped to the image) into
     m[c] for c in ``channels``."""
     v0 = slot[min(max(v - r, 0), H)]
     v1 = slot[min(max(v + r + 1, 0), H)]
-    u0 = min(max(u - r, 0), W)
-    u1 = min(max(u + r + 1, 0), W)
+    u0 = pos[min(max(u - r, 0), W)]
+    u1 = pos[min(max(u + r + 1, 0), W)]
     for c in channels:
         m[c] = ring[v1, c, u1] - ring[v0, c, u1] - ring[v1, c, u0] + ring[v0, c, u0]
 
@@ -513,57 +537,65 @@ _W_SUMS = (6, 7, 8, 9)
 
 
 @njit(noalias=True, _nrt=False)
-def box_row(top, bottom, r, pick, first, src, dst):
-    """Window sums at radius r of the count and the w moments (``_BOXED``): dst[j, u] = sums of moment
-    _BOXED[j] over columns u - r .. u + r (clipped) between integral rows ``top`` and ``bottom`` where
-    ``pick``; elsewhere src[j, u], or anything when ``first``. ``src`` and ``dst`` are distinct arrays:
-    a store that keeps the old value in place compiles to a masked store, microcoded and slow on some
-    processors.
+def box_row(top, bottom, r, stride, pos, pick, first, src, dst):
+    """Window sums at radius r of the count and the w moments (``_BOXED``) of the fitted pixels of a row
+    (columns u = stride i): dst[j, i] = sums of moment _BOXED[j] over columns u - r .. u + r (clipped)
+    between integral rows ``top`` and ``bottom`` where ``pick``; elsewhere src[j, i], or anything when
+    ``first``. ``src`` and ``dst`` are distinct arrays: a store that keeps the old value in place compiles
+    to a masked store, microcoded and slow on some processors.
 
-    Each sum is (bottom - top at the right edge) - (bottom - top at the left edge).
+    Each sum is (bottom - top at the right edge) - (bottom - top at the left edge). Away from the image's
+    borders both edges move one place in ``pos`` per fitted pixel: two contiguous runs.
     """
-    W = dst.shape[1]
-    k = 2 * r + 1
+    W = pos.shape[0] - 1
+    n_fit = dst.shape[1]
+    lo = min((r + stride - 1) // stride, n_fit)  # the first pixel whose window is not clipped on the left
+    hi = max(min((W - r - 1) // stride + 1, n_fit), lo)  # ... and past the last one not clipped on the right
     for j in range(len(_BOXED)):
         c = _BOXED[j]
         t = top[c]
         b = bottom[c]
         s = src[j]
         d = dst[j]
-        for u in range(min(r, W)):  # left border: clipped windows
-            u1 = min(u + r + 1, W)
-            d[u] = select(pick[u], (b[u1] - t[u1]) - (b[0] - t[0]), s[u])
-        n = W - k
-        if n > 0:  # interior: u = r .. W - r - 2
-            bh = b[k:]
-            th = t[k:]
-            do = d[r:]
+        for i in range(lo):  # left border: clipped windows
+            u1 = pos[min(stride * i + r + 1, W)]
+            d[i] = select(pick[i], (b[u1] - t[u1]) - (b[0] - t[0]), s[i])
+        if hi > lo:  # interior
+            p0 = pos[stride * lo - r]
+            p1 = pos[stride * lo + r + 1]
+            b0 = b[p0:]
+            t0 = t[p0:]
+            b1 = b[p1:]
+            t1 = t[p1:]
+            do = d[lo:]
             if first:
-                for i in range(n):
-                    do[i] = (bh[i] - th[i]) - (b[i] - t[i])
+                for i in range(hi - lo):
+                    do[i] = (b1[i] - t1[i]) - (b0[i] - t0[i])
             else:
-                p = pick[r:]
-                so = s[r:]
-                for i in range(n):
-                    do[i] = select(p[i], (bh[i] - th[i]) - (b[i] - t[i]), so[i])
-        for u in range(max(r, W - r - 1), W):  # right border
-            u0 = max(u - r, 0)
-            d[u] = select(pick[u], (b[W] - t[W]) - (b[u0] - t[u0]), s[u])
+                p = pick[lo:]
+                so = s[lo:]
+                for i in range(hi - lo):
+                    do[i] = select(p[i], (b1[i] - t1[i]) - (b0[i] - t0[i]), so[i])
+        e = pos[W]
+        for i in range(hi, n_fit):  # right border
+            u0 = pos[max(stride * i - r, 0)]
+            d[i] = select(pick[i], (b[e] - t[e]) - (b[u0] - t[u0]), s[i])
 
 
 @njit(noalias=True, _nrt=False)
-def coordinate_sums(top, bottom, r, pick, counts, coords):
-    """The coordinate sums (``_COORDS``) at radius r into coords[j, u], for the pixels where ``pick``
-    whose window is not the full (2r + 1)^2 square (``counts``, from :func:`box_row`)."""
-    W = coords.shape[1]
+def coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords):
+    """The coordinate sums (``_COORDS``) at radius r into coords[j, i] (columns u = stride i), for the pixels
+    where ``pick`` whose window is not the full (2r + 1)^2 square (``counts``, from :func:`box_row`)."""
+    W = pos.shape[0] - 1
     full = (2 * r + 1) * (2 * r + 1)
-    for u in range(W):
-        if pick[u] and counts[u] != full:
-            u0 = max(u - r, 0)
-            u1 = min(u + r + 1, W)
+    for i in range(coords.shape[1]):
+        if pick[i] and counts[i] != full:
+            u = stride * i
+            u0 = pos[max(u - r, 0)]
+            u1 = pos[min(u + r + 1, W)]
             for j in range(len(_COORDS)):
                 c = _COORDS[j]
-                coords[j, u] = (bottom[c, u1] - top[c, u1]) - (bottom[c, u0] - top[c, u0])
+                coords[j, i] = (bottom[c, u1] - top[c, u1]) - (bottom[c, u0] - top[c, u0])
 
 
 @pixel
@@ -647,15 +679,21 @@ def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_
     W = z_row.shape[0]
     for u in range(W):
         ok = valid_row[u] & (dof[u] > 0.0)
-        au = a[u]
-        au = select(au > 0.0, au, 1.0 / z_row[u])  # a fit that passes behind the camera: the pixel's own w
-        nx = fx * g_u[u]
-        ny = fy * g_v[u]
-        nz = au - g_u[u] * (u - cx) - g_v[u] * (v - cy)
-        inv_norm = -1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
-        out_row[3 * u] = select(ok, np.float32(nx * inv_norm), fill)
-        out_row[3 * u + 1] = select(ok, np.float32(ny * inv_norm), fill)
-        out_row[3 * u + 2] = select(ok, np.float32(nz * inv_norm), fill)
+        nx, ny, nz = unit_normal(z_row[u], a[u], g_u[u], g_v[u], u, v, fx, fy, cx, cy)
+        out_row[3 * u] = select(ok, nx, fill)
+        out_row[3 * u + 1] = select(ok, ny, fill)
+        out_row[3 * u + 2] = select(ok, nz, fill)
+
+
+@pixel
+def unit_normal(zp, a, g_u, g_v, u, v, fx, fy, cx, cy):
+    """Eq. (2) at pixel (u, v) of depth ``zp`` from its plane (a: w there, g_u, g_v), as float32."""
+    a = select(a > 0.0, a, 1.0 / zp)  # a fit that passes behind the camera: the pixel's own w
+    nx = fx * g_u
+    ny = fy * g_v
+    nz = a - g_u * (u - cx) - g_v * (v - cy)
+    inv_norm = -1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return np.float32(nx * inv_norm), np.float32(ny * inv_norm), np.float32(nz * inv_norm)
 
 
 @pixel
@@ -682,65 +720,161 @@ def noise_limits(z_row, z0, inv_step, rho_table, f, kappa, rho_floor, limit):
 
 
 @njit(noalias=True, _nrt=False)
-def between_row(z_row, valid_row, limit, above, below, fit):
-    """A row between two fitted rows: each pixel takes the planes of the pixels directly above and below it
-    (``above``, ``below``: a, g_u, g_v and dof of each pixel; dof 0 where none). Where both predict its
-    w = 1/z within the noise (squared error at most ``limit``, the noise test's), their mean: the plane
-    half-way, as the pixel's own window would give on a smooth surface. Otherwise the one that predicts
-    it closer (by more than TIE of the squared error; else the one above): at an edge, its own side's.
-    Where neither has a plane, the closest of the four diagonal ones (above-left, above-right,
-    below-left, below-right, in that order). ``fit`` gets the plane at the pixel: a (w there), g_u, g_v,
-    and dof 1 (0 without one).
-    """
-    W = z_row.shape[0]
-    for u in range(W):  # the pixels above and below (selects: the loop vectorises)
-        w_p = 1.0 / z_row[u]
-        a_1 = above[0, u] + above[2, u]  # one row down from the row above
-        a_2 = below[0, u] - below[2, u]
-        e_1 = select(above[3, u] > 0.0, (a_1 - w_p) * (a_1 - w_p), np.inf)
-        e_2 = select(below[3, u] > 0.0, (a_2 - w_p) * (a_2 - w_p), np.inf)
-        two = e_2 < e_1 * (1.0 - TIE)
-        mean = (e_1 <= limit[u]) & (e_2 <= limit[u])
-        fit[0, u] = select(mean, 0.5 * (a_1 + a_2), select(two, a_2, a_1))
-        fit[1, u] = select(mean, 0.5 * (above[1, u] + below[1, u]), select(two, below[1, u], above[1, u]))
-        fit[2, u] = select(mean, 0.5 * (above[2, u] + below[2, u]), select(two, below[2, u], above[2, u]))
-        fit[3, u] = select(valid_row[u] & ((above[3, u] > 0.0) | (below[3, u] > 0.0)), 1.0, 0.0)
-    for u in range(W):  # the few with neither: the diagonal ones
-        if not valid_row[u] or fit[3, u] > 0.0:
-            continue
-        w_p = 1.0 / z_row[u]
-        best = np.inf
-        for k in range(4):
-            rows = above if k < 2 else below
-            dv = 1.0 if k < 2 else -1.0  # the pixel's row minus the fitted row's
-            du = 1 - 2 * (k % 2)  # the pixel's column minus the fitted pixel's: +1 (left one), -1 (right one)
-            c = u - du
-            if c < 0 or c >= W or not rows[3, c] > 0.0:
-                continue
-            a_k = rows[0, c] + rows[1, c] * du + rows[2, c] * dv
-            e = (a_k - w_p) * (a_k - w_p)
-            if e < best * (1.0 - TIE):
-                best = e
-                fit[0, u] = a_k
-                fit[1, u] = rows[1, c]
-                fit[2, u] = rows[2, c]
-                fit[3, u] = 1.0
+def expand_row(a, g_u, g_v, ok, limit, e):
+    """The planes of a row's fitted pixels (columns 0, 2, 4, ...: a, g_u, g_v, ok and the noise limit, each
+    (n_fit,)) at full width: e[:, u] is column 2 (u // 2)'s, for u = 0 .. W (none at u = W for an even W)."""
+    W = e.shape[1] - 1
+    for i in range(a.shape[0]):
+        for c, x in ((0, a[i]), (1, g_u[i]), (2, g_v[i]), (3, ok[i]), (4, limit[i])):
+            e[c, 2 * i] = x
+            if 2 * i + 1 <= W:
+                e[c, 2 * i + 1] = x
+    if W % 2 == 0:
+        e[3, W] = 0.0
+
+
+@pixel
+def carried(rows, k, du, dv, w_p):
+    """The plane of the fitted pixel held at ``k`` in ``rows`` (:func:`expand_row`) carried to a pixel ``du``
+    columns and ``dv`` rows from it: (w there, g_u, g_v, squared error to the pixel's own w_p: inf where that
+    fitted pixel has no plane, and the fitted pixel's noise limit: -1 there)."""
+    has = rows[3, k] > 0.0
+    p = rows[0, k] + rows[1, k] * du + rows[2, k] * dv
+    return p, rows[1, k], rows[2, k], select(has, (p - w_p) * (p - w_p), np.inf), select(has, rows[4, k], -1.0)
+
+
+@pixel
+def interpolated(p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3):
+    """The plane at a pixel from those of up to four fitted pixels next to it (:func:`carried`; a missing one
+    has e = inf): the mean of those that predict the pixel's w within their noise limit (e <= l), else the
+    one that predicts it closest (one closer by more than TIE of the squared error replaces the one before
+    it). Returns (a, g_u, g_v, found); limits of -1 give the closest one."""
+    q0 = e0 <= l0
+    q1 = e1 <= l1
+    q2 = e2 <= l2
+    q3 = e3 <= l3
+    n = q0 + q1 + q2 + q3
+    s_a = select(q0, p0, 0.0) + select(q1, p1, 0.0) + select(q2, p2, 0.0) + select(q3, p3, 0.0)
+    s_u = select(q0, gu0, 0.0) + select(q1, gu1, 0.0) + select(q2, gu2, 0.0) + select(q3, gu3, 0.0)
+    s_v = select(q0, gv0, 0.0) + select(q1, gv1, 0.0) + select(q2, gv2, 0.0) + select(q3, gv3, 0.0)
+    best = e0
+    a_c = p0
+    gu_c = gu0
+    gv_c = gv0
+    c = e1 < best * (1.0 - TIE)
+    best, a_c, gu_c, gv_c = select(c, e1, best), select(c, p1, a_c), select(c, gu1, gu_c), select(c, gv1, gv_c)
+    c = e2 < best * (1.0 - TIE)
+    best, a_c, gu_c, gv_c = select(c, e2, best), select(c, p2, a_c), select(c, gu2, gu_c), select(c, gv2, gv_c)
+    c = e3 < best * (1.0 - TIE)
+    best, a_c, gu_c, gv_c = select(c, e3, best), select(c, p3, a_c), select(c, gu3, gu_c), select(c, gv3, gv_c)
+    mean = n > 0
+    n_f = float(max(n, 1))
+    return select(mean, s_a / n_f, a_c), select(mean, s_u / n_f, gu_c), select(mean, s_v / n_f, gv_c), best < np.inf
 
 
 @njit(noalias=True, _nrt=False)
-def _row_between(
-    z, valid, o, above, below, z0, inv_step, rho_table, f, kappa, rho_floor, cam, fill, limit, plane, out_flat
-):
-    """The normals of row ``o``, between the fitted rows whose fits are ``above`` and ``below`` (see
-    :func:`between_row`); ``cam`` is (fx, fy, cx, cy); ``limit`` (W) and ``plane`` (4, W) are scratch."""
-    noise_limits(z[o], z0, inv_step, rho_table, f, kappa, rho_floor, limit)
-    between_row(z[o], valid[o], limit, above, below, plane)
+def assembled_row(z_row, valid_row, o, up2, up1, same, dn1, dn2, cam, fill, got, out_row):
+    """Eq. (2) for every pixel of row ``o`` with ``stride`` 2, from the planes of the fitted rows around it
+    (:func:`expand_row`, or a row without planes): ``same`` the row itself (o even), ``up2`` and ``dn2`` the
+    fitted rows two above and below it, ``up1`` and ``dn1`` those just above and below it (o odd).
+
+    A fitted pixel (even row and column) keeps its plane. Every other one takes :func:`interpolated` of the
+    fitted pixels of its 3x3 neighbourhood (left and right; above and below; the four diagonal ones), and
+    where none of them has a plane, the closest of the other fitted pixels of its 5x5 neighbourhood. On
+    the full-width rows of :func:`expand_row` a pixel u finds the fitted pixels of its column pair at u and
+    u + 1: its own plane twice (the mean of a value with itself is that value, to the bit), or its left
+    and right ones, so that the first pass over the row reads contiguous memory, branch-free (it
+    vectorises). ``got`` is scratch (W,).
+    """
+    W = z_row.shape[0]
     fx, fy, cx, cy = cam
-    normal_row(z[o], valid[o], o, plane[1], plane[2], plane[0], plane[3], fx, fy, cx, cy, fill, out_flat[o])
+    inf = np.inf
+    odd = o % 2 == 1
+    rows_0 = up1 if odd else same
+    rows_1 = dn1 if odd else same
+    dv_0 = 1.0 if odd else 0.0
+    dv_1 = -1.0 if odd else 0.0
+    for u in range(W):
+        w_p = 1.0 / z_row[u]
+        du = float(u % 2)
+        p0, gu0, gv0, e0, l0 = carried(rows_0, u, du, dv_0, w_p)
+        p1, gu1, gv1, e1, l1 = carried(rows_0, u + 1, -du, dv_0, w_p)
+        p2, gu2, gv2, e2, l2 = carried(rows_1, u, du, dv_1, w_p)
+        p3, gu3, gv3, e3, l3 = carried(rows_1, u + 1, -du, dv_1, w_p)
+        # an even row has two candidates: rows_1 is the same row, so drop its copies
+        e2 = select(odd, e2, inf)
+        e3 = select(odd, e3, inf)
+        a, gu, gv, found = interpolated(
+            p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3
+        )
+        ok = valid_row[u] & found
+        got[u] = ok
+        nx, ny, nz = unit_normal(z_row[u], a, gu, gv, u, o, fx, fy, cx, cy)
+        out_row[3 * u] = select(ok, nx, fill)
+        out_row[3 * u + 1] = select(ok, ny, fill)
+        out_row[3 * u + 2] = select(ok, nz, fill)
+    for u in range(W):  # the few without a plane yet: the other fitted pixels of the 5x5 neighbourhood
+        if got[u] or not valid_row[u] or u % 2 == o % 2:  # fitted, or diagonal to the fitted ones: no others
+            continue
+        w_p = 1.0 / z_row[u]
+        if odd:  # even column: two columns left and right in the rows above and below
+            left = max(u - 2, 0)
+            right = min(u + 2, W)
+            p0, gu0, gv0, e0, l0 = carried(up1, left, 2.0, 1.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(up1, right, -2.0, 1.0, w_p)
+            p2, gu2, gv2, e2, l2 = carried(dn1, left, 2.0, -1.0, w_p)
+            p3, gu3, gv3, e3, l3 = carried(dn1, right, -2.0, -1.0, w_p)
+            e0, e2 = select(u >= 2, e0, inf), select(u >= 2, e2, inf)
+            e1, e3 = select(u + 2 <= W, e1, inf), select(u + 2 <= W, e3, inf)
+        else:  # odd column: left and right in the rows two above and below
+            p0, gu0, gv0, e0, l0 = carried(up2, u - 1, 1.0, 2.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(up2, u + 1, -1.0, 2.0, w_p)
+            p2, gu2, gv2, e2, l2 = carried(dn2, u - 1, 1.0, -2.0, w_p)
+            p3, gu3, gv3, e3, l3 = carried(dn2, u + 1, -1.0, -2.0, w_p)
+        a, gu, gv, found = interpolated(
+            p0, gu0, gv0, e0, -1.0, p1, gu1, gv1, e1, -1.0, p2, gu2, gv2, e2, -1.0, p3, gu3, gv3, e3, -1.0
+        )
+        if found:
+            nx, ny, nz = unit_normal(z_row[u], a, gu, gv, u, o, fx, fy, cx, cy)
+            out_row[3 * u] = nx
+            out_row[3 * u + 1] = ny
+            out_row[3 * u + 2] = nz
 
 
 #: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner.
 _SHIFTS = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], np.int64)
+
+
+@pixel
+def _fitted_row(fitted, none, v, stride, first, last):
+    """The planes of fitted row v in the ring ``fitted``, or ``none`` where v is not a fitted row there."""
+    return fitted[(v // stride) % 3] if v % stride == 0 and first <= v <= last else none
+
+
+@njit(noalias=True, _nrt=False)
+def _emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, out_flat):
+    """The normals of row ``o`` from the planes of the fitted rows ``first`` .. ``last`` held in ``fitted``
+    (a ring of three: fitted row v at (v // stride) % 3; ``none`` for a row outside them); ``cam`` is
+    (fx, fy, cx, cy); ``got`` is scratch (W,)."""
+    if stride == 1:
+        rows = fitted[o % 3]
+        fx, fy, cx, cy = cam
+        normal_row(z[o], valid[o], o, rows[1], rows[2], rows[0], rows[3], fx, fy, cx, cy, fill, out_flat[o])
+        return
+    assembled_row(
+        z[o],
+        valid[o],
+        o,
+        _fitted_row(fitted, none, o - 2, stride, first, last),
+        _fitted_row(fitted, none, o - 1, stride, first, last),
+        _fitted_row(fitted, none, o, stride, first, last),
+        _fitted_row(fitted, none, o + 1, stride, first, last),
+        _fitted_row(fitted, none, o + 2, stride, first, last),
+        cam,
+        fill,
+        got,
+        out_flat[o],
+    )
 
 
 @ahead_of_time
@@ -771,8 +905,9 @@ def _adaptive_fit_kernel(
 ):
     """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`).
 
-    With ``stride`` 2 the windows are fitted on the even rows only, and each odd row takes its planes from
-    the rows above and below (:func:`between_row`).
+    The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
+    pixel takes its plane from the fitted pixels around it (:func:`assemble_row`), so a band fits the rows
+    up to two beyond its own.
 
     Integral rows are sums from row 0 down, so a band starting at v0 first runs the integral rows
     above it through its ring (no fits): the same additions in the same order as one sweep, so the
@@ -781,42 +916,46 @@ def _adaptive_fit_kernel(
     H, W = z.shape
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
+    pos = integral_positions(W, stride)
+    n_fit = (W + stride - 1) // stride
     m = np.zeros(_N_MOMENTS)
-    m_a = np.zeros((len(_BOXED), W))
-    m_b = np.zeros((len(_BOXED), W))
-    m_coords = np.zeros((len(_COORDS), W))
-    m_coords2 = np.zeros((len(_COORDS), W))
-    r_row = np.empty(W, np.int64)
-    r_float = np.empty(W)
-    x_row = np.empty(W)
-    for u in range(W):
-        x_row[u] = u - 0.5 * W
-    t_row = np.empty(W, np.int64)
-    pick = np.empty(W, np.bool_)
-    g_u = np.empty(W)
-    g_v = np.empty(W)
-    a = np.empty(W)
-    rss = np.empty(W)
-    dof = np.empty(W)
-    limit = np.empty(W)
-    passed = np.empty(W, np.bool_)
-    r_try = np.empty(W, np.int64)
-    m_c = np.zeros((len(_BOXED), W))
-    m_d = np.zeros((len(_BOXED), W))
-    g_u2 = np.empty(W)
-    g_v2 = np.empty(W)
-    a2 = np.empty(W)
-    rss2 = np.empty(W)
-    dof2 = np.empty(W)
-    g_u3 = np.empty(W)
-    g_v3 = np.empty(W)
-    a3 = np.empty(W)
-    rss3 = np.empty(W)
-    dof3 = np.empty(W)
-    r_next = np.empty(W, np.int64)
-    r_try_f = np.empty(W)
-    need = np.empty(W)
-    tried = np.empty(W, np.bool_)
+    m_a = np.zeros((len(_BOXED), n_fit))
+    m_b = np.zeros((len(_BOXED), n_fit))
+    m_coords = np.zeros((len(_COORDS), n_fit))
+    m_coords2 = np.zeros((len(_COORDS), n_fit))
+    r_row = np.empty(n_fit, np.int64)
+    r_float = np.empty(n_fit)
+    x_row = np.empty(n_fit)
+    for i in range(n_fit):
+        x_row[i] = stride * i - 0.5 * W
+    z_row = np.empty(n_fit)
+    valid_row = np.empty(n_fit, np.bool_)
+    t_row = np.empty(n_fit, np.int64)
+    pick = np.empty(n_fit, np.bool_)
+    g_u = np.empty(n_fit)
+    g_v = np.empty(n_fit)
+    a = np.empty(n_fit)
+    rss = np.empty(n_fit)
+    dof = np.empty(n_fit)
+    limit = np.empty(n_fit)
+    passed = np.empty(n_fit, np.bool_)
+    r_try = np.empty(n_fit, np.int64)
+    m_c = np.zeros((len(_BOXED), n_fit))
+    m_d = np.zeros((len(_BOXED), n_fit))
+    g_u2 = np.empty(n_fit)
+    g_v2 = np.empty(n_fit)
+    a2 = np.empty(n_fit)
+    rss2 = np.empty(n_fit)
+    dof2 = np.empty(n_fit)
+    g_u3 = np.empty(n_fit)
+    g_v3 = np.empty(n_fit)
+    a3 = np.empty(n_fit)
+    rss3 = np.empty(n_fit)
+    dof3 = np.empty(n_fit)
+    r_next = np.empty(n_fit, np.int64)
+    r_try_f = np.empty(n_fit)
+    need = np.empty(n_fit)
+    tried = np.empty(n_fit, np.bool_)
     present = np.zeros(r_max + 2, np.bool_)
     widened = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)
@@ -824,26 +963,34 @@ def _adaptive_fit_kernel(
     out_flat = out.reshape(H, 3 * W)
     ring[0, :, :] = 0.0
     made = 0  # the last integral row made
-    # the fits (a, g_u, g_v, dof) of the last two fitted rows
-    above = np.zeros((4, W))
-    below = np.zeros((4, W))
-    plane = np.zeros((4, W))
+    # the planes of the last three fitted rows: (a, g_u, g_v, ok) at every pixel (stride 1), or those and the
+    # noise limit at full width (stride 2: expand_row)
+    fitted = np.zeros((3, 5, W + 1))
+    none = np.zeros((5, W + 1))
+    got = np.zeros(W, np.bool_)
+    ok_row = np.empty(n_fit)
     cam = (fx, fy, cx, cy)
-    v_first = v0 - v0 % stride  # the fitted rows: every stride-th row of the frame, whatever the band
-    v_last = min(v1 - 1 + (stride - (v1 - 1) % stride) % stride, H - 1)
+    # The fitted rows: every stride-th row of the frame, whatever the band; with stride 2 those that the band's
+    # rows take planes from (rows up to two above and below).
+    reach = stride - 1
+    v_first = max(v0 - reach, 0)
+    v_first -= v_first % stride
+    v_last = min(v1 - 1 + 2 * reach, H - 1)
+    v_last -= v_last % stride
     for v in range(v_first, v_last + 1, stride):
         while made < min(H, v + 2 * r_max + 1):
             made += 1
-            integral_row(z[made - 1], valid[made - 1], made - 1 - 0.5 * H, ring[slot[made - 1]], ring[slot[made]])
+            integral_row(z[made - 1], valid[made - 1], made - 1 - 0.5 * H, pos, ring[slot[made - 1]], ring[slot[made]])
         y = v - 0.5 * H
-        valid_row = valid[v]
-        z_row = z[v]
+        for i in range(n_fit):
+            z_row[i] = z[v, stride * i]
+            valid_row[i] = valid[v, stride * i]
         # Each pixel's radius from its depth; then window sums radius by radius, growing the
         # radius where too few of the window's pixels are valid (sparse depth).
         present[:] = False
         m_src = m_a
         m_row = m_b
-        for u in range(W):
+        for u in range(n_fit):
             t = table_entry(z_row[u], z0, inv_step, n_table)
             t_row[u] = t
             r0 = r_table[t]
@@ -855,13 +1002,13 @@ def _adaptive_fit_kernel(
         for r in range(1, r_max + 1):
             if not present[r]:
                 continue
-            for u in range(W):
+            for u in range(n_fit):
                 pick[u] = valid_row[u] & (r_row[u] == r)
             m_row, m_src = m_src, m_row
             top = ring[slot[max(v - r, 0)]]
             bottom = ring[slot[min(v + r + 1, H)]]
-            box_row(top, bottom, r, pick, first, m_src, m_row)
-            coordinate_sums(top, bottom, r, pick, m_row[0], m_coords)
+            box_row(top, bottom, r, stride, pos, pick, first, m_src, m_row)
+            coordinate_sums(top, bottom, r, stride, pos, pick, m_row[0], m_coords)
             first = False
             if r == r_max:
                 continue
@@ -871,25 +1018,25 @@ def _adaptive_fit_kernel(
             r_big = grow[r]
             spread = float(r * (r + 1))
             grew = False
-            for u in range(W):
+            for u in range(n_fit):
                 sparse = pick[u] & ((m_row[0, u] < MIN_POINTS) | (2.0 * m_row[0, u] * spread < need[u]))
                 r_row[u] = select(sparse, r_big, r_row[u])
                 grew |= sparse
             if grew:
                 present[r_big] = True
-        for u in range(W):
+        for u in range(n_fit):
             r_float[u] = r_row[u]
         fit_row(m_row, m_coords, r_float, x_row, y, g_u, g_v, a, rss, dof)
         # The noise test: a fit is consistent with the noise when its residual per degree of
         # freedom is at most the limit (kappa sigma_w)^2.
-        for u in range(W):
+        for u in range(n_fit):
             limit[u] = noise_limit(z_row[u], rho_table[t_row[u]], f, kappa, rho_floor)
             passed[u] = valid_row[u] & (dof[u] > 0.0) & (rss[u] <= limit[u] * dof[u])
         # Wider where the data allow: a fit that passes is tried on a window twice as wide, kept
         # while it still passes (planes get wide windows, curved surfaces and edges keep theirs).
         for _ in range(n_widen):
             # ``present``: the radii of the windows just fitted, so those of the passing pixels.
-            for u in range(W):
+            for u in range(n_fit):
                 tried[u] = False
             widened[:] = False
             m_try = m_c
@@ -901,7 +1048,7 @@ def _adaptive_fit_kernel(
                     continue
                 r2_f = float(r2)
                 count = 0
-                for u in range(W):
+                for u in range(n_fit):
                     p = passed[u] & (r_row[u] == r)
                     pick[u] = p
                     tried[u] |= p
@@ -914,13 +1061,13 @@ def _adaptive_fit_kernel(
                 m_try, m_old = m_old, m_try
                 top = ring[slot[max(v - r2, 0)]]
                 bottom = ring[slot[min(v + r2 + 1, H)]]
-                box_row(top, bottom, r2, pick, first, m_old, m_try)
-                coordinate_sums(top, bottom, r2, pick, m_try[0], m_coords2)
+                box_row(top, bottom, r2, stride, pos, pick, first, m_old, m_try)
+                coordinate_sums(top, bottom, r2, stride, pos, pick, m_try[0], m_coords2)
                 first = False
             if first:
                 break
             present, widened = widened, present
-            for u in range(W):
+            for u in range(n_fit):
                 passed[u] = tried[u]
             fit_row(m_try, m_coords2, r_try_f, x_row, y, g_u2, g_v2, a2, rss2, dof2)
             keep_row(
@@ -953,97 +1100,65 @@ def _adaptive_fit_kernel(
             r_row, r_next = r_next, r_row
         # The edge test: a pixel whose fit fails the noise test takes the best of the four
         # quadrant windows (smallest residual per dof).
-        for u in range(W):
-            if not valid_row[u]:
+        for i in range(n_fit):
+            if not valid_row[i]:
                 continue
-            ok = dof[u] > 0.0
-            if ok and rss[u] <= limit[u] * dof[u]:
+            ok = dof[i] > 0.0
+            if ok and rss[i] <= limit[i] * dof[i]:
                 continue
-            x = u - 0.5 * W
-            r = r_row[u]
+            u = stride * i
+            x = x_row[i]
+            r = r_row[i]
             # A candidate is consistent when its plane passes through the pixel itself (within kappa
             # times its residual or the noise): a thin part seen against a far background must not
             # take the background's plane because that one fits its own points better.
-            w_p = 1.0 / z_row[u]
-            best = max(rss[u] / dof[u], TIE * limit[u]) if ok else np.inf
-            best_in = ok and (a[u] - w_p) ** 2 <= kappa * kappa * max(best, limit[u])
-            n_min = max(6.0, 0.25 * m_row[0, u])
+            w_p = 1.0 / z_row[i]
+            best = max(rss[i] / dof[i], TIE * limit[i]) if ok else np.inf
+            best_in = ok and (a[i] - w_p) ** 2 <= kappa * kappa * max(best, limit[i])
+            n_min = max(6.0, 0.25 * m_row[0, i])
             for k in range(_SHIFTS.shape[0]):
                 dv = _SHIFTS[k, 0] * r
                 du = _SHIFTS[k, 1] * r
                 # The count first: a window with too few points needs no more; a full square needs no
                 # coordinate sums (affine_fit knows them).
-                window_sums(ring, slot, H, W, v + dv, u + du, r, _COUNT, m)
+                window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _COUNT, m)
                 if m[0] < n_min:
                     continue
-                window_sums(ring, slot, H, W, v + dv, u + du, r, _W_SUMS, m)
+                window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _W_SUMS, m)
                 if m[0] != (2 * r + 1) * (2 * r + 1):
-                    window_sums(ring, slot, H, W, v + dv, u + du, r, _COORDS, m)
+                    window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _COORDS, m)
                 a_k, gu_k, gv_k, rss_k, dof_k = affine_fit(
                     m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], r, x + du, y + dv
                 )
                 if not dof_k > 0.0:
                     continue
-                score = max(rss_k / dof_k, TIE * limit[u])
+                score = max(rss_k / dof_k, TIE * limit[i])
                 a_p = a_k - gu_k * du - gv_k * dv
-                inside = (a_p - w_p) ** 2 <= kappa * kappa * max(score, limit[u])
+                inside = (a_p - w_p) ** 2 <= kappa * kappa * max(score, limit[i])
                 if (inside and not best_in) or (inside == best_in and score < best * (1.0 - TIE)):
                     best = score
                     best_in = inside
-                    g_u[u] = gu_k
-                    g_v[u] = gv_k
-                    a[u] = a_p
-                    dof[u] = dof_k
-        if v0 <= v < v1:  # (the fitted rows just outside the band are only read)
-            normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_flat[v])
-        if stride > 1:
-            above, below = below, above
-            for u in range(W):
-                below[0, u] = a[u]
-                below[1, u] = g_u[u]
-                below[2, u] = g_v[u]
-                below[3, u] = select(valid_row[u], dof[u], 0.0)
-            o = v - 1  # the row between this one and the last
-            if o >= v0:
-                _row_between(
-                    z,
-                    valid,
-                    o,
-                    above,
-                    below,
-                    z0,
-                    inv_step,
-                    rho_table,
-                    f,
-                    kappa,
-                    rho_floor,
-                    cam,
-                    fill,
-                    limit,
-                    plane,
-                    out_flat,
-                )
-    if stride > 1 and H % 2 == 0 and v0 <= H - 1 < v1:  # the last row has no fitted row below it
-        above, below = below, above
-        below[3, :] = 0.0
-        _row_between(
-            z,
-            valid,
-            H - 1,
-            above,
-            below,
-            z0,
-            inv_step,
-            rho_table,
-            f,
-            kappa,
-            rho_floor,
-            cam,
-            fill,
-            limit,
-            plane,
-            out_flat,
-        )
+                    g_u[i] = gu_k
+                    g_v[i] = gv_k
+                    a[i] = a_p
+                    dof[i] = dof_k
+        rows = fitted[(v // stride) % 3]
+        for i in range(n_fit):
+            ok_row[i] = select(valid_row[i] & (dof[i] > 0.0), 1.0, 0.0)
+        if stride == 1:
+            rows[0, :W] = a
+            rows[1, :W] = g_u
+            rows[2, :W] = g_v
+            rows[3, :W] = ok_row
+        else:
+            expand_row(a, g_u, g_v, ok_row, limit, rows)
+        # the rows whose planes are all known now: this one (stride 1), or the two before it (stride 2)
+        for o in range(v - 2 * reach, v + 1 - reach):
+            if v0 <= o < v1:
+                _emit_row(z, valid, o, stride, fitted, v_first, v, none, cam, fill, got, out_flat)
+    for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
+        if v0 <= o < v1 and o < H:
+            _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)
 
 
 def adaptive_fit(
@@ -1087,10 +1202,10 @@ def adaptive_fit(
     profile : NoiseProfile, optional
         The frame's :func:`noise_profile`, when the caller has it already.
     stride : 1, 2 or None
-        1: every pixel's own window. 2: windows on every other row (the even ones); a pixel of the rows
-        between takes the planes of the pixels above and below it: their mean where both pass through its
-        depth within the noise, the closer one otherwise (:func:`between_row`); half the work. None
-        (default): 2 unless the depth is sparse (:func:`choose_stride`).
+        1: every pixel's own window. 2: windows on the pixels of the even rows and columns; every other
+        pixel takes the planes of the fitted pixels next to it: the mean of those that pass through its
+        depth within their noise limit, else the closest one (:func:`assembled_row`); a quarter of the
+        fits. None (default): 2 unless the depth is sparse (:func:`choose_stride`).
     bands : callable
         How rows are split over threads (see :mod:`surfnorm._bands`); each band has its own ring of
         integral rows.
@@ -1133,11 +1248,12 @@ def adaptive_fit(
         )
         _rings.give(shape, (ring,))
 
-    # A row costs its integral row and bookkeeping (every pixel) and its fits (valid pixels; on the fitted
-    # rows only): sparse rows (a LiDAR frame's upper part) are cheap, so bands of equal cost, not of equal rows.
+    # A row costs its integral row and bookkeeping (every pixel) and its fits (its valid pixels on the fitted
+    # columns, on the fitted rows only): sparse rows (a LiDAR frame's upper part) are cheap, so bands of equal
+    # cost, not of equal rows.
     if bands is whole:
         weights = None
     else:
-        weights = 0.25 * z.shape[1] + np.count_nonzero(valid, axis=1) * (np.arange(z.shape[0]) % stride == 0)
+        weights = 0.25 * z.shape[1] + np.count_nonzero(valid, axis=1) / stride * (np.arange(z.shape[0]) % stride == 0)
     bands(rows, z.shape[0], weights=weights)
     return out

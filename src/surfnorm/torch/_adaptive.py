@@ -21,9 +21,10 @@ Same rule as the NumPy kernel, step for step (its module docstring explains the 
    (the Kuwahara fallback). Each step is element-wise over pixels: on the CPU over the pixels concerned
    (gathered: a minority at every rung but the first), elsewhere over all pixels with masks, so that
    nothing waits for the device.
-4. With ``stride`` 2 (the default where the depth is dense: :func:`choose_stride`, per frame), the odd rows
-   take their planes from the even rows above and below (:func:`_between_rows`). Every row is still fitted
-   here (all pixels at once); only the NumPy kernel saves the odd rows' fits.
+4. With ``stride`` 2 (the default where the depth is dense: :func:`choose_stride`, per frame), the pixels
+   that are not on an even row and column take their planes from those that are (:func:`_between`). Every
+   pixel is still fitted here (all pixels at once); only the NumPy kernel saves the other three quarters'
+   fits.
 
 Gradients: the choices (the noise profile, each pixel's radius, widening, quadrant, and ``auto``'s choice)
 are piecewise constant in depth and carry none; given them, the normal is a differentiable function of
@@ -560,89 +561,136 @@ def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tupl
 
 def choose_stride(valid: torch.Tensor) -> torch.Tensor:
     """``adaptive_fit.choose_stride`` per frame of valid (B, H, W): 2 unless more than MAX_UNREACHED of the
-    valid pixels of the odd rows have no valid pixel among the six next to them in the even rows; (B,) int64."""
+    valid pixels that are not fitted (not on an even row and column) have no valid fitted pixel in their 5x5
+    neighbourhood; (B,) int64."""
     B, H, W = valid.shape
-    if H < 2:
+    if H < 2 or W < 2:
         return torch.ones(B, dtype=torch.int64, device=valid.device)
-    odd = valid[:, 1::2]
-    n = odd.shape[1]
-    up = valid[:, 0 : 2 * n : 2]
-    down = torch.zeros_like(odd)
-    down[:, : valid[:, 2::2].shape[1]] = valid[:, 2::2]
-    near = up | down
-    near[:, :, 1:] |= up[:, :, :-1] | down[:, :, :-1]
-    near[:, :, :-1] |= up[:, :, 1:] | down[:, :, 1:]
-    unreached = (odd & ~near).sum(dim=(1, 2)).to(_F64)
-    total = torch.clamp_min(odd.sum(dim=(1, 2)), 1).to(_F64)
+    fitted = torch.zeros_like(valid)
+    fitted[:, ::2, ::2] = valid[:, ::2, ::2]
+    reached = F.max_pool2d(fitted.unsqueeze(1).to(torch.float32), 5, stride=1, padding=2).squeeze(1) > 0.0
+    others = valid & ~fitted
+    unreached = (others & ~reached).sum(dim=(1, 2)).to(_F64)
+    total = torch.clamp_min(others.sum(dim=(1, 2)), 1).to(_F64)
     return torch.where(unreached <= MAX_UNREACHED * total, 2, 1)
 
 
-def _between_rows(a, g_u, g_v, ok, w, limit, stride2):
-    """``adaptive_fit.between_row`` for the odd rows of the frames where ``stride2``: each pixel takes the
-    mean of the planes of the pixels above and below where both predict its w within the noise (``limit``),
-    else the one that predicts it closer (ties within TIE: above), else the closest diagonal one (above-left,
-    above-right, below-left, below-right). a, g_u, g_v, w, limit (B, H, W) float64, ok (B, H, W) where a pixel
-    of an even row has a plane. Returns (a, g_u, g_v, ok) with the odd rows replaced."""
-    B, H, W = a.shape
-    n = H // 2  # odd rows
-    inf = torch.full((B, n, W), math.inf, dtype=_F64, device=a.device)
+def _carried(c, du, dv, w_p):
+    """``adaptive_fit.carried``: c = (a, g_u, g_v, ok, limit) of a fitted pixel per pixel."""
+    a, g_u, g_v, has, lim = c
+    p = a + g_u * du + g_v * dv
+    inf = torch.full_like(p, math.inf)
+    return p, g_u, g_v, torch.where(has, (p - w_p) * (p - w_p), inf), torch.where(has, lim, torch.full_like(p, -1.0))
 
-    def below_rows(t):  # the even rows below the odd ones; the last odd row of an even H has none (zeros)
-        out = torch.zeros((B, n, W), dtype=t.dtype, device=t.device)
-        part = t[:, 2::2]
-        out[:, : part.shape[1]] = part
-        return out
 
-    above = tuple(t[:, 0 : 2 * n : 2] for t in (a, g_u, g_v, ok))
-    below = tuple(below_rows(t) for t in (a, g_u, g_v, ok))
-    w_p = w[:, 1::2]
-    a_1 = above[0] + above[2]
-    a_2 = below[0] - below[2]
-    e_1 = torch.where(above[3], (a_1 - w_p) * (a_1 - w_p), inf)
-    e_2 = torch.where(below[3], (a_2 - w_p) * (a_2 - w_p), inf)
-    two = e_2 < e_1 * (1.0 - TIE)
-    lim = limit[:, 1::2]
-    mean = (e_1 <= lim) & (e_2 <= lim)
-    a_o = torch.where(mean, 0.5 * (a_1 + a_2), torch.where(two, a_2, a_1))
-    gu_o = torch.where(mean, 0.5 * (above[1] + below[1]), torch.where(two, below[1], above[1]))
-    gv_o = torch.where(mean, 0.5 * (above[2] + below[2]), torch.where(two, below[2], above[2]))
-    ok_o = above[3] | below[3]
-    best = inf
-    got = torch.zeros_like(ok_o)
-    for k in range(4):
-        src = above if k < 2 else below
-        dv = 1.0 if k < 2 else -1.0
-        du = 1 - 2 * (k % 2)
-        # the fitted pixel at column u - du: shift the row by du (columns without one have none)
-        a_c, gu_c, gv_c, ok_c = (torch.roll(t, du, dims=2) for t in src)
-        edge = torch.zeros(W, dtype=torch.bool, device=a.device)
-        edge[0 if du > 0 else W - 1] = True
-        ok_c = ok_c & ~edge
-        a_k = a_c + gu_c * du + gv_c * dv
-        e = (a_k - w_p) * (a_k - w_p)
-        better = ~ok_o & ok_c & (e < best * (1.0 - TIE))
-        best = torch.where(better, e, best)
-        a_o, gu_o, gv_o = (
-            torch.where(better, a_k, a_o),
-            torch.where(better, gu_c, gu_o),
-            torch.where(better, gv_c, gv_o),
+def _interpolated(cands):
+    """``adaptive_fit.interpolated`` of four :func:`_carried` candidates."""
+    q = [e <= lim for _, _, _, e, lim in cands]
+    n = q[0].to(torch.int64) + q[1] + q[2] + q[3]
+    zero = torch.zeros_like(cands[0][0])
+    sums = []
+    for j in range(3):
+        s = torch.where(q[0], cands[0][j], zero)
+        for k in range(1, 4):
+            s = s + torch.where(q[k], cands[k][j], zero)
+        sums.append(s)
+    best, a_c, gu_c, gv_c = cands[0][3], cands[0][0], cands[0][1], cands[0][2]
+    for p, g_u, g_v, e, _ in cands[1:]:
+        c = e < best * (1.0 - TIE)
+        best, a_c, gu_c, gv_c = (
+            torch.where(c, e, best),
+            torch.where(c, p, a_c),
+            torch.where(c, g_u, gu_c),
+            torch.where(c, g_v, gv_c),
         )
-        got = got | better
-    ok_o = ok_o | got
+    mean = n > 0
+    n_f = torch.clamp_min(n, 1).to(_F64)
+    return (
+        torch.where(mean, sums[0] / n_f, a_c),
+        torch.where(mean, sums[1] / n_f, gu_c),
+        torch.where(mean, sums[2] / n_f, gv_c),
+        best < math.inf,
+    )
+
+
+def _between(a, g_u, g_v, ok, w, limit, valid, stride2):
+    """``adaptive_fit.assembled_row`` for the frames where ``stride2``: every pixel takes the planes of the fitted
+    pixels (even row and column) next to it (the mean of those that predict its w within their noise limit,
+    else the closest; a fitted pixel its own), and where none has a plane, the closest other fitted pixel of
+    its 5x5 neighbourhood. a, g_u, g_v, w, limit (B, H, W) float64, ok (B, H, W) where a pixel has a plane.
+    Returns (a, g_u, g_v, ok) with every pixel of those frames replaced."""
+    B, H, W = a.shape
+    dev = a.device
+    even_v = (torch.arange(H, device=dev) % 2 == 0).view(1, H, 1)
+    even_u = (torch.arange(W, device=dev) % 2 == 0).view(1, 1, W)
+    fit_ok = (ok & even_v & even_u).to(_F64)
+    # as the NumPy kernel's expand_row: column u holds the fitted pixel 2 (u // 2) of its row (u = 0 .. W)
+    cols = 2 * (torch.arange(W + 1, device=dev) // 2)
+    inside = cols < W
+    cols = torch.clamp_max(cols, W - 1)
+    E = [t[:, :, cols] for t in (a, g_u, g_v, fit_ok, limit)]
+    E[3] = E[3] * inside.to(_F64)
+    # padded by two rows above and below and two columns on either side, without planes
+    E = [F.pad(t.unsqueeze(1), (2, 2, 2, 2)).squeeze(1) for t in E]
+
+    def at(dv, du):  # the entry at row v + dv, column u + du of every pixel (v, u)
+        return tuple(t[:, 2 + dv : 2 + dv + H, 2 + du : 2 + du + W] for t in E[:3]) + (
+            E[3][:, 2 + dv : 2 + dv + H, 2 + du : 2 + du + W] > 0.0,
+            E[4][:, 2 + dv : 2 + dv + H, 2 + du : 2 + du + W],
+        )
+
+    none = tuple(torch.zeros((B, H, W), dtype=_F64, device=dev) for _ in range(3)) + (
+        torch.zeros((B, H, W), dtype=torch.bool, device=dev),
+        torch.zeros((B, H, W), dtype=_F64, device=dev),
+    )
+    odd = ~even_v
+
+    def pick(c_odd, c_even):
+        return tuple(torch.where(odd, x, y) for x, y in zip(c_odd, c_even))
+
+    par = (torch.arange(W, device=dev) % 2).to(_F64).view(1, 1, W)
+    dv_0 = torch.where(odd, 1.0, 0.0).to(_F64)
+    dv_1 = torch.where(odd, -1.0, 0.0).to(_F64)
+    cands = [
+        _carried(pick(at(-1, 0), at(0, 0)), par, dv_0, w),
+        _carried(pick(at(-1, 1), at(0, 1)), -par, dv_0, w),
+        _carried(pick(at(1, 0), none), par, dv_1, w),
+        _carried(pick(at(1, 1), none), -par, dv_1, w),
+    ]
+    a_o, gu_o, gv_o, found = _interpolated(cands)
+    # the few without a plane: odd rows (even columns) two columns left and right in the rows above and
+    # below, even rows (odd columns) left and right in the rows two above and below; closest only
+    back = [
+        pick(at(-1, -2), at(-2, -1)),
+        pick(at(-1, 2), at(-2, 1)),
+        pick(at(1, -2), at(2, -1)),
+        pick(at(1, 2), at(2, 1)),
+    ]
+    two = torch.where(odd, 2.0, 1.0).to(_F64)
+    dv_up = torch.where(odd, 1.0, 2.0).to(_F64)
+    dvs = (dv_up, dv_up, -dv_up, -dv_up)
+    dus = (two, -two, two, -two)
+    fallback = [_carried(c, du, dv, w) for c, du, dv in zip(back, dus, dvs)]
+    fallback = [(p, gu, gv, e, torch.full_like(lim, -1.0)) for p, gu, gv, e, lim in fallback]
+    a_f, gu_f, gv_f, found_f = _interpolated(fallback)
+    use = ~found & (even_v != even_u)  # (a fitted pixel, or one diagonal to the fitted ones, has no others)
+    a_o, gu_o, gv_o = (torch.where(use, x, y) for x, y in ((a_f, a_o), (gu_f, gu_o), (gv_f, gv_o)))
+    ok_o = valid & (found | (use & found_f))
     s2 = stride2.view(B, 1, 1)
-    a, g_u, g_v, ok = a.clone(), g_u.clone(), g_v.clone(), ok.clone()
-    a[:, 1::2] = torch.where(s2, a_o, a[:, 1::2])
-    g_u[:, 1::2] = torch.where(s2, gu_o, g_u[:, 1::2])
-    g_v[:, 1::2] = torch.where(s2, gv_o, g_v[:, 1::2])
-    ok[:, 1::2] = torch.where(s2, ok_o, ok[:, 1::2])
-    return a, g_u, g_v, ok
+    return (
+        torch.where(s2, a_o, a),
+        torch.where(s2, gu_o, g_u),
+        torch.where(s2, gv_o, g_v),
+        torch.where(s2, ok_o, ok),
+    )
 
 
 def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fill: float, out_dtype, stride=None):
     """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables.
 
-    ``stride`` 2: the odd rows take their planes from the even rows (:func:`_between_rows`); None: per
-    frame (:func:`choose_stride`). Every row is fitted all the same (the work is done for all pixels at once)."""
+    ``stride`` 2: the pixels that are not on an even row and column take their planes from those that are
+    (:func:`_between`); None: per frame (:func:`choose_stride`). Every pixel is fitted all the same (the work
+    is done for all pixels at once)."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
     px, z_p, I_flat, choice, limit = _setup(z, valid, cam, tables, window=window, max_window=max_window)
@@ -656,7 +704,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     if H > 1 and (z.device.type != "cpu" or bool(stride2.any())):
         a3, gu3, gv3, ok3 = (t.view(B, H, W) for t in (a, g_u, g_v, ok))
         w3, lim3 = torch.reciprocal(z_p).view(B, H, W), limit.view(B, H, W)
-        a3, gu3, gv3, ok3 = _between_rows(a3, gu3, gv3, ok3, w3, lim3, stride2)
+        a3, gu3, gv3, ok3 = _between(a3, gu3, gv3, ok3, w3, lim3, valid, stride2)
         a, g_u, g_v, ok = a3.reshape(-1), gu3.reshape(-1), gv3.reshape(-1), ok3.reshape(-1)
         ok = ok & valid.reshape(-1)
     a = torch.where(a > 0.0, a, torch.reciprocal(z_p))  # a fit that passes behind the camera: the pixel's own w

@@ -168,3 +168,44 @@ def test_stack_still_runs_frames_side_by_side():
     out = surfnorm.estimate(stack, K, method="sda_sne", threads=2)
     for i in range(5):
         np.testing.assert_array_equal(out[i], surfnorm.estimate(stack[i], K, method="sda_sne", threads=1))
+
+
+def test_the_caller_runs_the_first_band_and_every_band_ends_before_an_error_is_raised():
+    """One band on the calling thread, the others on the pool: all have ended when the call returns or raises,
+    and the error raised is the first band's (in band order) among those that failed."""
+    import threading
+    import time
+
+    from surfnorm._bands import split_with_caller
+
+    caller = threading.get_ident()
+    ran = {}
+
+    def work(i):
+        time.sleep(0.02 * (3 - i))  # the later bands end first
+        ran[i] = threading.get_ident()
+
+    split_with_caller(work, 3)
+    assert sorted(ran) == [0, 1, 2] and ran[0] == caller and ran[1] != caller and ran[2] != caller
+
+    ended = set()
+
+    def failing(i):
+        time.sleep(0.05 if i == 2 else 0.0)
+        ended.add(i)
+        if i >= 1:
+            raise ValueError(f"band {i}")
+
+    with pytest.raises(ValueError, match="band 1"):
+        split_with_caller(failing, 3)
+    assert ended == {0, 1, 2}  # band 2, the slowest, had ended before the error was raised
+
+    def first_fails(i):
+        if i == 0:
+            raise KeyError("band 0")
+        time.sleep(0.05)
+        ended.add(10 + i)
+
+    with pytest.raises(KeyError, match="band 0"):
+        split_with_caller(first_fails, 2)
+    assert 11 in ended

@@ -66,6 +66,32 @@ def map_threads(func, n: int, workers: int) -> None:
     list(pool.map(func, range(n)))
 
 
+def split_with_caller(func, n: int) -> None:
+    """``func(i)`` for i in range(n): i = 0 on the calling thread, the others on a kept pool of n - 1 threads at the
+    same time (the caller's caches already hold the frame, and one thread fewer is woken); every call has ended
+    when this returns, and the first exception (in the order of i) is raised here."""
+    if n - 1 > (os.cpu_count() or 1):
+        map_threads(func, n, n)
+        return
+    with _pools_lock:
+        if n - 1 not in _pools:
+            _pools[n - 1] = ThreadPoolExecutor(max_workers=n - 1, thread_name_prefix="surfnorm")
+        pool = _pools[n - 1]
+    futures = [pool.submit(func, i) for i in range(1, n)]
+    errors: list[BaseException] = []
+    try:
+        func(0)
+    except BaseException as exc:  # the other calls still run to their end before this one is raised
+        errors.append(exc)
+    for future in futures:
+        try:
+            future.result()
+        except BaseException as exc:
+            errors.append(exc)
+    if errors:
+        raise errors[0]
+
+
 def spans(n_rows: int, workers: int, min_rows: int | None = None, weights=None) -> list[tuple[int, int]]:
     """Row bands [start, stop) covering ``n_rows`` rows: at most ``workers``, each at least ``min_rows``
     (default :data:`MIN_ROWS`; one band if there are fewer rows), as equal as possible: in rows, or in the
@@ -106,7 +132,7 @@ def on_threads(workers: int):
         def one(i):
             results[i] = stage(*parts[i])
 
-        map_threads(one, len(parts), len(parts))
+        split_with_caller(one, len(parts))
         return results
 
     return bands

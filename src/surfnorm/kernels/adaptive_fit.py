@@ -475,32 +475,36 @@ def integral_positions(W, stride):
 
 
 @njit(noalias=True, _nrt=False)
-def integral_row(z_row, valid_row, y, pos, prev, row):
+def integral_row(z_row, valid_row, y, pos, w_row, prev, row):
     """Integral row i from row i - 1 (``prev``), adding image row i - 1 (``z_row``, ``valid_row``, at
-    centred ordinate ``y``); column u at ``pos[u]``.
+    centred ordinate ``y``); column u at ``pos[u]``; ``w_row`` is scratch (W,).
 
     Integral row i holds, per column u (0..W), the sums over the valid pixels of image rows < i
     and columns < u of (1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww), with u' = u - W/2,
-    v' = v - H/2 (centred coordinates keep the sums small) and w = 1/z.
+    v' = v - H/2 (centred coordinates keep the sums small) and w = 1/z. The divisions come first, in a
+    loop of their own (it vectorises; inside the running sums they were their bottleneck), and an invalid
+    pixel adds zeros (the same bits as adding nothing), so that the running sums have no branch.
     """
     W = z_row.shape[0]
+    for u in range(W):
+        w_row[u] = select(valid_row[u], 1.0 / z_row[u], 0.0)
     for c in range(_N_MOMENTS):
         row[c, pos[0]] = 0.0
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = 0.0
     for u in range(W):
-        if valid_row[u]:
-            x = u - 0.5 * W
-            w = 1.0 / z_row[u]
-            s0 += 1.0
-            s1 += x
-            s2 += y
-            s3 += x * x
-            s4 += x * y
-            s5 += y * y
-            s6 += w
-            s7 += x * w
-            s8 += y * w
-            s9 += w * w
+        m = select(valid_row[u], 1.0, 0.0)
+        x = u - 0.5 * W
+        w = w_row[u]
+        s0 += m
+        s1 += x * m
+        s2 += y * m
+        s3 += x * x * m
+        s4 += x * y * m
+        s5 += y * y * m
+        s6 += w
+        s7 += x * w
+        s8 += y * w
+        s9 += w * w
         j = pos[u + 1]
         row[0, j] = prev[0, j] + s0
         row[1, j] = prev[1, j] + s1
@@ -768,8 +772,13 @@ def interpolated(p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l
     c = e3 < best * (1.0 - TIE)
     best, a_c, gu_c, gv_c = select(c, e3, best), select(c, p3, a_c), select(c, gu3, gu_c), select(c, gv3, gv_c)
     mean = n > 0
-    n_f = float(max(n, 1))
-    return select(mean, s_a / n_f, a_c), select(mean, s_u / n_f, gu_c), select(mean, s_v / n_f, gv_c), best < np.inf
+    inv_n = select(n == 2, 0.5, select(n == 4, 0.25, select(n == 3, 1.0 / 3.0, 1.0)))  # 1 / n, multiplied
+    return (
+        select(mean, s_a * inv_n, a_c),
+        select(mean, s_u * inv_n, gu_c),
+        select(mean, s_v * inv_n, gv_c),
+        best < np.inf,
+    )
 
 
 @njit(noalias=True, _nrt=False)
@@ -968,6 +977,7 @@ def _adaptive_fit_kernel(
     fitted = np.zeros((3, 5, W + 1))
     none = np.zeros((5, W + 1))
     got = np.zeros(W, np.bool_)
+    w_scratch = np.empty(W)
     ok_row = np.empty(n_fit)
     cam = (fx, fy, cx, cy)
     # The fitted rows: every stride-th row of the frame, whatever the band; with stride 2 those that the band's
@@ -980,7 +990,9 @@ def _adaptive_fit_kernel(
     for v in range(v_first, v_last + 1, stride):
         while made < min(H, v + 2 * r_max + 1):
             made += 1
-            integral_row(z[made - 1], valid[made - 1], made - 1 - 0.5 * H, pos, ring[slot[made - 1]], ring[slot[made]])
+            integral_row(
+                z[made - 1], valid[made - 1], made - 1 - 0.5 * H, pos, w_scratch, ring[slot[made - 1]], ring[slot[made]]
+            )
         y = v - 0.5 * H
         for i in range(n_fit):
             z_row[i] = z[v, stride * i]

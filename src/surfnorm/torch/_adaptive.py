@@ -604,11 +604,11 @@ def _interpolated(cands):
             torch.where(c, g_v, gv_c),
         )
     mean = n > 0
-    n_f = torch.clamp_min(n, 1).to(_F64)
+    inv_n = torch.where(n == 2, 0.5, torch.where(n == 4, 0.25, torch.where(n == 3, 1.0 / 3.0, 1.0))).to(_F64)
     return (
-        torch.where(mean, sums[0] / n_f, a_c),
-        torch.where(mean, sums[1] / n_f, gu_c),
-        torch.where(mean, sums[2] / n_f, gv_c),
+        torch.where(mean, sums[0] * inv_n, a_c),
+        torch.where(mean, sums[1] * inv_n, gu_c),
+        torch.where(mean, sums[2] * inv_n, gv_c),
         best < math.inf,
     )
 

@@ -319,3 +319,19 @@ def test_a_fixed_window_wider_than_max_window_is_refused():
     with pytest.raises(InputError, match=r"window: expected at most max_window \(5\), got 9"):
         surfnorm.estimate(z, K, method="adaptive_fit", window=9, max_window=5)
     assert surfnorm.estimate(z, K, method="adaptive_fit", window=5, max_window=5).shape == z.shape + (3,)
+
+
+def test_depth_range_from_the_bits_is_the_plain_one():
+    """The noise profile's depth range from float32 bits (vectorised integer minima) equals the plain loop's,
+    with NaN, infinities, negatives and zeros where the validity says so, and without any valid pixel."""
+    from surfnorm._validate import valid_map
+    from surfnorm.kernels.adaptive_fit import _depth_range, depth_range
+
+    rng = np.random.default_rng(7)
+    for shape in ((1, 1), (5, 7), (48, 64)):
+        z = rng.lognormal(0.0, 2.0, shape).astype(np.float32)
+        z[rng.random(shape) < 0.2] = rng.choice(np.array([0.0, -1.0, np.nan, np.inf], np.float32))
+        for valid in (valid_map(z, None), rng.random(shape) < 0.5, np.zeros(shape, bool)):
+            valid &= np.isfinite(z) & (z > 0)
+            assert depth_range(z, valid) == _depth_range(z, valid)
+    assert depth_range(np.zeros((3, 4), np.float32), np.zeros((3, 4), bool)) == (np.inf, 0.0)

@@ -154,6 +154,33 @@ def _depth_range(z, valid):
     return zmin, zmax
 
 
+@ahead_of_time
+@njit(noalias=True, _nrt=False)
+def _depth_range_bits(bits, valid):
+    """:func:`_depth_range` of float32 depth from its bits (``z.view(np.int32)``): positive floats order as their
+    bits do, and integer minima and maxima vectorise. Returns the bits of the nearest and farthest valid depth
+    (2**31 - 1 and 0 without any)."""
+    lo = np.int32(2147483647)
+    hi = np.int32(0)
+    for v in range(bits.shape[0]):
+        b = bits[v]
+        m = valid[v]
+        for u in range(b.shape[0]):
+            lo = min(lo, select(m[u], b[u], np.int32(2147483647)))
+            hi = max(hi, select(m[u], b[u], np.int32(0)))
+    return lo, hi
+
+
+def depth_range(z: np.ndarray, valid: np.ndarray) -> tuple[float, float]:
+    """The nearest and farthest valid depth (inf and 0 without any)."""
+    if z.dtype != np.float32 or not z.flags.c_contiguous:
+        return _depth_range(z, valid)
+    lo, hi = _depth_range_bits(z.view(np.int32), valid)
+    if lo == 2147483647:
+        return np.inf, 0.0
+    return float(np.int32(lo).view(np.float32)), float(np.int32(hi).view(np.float32))
+
+
 @pixel
 def _spread(z0, z1, z2, z3, z4, z5, z6):
     """True when the depths of a stencil differ by more than ``_MAX_SPREAD`` (a discontinuity)."""
@@ -298,7 +325,7 @@ def _by_bin(xs, bins, nbins):
 
 
 def _samples(z, valid, f):
-    zmin, zmax = _depth_range(z, valid)
+    zmin, zmax = depth_range(z, valid)
     if not zmax > 0.0:
         return zmin, zmax, np.empty((3, 0)), np.empty(0, np.int64)
     step = max(1, int(round(math.sqrt(z.size / _NOISE_SAMPLES))))
@@ -368,13 +395,49 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
 MAX_UNREACHED = 0.01
 
 
-def _reached(valid: np.ndarray) -> np.ndarray:
-    """Where a pixel has a valid fitted pixel (even row and column) in its 5x5 neighbourhood."""
+@ahead_of_time
+@njit
+def _unreached(valid):
+    """(pixels that no valid fitted pixel reaches, valid pixels that are not fitted): see :func:`choose_stride`.
+
+    On the grid of the fitted pixels (i, j) = (v / 2, u / 2), with a border without any: a pixel (2i, 2j + 1)
+    is reached from rows i - 1 .. i + 1 and columns j, j + 1 of it; (2i + 1, 2j) from rows i, i + 1 and
+    columns j - 1 .. j + 1; (2i + 1, 2j + 1) from rows i, i + 1 and columns j, j + 1. ``two`` and ``three``
+    hold each row's fitted pixels at columns (j, j + 1) and (j - 1 .. j + 1).
+    """
     H, W = valid.shape
-    fit = np.zeros((H + 4, W + 4), np.bool_)
-    fit[2 : H + 2 : 2, 2 : W + 2 : 2] = valid[::2, ::2]
-    rows = fit[:, :-4] | fit[:, 1:-3] | fit[:, 2:-2] | fit[:, 3:-1] | fit[:, 4:]
-    return rows[:-4] | rows[1:-3] | rows[2:-2] | rows[3:-1] | rows[4:]
+    n_i = (H + 1) // 2
+    n_j = (W + 1) // 2
+    two = np.zeros((n_i + 2, n_j), np.bool_)
+    three = np.zeros((n_i + 2, n_j), np.bool_)
+    for i in range(n_i):
+        row = valid[2 * i]
+        for j in range(n_j):
+            here = row[2 * j]
+            right = row[2 * j + 2] if 2 * j + 2 < W else False
+            left = row[2 * j - 2] if j > 0 else False
+            two[i + 1, j] = here | right
+            three[i + 1, j] = here | right | left
+    unreached = 0
+    others = 0
+    for v in range(H):
+        i = v // 2
+        row = valid[v]
+        if v % 2 == 0:
+            for j in range(W // 2):  # odd columns
+                hit = row[2 * j + 1]
+                others += hit
+                unreached += hit & ~(two[i, j] | two[i + 1, j] | two[i + 2, j])
+        else:
+            for j in range(n_j):  # even columns
+                hit = row[2 * j]
+                others += hit
+                unreached += hit & ~(three[i + 1, j] | three[i + 2, j])
+            for j in range(W // 2):  # odd columns
+                hit = row[2 * j + 1]
+                others += hit
+                unreached += hit & ~(two[i + 1, j] | two[i + 2, j])
+    return unreached, others
 
 
 def choose_stride(valid: np.ndarray) -> int:
@@ -384,10 +447,8 @@ def choose_stride(valid: np.ndarray) -> int:
     H, W = valid.shape
     if H < 2 or W < 2:
         return 1
-    others = valid.copy()
-    others[::2, ::2] = False
-    unreached = np.count_nonzero(others & ~_reached(valid))
-    return 2 if unreached <= MAX_UNREACHED * max(np.count_nonzero(others), 1) else 1
+    unreached, others = _unreached(np.ascontiguousarray(valid, dtype=np.bool_))
+    return 2 if unreached <= MAX_UNREACHED * max(others, 1) else 1
 
 
 #: Rings of integral rows kept for the next frame (a 640-pixel row's takes 3.2 MB: mapping its pages in

@@ -335,3 +335,25 @@ def test_depth_range_from_the_bits_is_the_plain_one():
             valid &= np.isfinite(z) & (z > 0)
             assert depth_range(z, valid) == _depth_range(z, valid)
     assert depth_range(np.zeros((3, 4), np.float32), np.zeros((3, 4), bool)) == (np.inf, 0.0)
+
+
+def test_noise_measured_by_one_band_while_the_others_make_their_rows():
+    """The profile given, measured here, or measured by the first band that needs it (while the others make
+    the integral rows above their own) gives the same bits on one band and on several; ``use`` False writes
+    nothing and returns None."""
+    from surfnorm._bands import on_threads
+    from surfnorm.kernels.adaptive_fit import Once, adaptive_fit, noise_profile
+
+    z, K = scene(4, H=120, W=96, holes=0.1)  # 120 rows: up to three bands of 40
+    z = z.astype(np.float32)
+    valid = z > 0
+    cam = Intrinsics.from_matrix(K)
+    f = np.sqrt(cam.fx * cam.fy)
+    ref = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32))
+    for bands in (on_threads(1), on_threads(2), on_threads(3)):
+        for profile in (None, noise_profile(z, valid, f), Once(lambda: noise_profile(z, valid, f)).get):
+            got = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), profile=profile, bands=bands)
+            np.testing.assert_array_equal(got, ref)
+        out = np.full(z.shape + (3,), 7.0, np.float32)
+        assert adaptive_fit(z, valid, cam, out, use=lambda p: False, bands=bands) is None
+        assert (out == 7.0).all()

@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -947,6 +948,27 @@ def _emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, ou
     )
 
 
+def first_fitted_row(v0, stride):
+    """The first fitted row that the band starting at row v0 reads (see :func:`_adaptive_fit_kernel`)."""
+    v = max(v0 - (stride - 1), 0)
+    return v - v % stride
+
+
+@ahead_of_time
+@njit(noalias=True)
+def prime(z, valid, ring, stride, upto):
+    """Integral rows 0 .. ``upto`` into ``ring`` (see :func:`integral_row`), as the kernel makes them; returns upto.
+    The rows of a band's first fitted row, made before the frame's noise is known."""
+    H, W = z.shape
+    L = ring.shape[0]
+    pos = integral_positions(W, stride)
+    w_scratch = np.empty(W)
+    ring[0, :, :] = 0.0
+    for i in range(1, upto + 1):
+        integral_row(z[i - 1], valid[i - 1], i - 1 - 0.5 * H, pos, w_scratch, ring[(i - 1) % L], ring[i % L])
+    return upto
+
+
 @ahead_of_time
 @njit(noalias=True)
 def _adaptive_fit_kernel(
@@ -968,20 +990,22 @@ def _adaptive_fit_kernel(
     r_max,
     fill,
     ring,
+    made,
     out,
     v0,
     v1,
     stride,
 ):
-    """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`).
+    """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`), in a ``ring`` that holds the
+    integral rows up to ``made`` (:func:`prime`).
 
     The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
     pixel takes its plane from the fitted pixels around it (:func:`assemble_row`), so a band fits the rows
     up to two beyond its own.
 
     Integral rows are sums from row 0 down, so a band starting at v0 first runs the integral rows
-    above it through its ring (no fits): the same additions in the same order as one sweep, so the
-    same bits; the price is that integral pass over rows 0 .. v0 + 2 ``r_max``.
+    above it through its ring (no fits: :func:`prime`): the same additions in the same order as one sweep,
+    so the same bits; the price is that integral pass over rows 0 .. v0 + 2 ``r_max``.
     """
     H, W = z.shape
     L = ring.shape[0]
@@ -1031,14 +1055,13 @@ def _adaptive_fit_kernel(
     f = math.sqrt(fx * fy)
     n_table = r_table.shape[0]
     out_flat = out.reshape(H, 3 * W)
-    ring[0, :, :] = 0.0
-    made = 0  # the last integral row made
     # the planes of the last three fitted rows: (a, g_u, g_v, ok) at every pixel (stride 1), or those and the
     # noise limit at full width (stride 2: expand_row)
     fitted = np.zeros((3, 5, W + 1))
     none = np.zeros((5, W + 1))
     got = np.zeros(W, np.bool_)
     w_scratch = np.empty(W)
+    made = made  # the last integral row made
     ok_row = np.empty(n_fit)
     cam = (fx, fy, cx, cy)
     # The fitted rows: every stride-th row of the frame, whatever the band; with stride 2 those that the band's
@@ -1234,6 +1257,23 @@ def _adaptive_fit_kernel(
             _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)
 
 
+class Once:
+    """A value made by the first thread that asks for it (``get``); a thread asking meanwhile waits for it."""
+
+    def __init__(self, make):
+        self._make = make
+        self._lock = threading.Lock()
+        self._made = False
+        self._value = None
+
+    def get(self):
+        with self._lock:
+            if not self._made:
+                self._value = self._make()
+                self._made = True
+        return self._value
+
+
 def adaptive_fit(
     z: np.ndarray,
     valid: np.ndarray,
@@ -1245,10 +1285,11 @@ def adaptive_fit(
     alpha: float = ALPHA,
     kappa: float = KAPPA,
     fill: float = 0.0,
-    profile: NoiseProfile | None = None,
+    profile=None,
+    use=None,
     stride=None,
     bands=whole,
-) -> np.ndarray:
+) -> np.ndarray | None:
     """Adaptive plane fit of inverse depth; fills ``out`` (H, W, 3) float32 and returns it.
 
     Parameters
@@ -1272,8 +1313,14 @@ def adaptive_fit(
         (kappa sigma_w)^2 is replaced by the best shifted window.
     fill : float
         Value of pixels without a normal.
-    profile : NoiseProfile, optional
-        The frame's :func:`noise_profile`, when the caller has it already.
+    profile : NoiseProfile, callable or None
+        The frame's :func:`noise_profile` when the caller has it already, or a function that returns it
+        (``Once.get``: measured by the first band that needs it). None: measured here. Either way, with
+        several bands, the one on the calling thread measures it while the others make the integral rows
+        above their own rows, which do not depend on it.
+    use : callable, optional
+        ``use(profile)``: False when the frame is not for this method after all (``auto`` on clean depth);
+        then nothing is written and the result is None.
     stride : 1, 2 or None
         1: every pixel's own window. 2: windows on the pixels of the even rows and columns; every other
         pixel takes the planes of the fitted pixels next to it: the mean of those that pass through its
@@ -1284,42 +1331,62 @@ def adaptive_fit(
         integral rows.
     """
     f = math.sqrt(cam.fx * cam.fy)
-    depths, rho, _ = profile if profile is not None else noise_profile(z, valid, f)
-    z0, inv_step, r_table, rho_table = radius_table(depths, rho, alpha=alpha, window=window, max_window=max_window)
     r_max = (max_window - 1) // 2
     grow, widen = growth_table(r_max), widen_table(r_max)
     stride = choose_stride(valid) if stride is None else stride
+    H = z.shape[0]
 
+    def measured():
+        if profile is None:
+            p = noise_profile(z, valid, f)
+        else:
+            p = profile() if callable(profile) else profile
+        if use is not None and not use(p):
+            return None
+        return radius_table(p.depths, p.rho, alpha=alpha, window=window, max_window=max_window)
+
+    tables = Once(measured)
     shape = (4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1)
 
     def rows(v0, v1):
         kept = _rings.take(shape)
         ring = kept[0] if kept is not None else np.empty(shape)
-        _adaptive_fit_kernel(
-            z,
-            valid,
-            z0,
-            inv_step,
-            r_table,
-            rho_table,
-            grow,
-            widen,
-            N_WIDEN,
-            float(cam.fx),
-            float(cam.fy),
-            float(cam.cx),
-            float(cam.cy),
-            float(kappa),
-            RHO_FLOOR,
-            r_max,
-            np.float32(fill),
-            ring,
-            out,
-            v0,
-            v1,
-            stride,
-        )
-        _rings.give(shape, (ring,))
+        try:
+            if v0 == 0:  # the calling thread's band (bands on threads) measures the noise first
+                tables.get()
+            made = prime(z, valid, ring, stride, min(H, first_fitted_row(v0, stride) + 2 * r_max + 1))
+            got = tables.get()
+            if got is None:
+                return False
+            z0, inv_step, r_table, rho_table = got
+            _adaptive_fit_kernel(
+                z,
+                valid,
+                z0,
+                inv_step,
+                r_table,
+                rho_table,
+                grow,
+                widen,
+                N_WIDEN,
+                float(cam.fx),
+                float(cam.fy),
+                float(cam.cx),
+                float(cam.cy),
+                float(kappa),
+                RHO_FLOOR,
+                r_max,
+                np.float32(fill),
+                ring,
+                made,
+                out,
+                v0,
+                v1,
+                stride,
+            )
+            return True
+        finally:
+            _rings.give(shape, (ring,))
 
     # A row costs its integral row and bookkeeping (every pixel) and its fits (its valid pixels on the fitted
     # columns, on the fitted rows only): sparse rows (a LiDAR frame's upper part) are cheap, so bands of equal
@@ -1327,6 +1394,6 @@ def adaptive_fit(
     if bands is whole:
         weights = None
     else:
-        weights = 0.25 * z.shape[1] + np.count_nonzero(valid, axis=1) / stride * (np.arange(z.shape[0]) % stride == 0)
-    bands(rows, z.shape[0], weights=weights)
-    return out
+        weights = 0.25 * z.shape[1] + np.count_nonzero(valid, axis=1) / stride * (np.arange(H) % stride == 0)
+    done = bands(rows, H, weights=weights)
+    return out if all(done) else None

@@ -861,20 +861,19 @@ def assembled_row(z_row, valid_row, o, up2, up1, same, dn1, dn2, cam, fill, got,
     fx, fy, cx, cy = cam
     inf = np.inf
     odd = o % 2 == 1
-    rows_0 = up1 if odd else same
-    rows_1 = dn1 if odd else same
-    dv_0 = 1.0 if odd else 0.0
-    dv_1 = -1.0 if odd else 0.0
     for u in range(W):
         w_p = 1.0 / z_row[u]
         du = float(u % 2)
-        p0, gu0, gv0, e0, l0 = carried(rows_0, u, du, dv_0, w_p)
-        p1, gu1, gv1, e1, l1 = carried(rows_0, u + 1, -du, dv_0, w_p)
-        p2, gu2, gv2, e2, l2 = carried(rows_1, u, du, dv_1, w_p)
-        p3, gu3, gv3, e3, l3 = carried(rows_1, u + 1, -du, dv_1, w_p)
-        # an even row has two candidates: rows_1 is the same row, so drop its copies
-        e2 = select(odd, e2, inf)
-        e3 = select(odd, e3, inf)
+        if odd:  # above and below, or the four diagonal ones
+            p0, gu0, gv0, e0, l0 = carried(up1, u, du, 1.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(up1, u + 1, -du, 1.0, w_p)
+            p2, gu2, gv2, e2, l2 = carried(dn1, u, du, -1.0, w_p)
+            p3, gu3, gv3, e3, l3 = carried(dn1, u + 1, -du, -1.0, w_p)
+        else:  # its own plane twice, or the left and right ones; no others (the compiler drops them)
+            p0, gu0, gv0, e0, l0 = carried(same, u, du, 0.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(same, u + 1, -du, 0.0, w_p)
+            p2, gu2, gv2, e2, l2 = 0.0, 0.0, 0.0, inf, -1.0
+            p3, gu3, gv3, e3, l3 = 0.0, 0.0, 0.0, inf, -1.0
         a, gu, gv, found = interpolated(
             p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3
         )

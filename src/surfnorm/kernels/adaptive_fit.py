@@ -738,19 +738,36 @@ def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
 
 
 @njit(noalias=True, _nrt=False)
-def keep_row(passed, limit, g_u2, g_v2, a2, rss2, dof2, r2, g_u, g_v, a, rss, dof, r, g_u3, g_v3, a3, rss3, dof3, r3):
-    """The widened fit (g_u2 ...) where it was tried (``passed``) and still passes the noise test, the
-    current one (g_u ...) elsewhere, into g_u3 ... (distinct arrays: see :func:`box_row`); ``passed``
-    becomes where the widened fit was kept."""
-    for u in range(passed.shape[0]):
-        ok = passed[u] & (dof2[u] > 0.0) & (rss2[u] <= limit[u] * dof2[u])
-        g_u3[u] = select(ok, g_u2[u], g_u[u])
-        g_v3[u] = select(ok, g_v2[u], g_v[u])
-        a3[u] = select(ok, a2[u], a[u])
-        rss3[u] = select(ok, rss2[u], rss[u])
-        dof3[u] = select(ok, dof2[u], dof[u])
+def widened_row(
+    m_box, m_coords, r2_f, x_row, y, tried, limit, r2, g_u, g_v, a, rss, dof, r, g_u3, g_v3, a3, rss3, dof3, r3, kept
+):
+    """The widened fits of a row (:func:`affine_fit` of its window moments at radii ``r2_f``, as :func:`fit_row`)
+    where they were ``tried`` and still pass the noise test, the current ones (g_u ...) elsewhere, into g_u3 ...
+    (distinct arrays: see :func:`box_row`); ``kept``: where the widened fit was kept."""
+    for u in range(tried.shape[0]):
+        a2, g_u2, g_v2, rss2, dof2 = affine_fit(
+            m_box[0, u],
+            m_coords[0, u],
+            m_coords[1, u],
+            m_coords[2, u],
+            m_coords[3, u],
+            m_coords[4, u],
+            m_box[1, u],
+            m_box[2, u],
+            m_box[3, u],
+            m_box[4, u],
+            r2_f[u],
+            x_row[u],
+            y,
+        )
+        ok = tried[u] & (dof2 > 0.0) & (rss2 <= limit[u] * dof2)
+        g_u3[u] = select(ok, g_u2, g_u[u])
+        g_v3[u] = select(ok, g_v2, g_v[u])
+        a3[u] = select(ok, a2, a[u])
+        rss3[u] = select(ok, rss2, rss[u])
+        dof3[u] = select(ok, dof2, dof[u])
         r3[u] = select(ok, r2[u], r[u])
-        passed[u] = ok
+        kept[u] = ok
 
 
 @njit(noalias=True, _nrt=False)
@@ -1049,11 +1066,6 @@ def _adaptive_fit_kernel(
     r_try = np.empty(n_fit, np.int64)
     m_c = np.zeros((len(_BOXED), n_fit))
     m_d = np.zeros((len(_BOXED), n_fit))
-    g_u2 = np.empty(n_fit)
-    g_v2 = np.empty(n_fit)
-    a2 = np.empty(n_fit)
-    rss2 = np.empty(n_fit)
-    dof2 = np.empty(n_fit)
     g_u3 = np.empty(n_fit)
     g_v3 = np.empty(n_fit)
     a3 = np.empty(n_fit)
@@ -1176,17 +1188,14 @@ def _adaptive_fit_kernel(
             if first:
                 break
             present, widened = widened, present
-            for u in range(n_fit):
-                passed[u] = tried[u]
-            fit_row(m_try, m_coords2, r_try_f, x_row, y, g_u2, g_v2, a2, rss2, dof2)
-            keep_row(
-                passed,
+            widened_row(
+                m_try,
+                m_coords2,
+                r_try_f,
+                x_row,
+                y,
+                tried,
                 limit,
-                g_u2,
-                g_v2,
-                a2,
-                rss2,
-                dof2,
                 r_try,
                 g_u,
                 g_v,
@@ -1200,6 +1209,7 @@ def _adaptive_fit_kernel(
                 rss3,
                 dof3,
                 r_next,
+                passed,
             )
             g_u, g_u3 = g_u3, g_u
             g_v, g_v3 = g_v3, g_v

@@ -357,3 +357,31 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
         out = np.full(z.shape + (3,), 7.0, np.float32)
         assert adaptive_fit(z, valid, cam, out, use=lambda p: False, bands=bands) is None
         assert (out == 7.0).all()
+
+
+def test_bands_balanced_by_their_times_give_the_same_bits():
+    """Balance moves band edges toward equal times from frame to frame; whatever the split, the same bits."""
+    from surfnorm._bands import on_threads
+    from surfnorm.kernels.adaptive_fit import Balance, _balance, adaptive_fit
+
+    balance = Balance()
+    weights = np.ones(100)
+    balance.learn("k", weights, [(0, 50, 3.0), (50, 100, 1.0)])  # the first band took three times as long
+    factors = balance.factors("k")
+    assert factors[:50].mean() > factors[50:].mean() and np.isclose(factors.mean(), 1.0)
+    assert balance.factors("other") is None
+    used = weights * factors
+    # times in proportion to the weights the bands were split by: the factors hold
+    balance.learn("k", used, [(0, 40, used[:40].sum()), (40, 100, used[40:].sum())])
+    np.testing.assert_allclose(balance.factors("k"), factors)
+
+    z, K = scene(5, H=128, W=96, holes=0.1)
+    z = z.astype(np.float32)
+    valid = z > 0
+    cam = Intrinsics.from_matrix(K)
+    ref = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32))
+    _balance.forget()
+    for _ in range(4):  # the factors learnt from each frame move the next frame's band edges
+        got = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), bands=on_threads(2))
+        np.testing.assert_array_equal(got, ref)
+    assert _balance.factors((z.shape, 2, 31, None)) is not None

@@ -231,12 +231,19 @@ def test_window_ties_go_the_same_way_in_every_unit():
 @pytest.mark.parametrize("stride", [1, 2])
 @pytest.mark.parametrize("r", [1, 2, 4, 15, 40])
 def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
-    """box_row and coordinate_sums (the row path of the window sums) give, for every picked fitted pixel
+    """box_row, box_row_sparse and coordinate_sums (the row path of the window sums) give, for every picked fitted pixel
     (column u = stride i), exactly (bottom - top at column u + r + 1) - (bottom - top at column u - r),
     clipped, with the integral columns where integral_positions places them; box_row keeps src elsewhere
     unless ``first``, and coordinate_sums fills only windows that are not the full square. The kernel's
     outputs rest on these bits (the windows' fits and every decision made from them)."""
-    from surfnorm.kernels.adaptive_fit import _BOXED, _COORDS, box_row, coordinate_sums, integral_positions
+    from surfnorm.kernels.adaptive_fit import (
+        _BOXED,
+        _COORDS,
+        box_row,
+        box_row_sparse,
+        coordinate_sums,
+        integral_positions,
+    )
 
     rng = np.random.default_rng(r)
     n_fit = (W + stride - 1) // stride
@@ -257,6 +264,10 @@ def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
         np.testing.assert_array_equal(dst[:, pick], box[list(_BOXED)][:, pick])
         if not first:
             np.testing.assert_array_equal(dst[:, ~pick], src[:, ~pick])
+    in_place = src.copy()  # the pixel-by-pixel path: the same sums where picked, the rest kept
+    box_row_sparse(top, bottom, r, stride, pos, pick, in_place)
+    np.testing.assert_array_equal(in_place[:, pick], box[list(_BOXED)][:, pick])
+    np.testing.assert_array_equal(in_place[:, ~pick], src[:, ~pick])
     counts = np.where(rng.random(n_fit) < 0.5, float((2 * r + 1) ** 2), box[0])
     coords = np.full((len(_COORDS), n_fit), np.nan)
     coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords)

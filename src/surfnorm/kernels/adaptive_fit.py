@@ -714,6 +714,25 @@ def box_row(top, bottom, r, stride, pos, pick, first, src, dst):
             d[i] = select(pick[i], (b[e] - t[e]) - (b[u0] - t[u0]), s[i])
 
 
+#: A row's window sums go pixel by pixel (:func:`box_row_sparse`) where fewer than one in SPARSE of its fitted
+#: pixels take them (sparse depth: LiDAR rows, the radii that few pixels grow to), else in runs (:func:`box_row`).
+SPARSE = 8
+
+
+@njit(noalias=True, _nrt=False)
+def box_row_sparse(top, bottom, r, stride, pos, pick, dst):
+    """:func:`box_row` pixel by pixel, in place: dst[j, i] for the pixels where ``pick`` only (the same sums)."""
+    W = pos.shape[0] - 1
+    for i in range(dst.shape[1]):
+        if pick[i]:
+            u = stride * i
+            u0 = pos[max(u - r, 0)]
+            u1 = pos[min(u + r + 1, W)]
+            for j in range(len(_BOXED)):
+                c = _BOXED[j]
+                dst[j, i] = (bottom[c, u1] - top[c, u1]) - (bottom[c, u0] - top[c, u0])
+
+
 @njit(noalias=True, _nrt=False)
 def coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords):
     """The coordinate sums (``_COORDS``) at radius r into coords[j, i] (columns u = stride i), for the pixels
@@ -1175,12 +1194,18 @@ def _adaptive_fit_kernel(
         for r in range(1, r_max + 1):
             if not present[r]:
                 continue
+            count = 0
             for u in range(n_fit):
-                pick[u] = valid_row[u] & (r_row[u] == r)
-            m_row, m_src = m_src, m_row
+                p = valid_row[u] & (r_row[u] == r)
+                pick[u] = p
+                count += p
             top = ring[slot[max(v - r, 0)]]
             bottom = ring[slot[min(v + r + 1, H)]]
-            box_row(top, bottom, r, stride, pos, pick, first, m_src, m_row)
+            if SPARSE * count < n_fit:
+                box_row_sparse(top, bottom, r, stride, pos, pick, m_row)
+            else:
+                m_row, m_src = m_src, m_row
+                box_row(top, bottom, r, stride, pos, pick, first, m_src, m_row)
             coordinate_sums(top, bottom, r, stride, pos, pick, m_row[0], m_coords)
             first = False
             if r == r_max:
@@ -1231,10 +1256,13 @@ def _adaptive_fit_kernel(
                 if count == 0:
                     continue
                 widened[r2] = True
-                m_try, m_old = m_old, m_try
                 top = ring[slot[max(v - r2, 0)]]
                 bottom = ring[slot[min(v + r2 + 1, H)]]
-                box_row(top, bottom, r2, stride, pos, pick, first, m_old, m_try)
+                if SPARSE * count < n_fit:
+                    box_row_sparse(top, bottom, r2, stride, pos, pick, m_try)
+                else:
+                    m_try, m_old = m_old, m_try
+                    box_row(top, bottom, r2, stride, pos, pick, first, m_old, m_try)
                 coordinate_sums(top, bottom, r2, stride, pos, pick, m_try[0], m_coords2)
                 first = False
             if first:

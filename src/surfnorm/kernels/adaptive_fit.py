@@ -1057,15 +1057,15 @@ def first_fitted_row(v0, stride):
 
 @ahead_of_time
 @njit(noalias=True)
-def prime(z, valid, ring, stride, upto):
-    """Integral rows 0 .. ``upto`` into ``ring`` (see :func:`integral_row`), as the kernel makes them; returns upto.
-    The rows of a band's first fitted row, made before the frame's noise is known."""
-    H, W = z.shape
+def prime(z, valid, ring, pos, w_scratch, made, upto):
+    """Integral rows ``made`` + 1 .. ``upto`` into ``ring`` (see :func:`integral_row`; columns at ``pos``, scratch
+    ``w_scratch`` (W,)), as the kernel makes them (row 0, zeros, where ``made`` is 0); returns upto. The rows above
+    a band's first fitted row, made before the frame's noise is known."""
+    H = z.shape[0]
     L = ring.shape[0]
-    pos = integral_positions(W, stride)
-    w_scratch = np.empty(W)
-    ring[0, :, :] = 0.0
-    for i in range(1, upto + 1):
+    if made == 0:
+        ring[0, :, :] = 0.0
+    for i in range(made + 1, upto + 1):
         integral_row(z[i - 1], valid[i - 1], i - 1 - 0.5 * H, pos, w_scratch, ring[(i - 1) % L], ring[i % L])
     return upto
 
@@ -1361,13 +1361,18 @@ def _adaptive_fit_kernel(
 
 
 class Once:
-    """A value made by the first thread that asks for it (``get``); a thread asking meanwhile waits for it."""
+    """A value made by the first thread that asks for it (``get``); a thread asking meanwhile waits for it.
+    ``done``: made already (``get`` then returns at once)."""
 
     def __init__(self, make):
         self._make = make
         self._lock = threading.Lock()
         self._made = False
         self._value = None
+
+    @property
+    def done(self) -> bool:
+        return self._made
 
     def get(self):
         with self._lock:
@@ -1459,7 +1464,12 @@ def adaptive_fit(
         try:
             if v0 == 0:  # the calling thread's band (bands on threads) measures the noise first
                 tables.get()
-            made = prime(z, valid, ring, stride, min(H, first_fitted_row(v0, stride) + 2 * r_max + 1))
+            # in two halves, so that a band stops early where the frame turns out not to be for this method (use)
+            upto = min(H, first_fitted_row(v0, stride) + 2 * r_max + 1)
+            pos, w_scratch = integral_positions(z.shape[1], stride), np.empty(z.shape[1])
+            made = prime(z, valid, ring, pos, w_scratch, 0, upto // 2)
+            if not (tables.done and tables.get() is None):
+                made = prime(z, valid, ring, pos, w_scratch, made, upto)
             got = tables.get()
             if got is None:
                 return False

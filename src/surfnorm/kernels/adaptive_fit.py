@@ -750,6 +750,22 @@ def coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords):
 
 
 @pixel
+def picked_sums(ring, slot, H, v, r, stride, pos, pick, count, first, cur, spare, coords):
+    """The window sums at radius r of the ``count`` pixels of row v where ``pick``: the count and w moments into
+    ``cur`` (the others keep theirs), or into ``spare`` with the others copied (:func:`box_row`, where many take
+    them), and the coordinate moments into ``coords``. Returns (cur, spare), swapped in the second case."""
+    top = ring[slot[max(v - r, 0)]]
+    bottom = ring[slot[min(v + r + 1, H)]]
+    if SPARSE * count < cur.shape[1]:
+        box_row_sparse(top, bottom, r, stride, pos, pick, cur)
+    else:
+        cur, spare = spare, cur
+        box_row(top, bottom, r, stride, pos, pick, first, spare, cur)
+    coordinate_sums(top, bottom, r, stride, pos, pick, cur[0], coords)
+    return cur, spare
+
+
+@pixel
 def affine_fit(n, s_u, s_v, s_uu, s_uv, s_vv, s_w, s_uw, s_vw, s_ww, r, x, y):
     """Least-squares w = a + g_u (u' - x) + g_v (v' - y) over a window centred on (x, y), from its
     moment sums (count n; sums of u', v', u'u', u'v', v'v', w, u'w, v'w, ww).
@@ -784,6 +800,26 @@ def affine_fit(n, s_u, s_v, s_uu, s_uv, s_vv, s_w, s_uw, s_vw, s_ww, r, x, y):
     return a, g_u, g_v, rss, select(ok, n - 3.0, 0.0)
 
 
+@pixel
+def fit_at(m_box, m_coords, r_row, x_row, y, u):
+    """:func:`affine_fit` of pixel u of a row from the row's window moments (see :func:`fit_row`)."""
+    return affine_fit(
+        m_box[0, u],
+        m_coords[0, u],
+        m_coords[1, u],
+        m_coords[2, u],
+        m_coords[3, u],
+        m_coords[4, u],
+        m_box[1, u],
+        m_box[2, u],
+        m_box[3, u],
+        m_box[4, u],
+        r_row[u],
+        x_row[u],
+        y,
+    )
+
+
 @njit(noalias=True, _nrt=False)
 def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
     """:func:`affine_fit` for every pixel of row ``y``, from the row's window moments (``m_box``: the
@@ -791,21 +827,7 @@ def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
     (floats, holding integers and half-integers exactly: int64 operands would not vectorise)."""
     W = m_box.shape[1]
     for u in range(W):
-        a[u], g_u[u], g_v[u], rss[u], dof[u] = affine_fit(
-            m_box[0, u],
-            m_coords[0, u],
-            m_coords[1, u],
-            m_coords[2, u],
-            m_coords[3, u],
-            m_coords[4, u],
-            m_box[1, u],
-            m_box[2, u],
-            m_box[3, u],
-            m_box[4, u],
-            r_row[u],
-            x_row[u],
-            y,
-        )
+        a[u], g_u[u], g_v[u], rss[u], dof[u] = fit_at(m_box, m_coords, r_row, x_row, y, u)
 
 
 @njit(noalias=True, _nrt=False)
@@ -816,21 +838,7 @@ def widened_row(
     where they were ``tried`` and still pass the noise test, the current ones (g_u ...) elsewhere, into g_u3 ...
     (distinct arrays: see :func:`box_row`); ``kept``: where the widened fit was kept."""
     for u in range(tried.shape[0]):
-        a2, g_u2, g_v2, rss2, dof2 = affine_fit(
-            m_box[0, u],
-            m_coords[0, u],
-            m_coords[1, u],
-            m_coords[2, u],
-            m_coords[3, u],
-            m_coords[4, u],
-            m_box[1, u],
-            m_box[2, u],
-            m_box[3, u],
-            m_box[4, u],
-            r2_f[u],
-            x_row[u],
-            y,
-        )
+        a2, g_u2, g_v2, rss2, dof2 = fit_at(m_box, m_coords, r2_f, x_row, y, u)
         ok = tried[u] & (dof2 > 0.0) & (rss2 <= limit[u] * dof2)
         g_u3[u] = select(ok, g_u2, g_u[u])
         g_v3[u] = select(ok, g_v2, g_v[u])
@@ -1199,14 +1207,7 @@ def _adaptive_fit_kernel(
                 p = valid_row[u] & (r_row[u] == r)
                 pick[u] = p
                 count += p
-            top = ring[slot[max(v - r, 0)]]
-            bottom = ring[slot[min(v + r + 1, H)]]
-            if SPARSE * count < n_fit:
-                box_row_sparse(top, bottom, r, stride, pos, pick, m_row)
-            else:
-                m_row, m_src = m_src, m_row
-                box_row(top, bottom, r, stride, pos, pick, first, m_src, m_row)
-            coordinate_sums(top, bottom, r, stride, pos, pick, m_row[0], m_coords)
+            m_row, m_src = picked_sums(ring, slot, H, v, r, stride, pos, pick, count, first, m_row, m_src, m_coords)
             first = False
             if r == r_max:
                 continue
@@ -1256,14 +1257,9 @@ def _adaptive_fit_kernel(
                 if count == 0:
                     continue
                 widened[r2] = True
-                top = ring[slot[max(v - r2, 0)]]
-                bottom = ring[slot[min(v + r2 + 1, H)]]
-                if SPARSE * count < n_fit:
-                    box_row_sparse(top, bottom, r2, stride, pos, pick, m_try)
-                else:
-                    m_try, m_old = m_old, m_try
-                    box_row(top, bottom, r2, stride, pos, pick, first, m_old, m_try)
-                coordinate_sums(top, bottom, r2, stride, pos, pick, m_try[0], m_coords2)
+                m_try, m_old = picked_sums(
+                    ring, slot, H, v, r2, stride, pos, pick, count, first, m_try, m_old, m_coords2
+                )
                 first = False
             if first:
                 break

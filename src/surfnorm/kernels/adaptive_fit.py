@@ -888,14 +888,6 @@ def noise_limit(zp, rho, f, kappa, rho_floor):
 
 
 @njit(noalias=True, _nrt=False)
-def noise_limits(z_row, z0, inv_step, rho_table, f, kappa, rho_floor, limit):
-    """:func:`noise_limit` of each pixel of a row, rho from the depth table."""
-    for u in range(z_row.shape[0]):
-        t = table_entry(z_row[u], z0, inv_step, rho_table.shape[0])
-        limit[u] = noise_limit(z_row[u], rho_table[t], f, kappa, rho_floor)
-
-
-@njit(noalias=True, _nrt=False)
 def expand_row(a, g_u, g_v, ok, limit, e):
     """The planes of a row's fitted pixels (columns 0, 2, 4, ...: a, g_u, g_v, ok and the noise limit, each
     (n_fit,)) at full width: e[:, u] is column 2 (u // 2)'s, for u = 0 .. W (none at u = W for an even W)."""
@@ -1057,18 +1049,19 @@ def _emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, ou
     )
 
 
+@pixel
 def first_fitted_row(v0, stride):
-    """The first fitted row that the band starting at row v0 reads (see :func:`_adaptive_fit_kernel`)."""
+    """The first fitted row that the band starting at row v0 reads: every stride-th row of the frame, with stride 2
+    from the one above v0 (its rows take planes from the fitted rows up to two above and below them)."""
     v = max(v0 - (stride - 1), 0)
     return v - v % stride
 
 
-@ahead_of_time
-@njit(noalias=True)
-def prime(z, valid, ring, pos, w_scratch, made, upto):
-    """Integral rows ``made`` + 1 .. ``upto`` into ``ring`` (see :func:`integral_row`; columns at ``pos``, scratch
-    ``w_scratch`` (W,)), as the kernel makes them (row 0, zeros, where ``made`` is 0); returns upto. The rows above
-    a band's first fitted row, made before the frame's noise is known."""
+@njit(noalias=True, _nrt=False)
+def make_rows(z, valid, ring, pos, w_scratch, made, upto):
+    """Integral rows ``made`` + 1 .. ``upto`` into ``ring``, integral row i at i % len(ring) (see
+    :func:`integral_row`; columns at ``pos``, scratch ``w_scratch`` (W,)); row 0, zeros, where ``made`` is 0.
+    Returns upto."""
     H = z.shape[0]
     L = ring.shape[0]
     if made == 0:
@@ -1076,6 +1069,14 @@ def prime(z, valid, ring, pos, w_scratch, made, upto):
     for i in range(made + 1, upto + 1):
         integral_row(z[i - 1], valid[i - 1], i - 1 - 0.5 * H, pos, w_scratch, ring[(i - 1) % L], ring[i % L])
     return upto
+
+
+@ahead_of_time
+@njit(noalias=True)
+def prime(z, valid, ring, pos, w_scratch, made, upto):
+    """:func:`make_rows` before the kernel: the rows above a band's first fitted row, made before the frame's noise
+    is known."""
+    return make_rows(z, valid, ring, pos, w_scratch, made, upto)
 
 
 @ahead_of_time
@@ -1100,13 +1101,15 @@ def _adaptive_fit_kernel(
     fill,
     ring,
     made,
+    pos,
+    w_scratch,
     out,
     v0,
     v1,
     stride,
 ):
     """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`), in a ``ring`` that holds the
-    integral rows up to ``made`` (:func:`prime`).
+    integral rows up to ``made`` (:func:`prime`); ``pos``: :func:`integral_positions`, ``w_scratch``: (W,).
 
     The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
     pixel takes its plane from the fitted pixels around it (:func:`assemble_row`), so a band fits the rows
@@ -1119,7 +1122,6 @@ def _adaptive_fit_kernel(
     H, W = z.shape
     L = ring.shape[0]
     slot = np.arange(H + 1) % L
-    pos = integral_positions(W, stride)
     n_fit = (W + stride - 1) // stride
     m = np.zeros(_N_MOMENTS)
     m_a = np.zeros((len(_BOXED), n_fit))
@@ -1164,23 +1166,17 @@ def _adaptive_fit_kernel(
     fitted = np.zeros((3, 5, W + 1))
     none = np.zeros((5, W + 1))
     got = np.zeros(W, np.bool_)
-    w_scratch = np.empty(W)
-    made = made  # the last integral row made
     ok_row = np.empty(n_fit)
     cam = (fx, fy, cx, cy)
     # The fitted rows: every stride-th row of the frame, whatever the band; with stride 2 those that the band's
     # rows take planes from (rows up to two above and below).
     reach = stride - 1
-    v_first = max(v0 - reach, 0)
-    v_first -= v_first % stride
+    v_first = first_fitted_row(v0, stride)
     v_last = min(v1 - 1 + 2 * reach, H - 1)
     v_last -= v_last % stride
     for v in range(v_first, v_last + 1, stride):
-        while made < min(H, v + 2 * r_max + 1):
-            made += 1
-            integral_row(
-                z[made - 1], valid[made - 1], made - 1 - 0.5 * H, pos, w_scratch, ring[slot[made - 1]], ring[slot[made]]
-            )
+        if made < min(H, v + 2 * r_max + 1):  # the integral rows of this row's windows (``made``: the last one)
+            made = make_rows(z, valid, ring, pos, w_scratch, made, min(H, v + 2 * r_max + 1))
         y = v - 0.5 * H
         for i in range(n_fit):
             z_row[i] = z[v, stride * i]
@@ -1490,6 +1486,8 @@ def adaptive_fit(
                 np.float32(fill),
                 ring,
                 made,
+                pos,
+                w_scratch,
                 out,
                 v0,
                 v1,

@@ -160,7 +160,9 @@ class Kernel:
         return f"<surfnorm AOT kernel {self.name}>"
 
     def __call__(self, *args):
-        if _state["jit_only"]:
+        # Without AOT code (none built, another CPU, sources edited) the JIT at once: no key to compute (tens of
+        # microseconds a frame for the default method's kernels, whose arguments are many).
+        if _state["jit_only"] or (_state["loaded"] and _state["module"] is None):
             return self.jit(*args)
         if self._epoch != _state["epoch"]:
             self._chosen = {}

@@ -295,6 +295,36 @@ def test_stride_follows_the_density_of_the_depth():
 
 
 @pytest.mark.parametrize("stride", [1, 2])
+def test_integral_rows_are_the_sums_above_and_left_and_a_band_below_makes_the_same_bits(stride):
+    """Integral row i holds, at column u (where integral_positions places it), the sums over the valid pixels of
+    rows < i and columns < u of the ten moments; a band that sums only the columns of the rows above the ones
+    it reads (make_rows' first_read) then makes those rows to the bit of a sweep from row 0."""
+    from surfnorm.kernels.adaptive_fit import _N_COLUMNS, _N_MOMENTS, integral_positions, make_rows
+
+    rng = np.random.default_rng(stride)
+    H, W = 23, 17
+    z = rng.uniform(0.5, 4.0, (H, W)).astype(np.float32)
+    valid = rng.random((H, W)) > 0.25
+    pos = integral_positions(W, stride)
+    L = 7
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    x, y = x - 0.5 * W, y - 0.5 * H
+    w = np.where(valid, 1.0 / z.astype(np.float64), 0.0)
+    m = valid * np.stack((np.ones_like(x), x, y, x * x, x * y, y * y, w, x * w, y * w, w * w))
+    sums = np.zeros((_N_MOMENTS, H + 1, W + 1))
+    sums[:, 1:, 1:] = m.cumsum(1).cumsum(2)
+    for first_read in (0, 5, 11):
+        ring = np.full((L, _N_MOMENTS, W + 1), np.nan)
+        cols = np.full((_N_COLUMNS, W), np.nan)
+        assert make_rows(z, valid, ring, cols, pos, np.empty(W), 0, H, first_read) == H
+        sweep = np.full_like(ring, np.nan)
+        make_rows(z, valid, sweep, np.empty_like(cols), pos, np.empty(W), 0, H, 0)
+        for i in range(max(first_read, H + 1 - L), H + 1):
+            np.testing.assert_array_equal(ring[i % L], sweep[i % L])
+            np.testing.assert_allclose(ring[i % L][:, pos], sums[:, i], rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("stride", [1, 2])
 def test_a_band_writes_its_own_rows_only(stride):
     """Bands split a frame between threads: each writes its rows and nothing else, and together they give the
     whole frame's bits (odd band ends: a band reads the fitted row below it, and must not write it)."""

@@ -273,17 +273,21 @@ def _clipped_rms(xs, starts, rounds, sigmas, rms):
 
     ``xs`` holds each bin's samples together (see :func:`_by_bin`). The kept sets only shrink from round to
     round (dropping values above sigmas >= 1 times the RMS lowers the RMS, and so the bound), so a round
-    that keeps as many values as the one before kept the same ones, and every later round would too: the
-    loop stops once that holds for every row and bin, with the same result. Each bin's squares are summed
-    in the order of its samples, three rows at once (independent chains of additions).
+    that keeps as many values as the one before kept the same ones, and every later round would too: a bin
+    is left as it is once that holds for each of its rows, and the loop stops once it holds for every bin,
+    with the same result. Each bin's squares are summed in the order of its samples, three rows at once
+    (independent chains of additions).
     """
     n_rows = xs.shape[0]
     nbins = starts.shape[0] - 1
     counts = np.zeros((n_rows, nbins), np.int64)
     before = np.full((n_rows, nbins), -1, np.int64)
+    settled = np.zeros(nbins, np.bool_)
     rms[:, :] = np.inf
     for _ in range(rounds + 1):
         for b in range(nbins):
+            if settled[b]:
+                continue
             for i0 in range(0, n_rows, 3):
                 i1 = min(i0 + 1, n_rows - 1)
                 i2 = min(i0 + 2, n_rows - 1)
@@ -302,7 +306,9 @@ def _clipped_rms(xs, starts, rounds, sigmas, rms):
                 for i, s, c in ((i0, s0, c0), (i1, s1, c1), (i2, s2, c2)):
                     rms[i, b] = math.sqrt(s / c) if c > 0 else 0.0
                     counts[i, b] = c
-        if np.array_equal(counts, before):
+        for b in range(nbins):
+            settled[b] = np.array_equal(counts[:, b], before[:, b])
+        if settled.all():
             break
         before[:, :] = counts
 
@@ -583,7 +589,9 @@ def growth_table(r_max: int) -> np.ndarray:
 #
 # Integral rows live in a ring of 4 r_max + 3 rows, channel-major: ring[slot[i], c, pos[u]] is moment c of
 # integral row i at column u. A row of the image needs integral rows v - 2 r .. v + 2 r + 1 (the centred
-# windows and the shifted ones), so the moments stay in cache instead of a full-size image.
+# windows and the shifted ones), so the moments stay in cache instead of a full-size image. Each integral row
+# is made from column sums kept beside the ring (:func:`integral_row`), so a band that starts lower down
+# sums the columns of the rows above it and makes only the integral rows that it reads (:func:`make_rows`).
 #
 # ``pos`` (:func:`integral_positions`) places the columns: in order for ``stride`` 1; for ``stride`` 2 the even
 # columns first, then the odd ones. A window centred on an even column u has one edge column of each
@@ -602,48 +610,74 @@ def integral_positions(W, stride):
     return pos
 
 
-@njit(noalias=True, _nrt=False)
-def integral_row(z_row, valid_row, y, pos, w_row, prev, row):
-    """Integral row i from row i - 1 (``prev``), adding image row i - 1 (``z_row``, ``valid_row``, at
-    centred ordinate ``y``); column u at ``pos[u]``; ``w_row`` is scratch (W,).
+#: Column sums kept beside the ring, per column u: over the valid pixels of the image rows made so far, of
+#: (1, v', v'v', w, v'w, ww). Integral row i is the running sum along the row of those after row i - 1 with the
+#: u' factors applied (:func:`integral_row`), so a band that starts further down sums its columns only
+#: (:func:`column_row`) until it reaches the rows that it reads.
+_N_COLUMNS = 6
 
-    Integral row i holds, per column u (0..W), the sums over the valid pixels of image rows < i
-    and columns < u of (1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww), with u' = u - W/2,
-    v' = v - H/2 (centred coordinates keep the sums small) and w = 1/z. The divisions come first, in a
-    loop of their own (it vectorises; inside the running sums they were their bottleneck), and an invalid
-    pixel adds zeros (the same bits as adding nothing), so that the running sums have no branch.
-    """
+
+@njit(noalias=True, _nrt=False)
+def column_row(z_row, valid_row, y, w_row, cols):
+    """Add image row ``z_row`` (at centred ordinate ``y``) to the column sums ``cols`` (_N_COLUMNS, W); ``w_row``
+    is scratch (W,). An invalid pixel adds zeros (the same bits as adding nothing): no branch, it vectorises."""
     W = z_row.shape[0]
     for u in range(W):
         w_row[u] = select(valid_row[u], 1.0 / z_row[u], 0.0)
+    yy = y * y
+    for u in range(W):
+        m = select(valid_row[u], 1.0, 0.0)
+        w = w_row[u]
+        cols[0, u] += m
+        cols[1, u] += y * m
+        cols[2, u] += yy * m
+        cols[3, u] += w
+        cols[4, u] += y * w
+        cols[5, u] += w * w
+
+
+@njit(noalias=True, _nrt=False)
+def integral_row(z_row, valid_row, y, pos, w_row, cols, row):
+    """Integral row i, adding image row i - 1 (``z_row``, ``valid_row``, at centred ordinate ``y``) to the column
+    sums ``cols`` (:func:`column_row`) first; column u at ``pos[u]``; ``w_row`` is scratch (W,).
+
+    Integral row i holds, per column u (0..W), the sums over the valid pixels of image rows < i
+    and columns < u of (1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww), with u' = u - W/2,
+    v' = v - H/2 (centred coordinates keep the sums small) and w = 1/z: the running sums along the row of
+    the column sums, those of u' and u'u' as u' times the column's sums (u' is the same down a column).
+    The coordinate moments are sums of integers and half-integers, exact in any order.
+    """
+    W = z_row.shape[0]
+    column_row(z_row, valid_row, y, w_row, cols)
     for c in range(_N_MOMENTS):
         row[c, pos[0]] = 0.0
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = 0.0
     for u in range(W):
-        m = select(valid_row[u], 1.0, 0.0)
         x = u - 0.5 * W
-        w = w_row[u]
-        s0 += m
-        s1 += x * m
-        s2 += y * m
-        s3 += x * x * m
-        s4 += x * y * m
-        s5 += y * y * m
+        n = cols[0, u]
+        n_v = cols[1, u]
+        w = cols[3, u]
+        s0 += n
+        s1 += x * n
+        s2 += n_v
+        s3 += x * x * n
+        s4 += x * n_v
+        s5 += cols[2, u]
         s6 += w
         s7 += x * w
-        s8 += y * w
-        s9 += w * w
+        s8 += cols[4, u]
+        s9 += cols[5, u]
         j = pos[u + 1]
-        row[0, j] = prev[0, j] + s0
-        row[1, j] = prev[1, j] + s1
-        row[2, j] = prev[2, j] + s2
-        row[3, j] = prev[3, j] + s3
-        row[4, j] = prev[4, j] + s4
-        row[5, j] = prev[5, j] + s5
-        row[6, j] = prev[6, j] + s6
-        row[7, j] = prev[7, j] + s7
-        row[8, j] = prev[8, j] + s8
-        row[9, j] = prev[9, j] + s9
+        row[0, j] = s0
+        row[1, j] = s1
+        row[2, j] = s2
+        row[3, j] = s3
+        row[4, j] = s4
+        row[5, j] = s5
+        row[6, j] = s6
+        row[7, j] = s7
+        row[8, j] = s8
+        row[9, j] = s9
 
 
 @pixel
@@ -1058,25 +1092,31 @@ def first_fitted_row(v0, stride):
 
 
 @njit(noalias=True, _nrt=False)
-def make_rows(z, valid, ring, pos, w_scratch, made, upto):
+def make_rows(z, valid, ring, cols, pos, w_scratch, made, upto, first_read):
     """Integral rows ``made`` + 1 .. ``upto`` into ``ring``, integral row i at i % len(ring) (see
-    :func:`integral_row`; columns at ``pos``, scratch ``w_scratch`` (W,)); row 0, zeros, where ``made`` is 0.
-    Returns upto."""
+    :func:`integral_row`; column sums ``cols``, columns at ``pos``, scratch ``w_scratch`` (W,)), those before
+    ``first_read`` as column sums only (:func:`column_row`: a band's rows above the ones it reads); row 0,
+    zeros, and ``cols`` zeroed where ``made`` is 0. Returns upto."""
     H = z.shape[0]
     L = ring.shape[0]
     if made == 0:
         ring[0, :, :] = 0.0
+        cols[:, :] = 0.0
     for i in range(made + 1, upto + 1):
-        integral_row(z[i - 1], valid[i - 1], i - 1 - 0.5 * H, pos, w_scratch, ring[(i - 1) % L], ring[i % L])
+        y = i - 1 - 0.5 * H
+        if i < first_read:
+            column_row(z[i - 1], valid[i - 1], y, w_scratch, cols)
+        else:
+            integral_row(z[i - 1], valid[i - 1], y, pos, w_scratch, cols, ring[i % L])
     return upto
 
 
 @ahead_of_time
 @njit(noalias=True)
-def prime(z, valid, ring, pos, w_scratch, made, upto):
+def prime(z, valid, ring, cols, pos, w_scratch, made, upto, first_read):
     """:func:`make_rows` before the kernel: the rows above a band's first fitted row, made before the frame's noise
     is known."""
-    return make_rows(z, valid, ring, pos, w_scratch, made, upto)
+    return make_rows(z, valid, ring, cols, pos, w_scratch, made, upto, first_read)
 
 
 @ahead_of_time
@@ -1100,6 +1140,7 @@ def _adaptive_fit_kernel(
     r_max,
     fill,
     ring,
+    cols,
     made,
     pos,
     w_scratch,
@@ -1109,15 +1150,17 @@ def _adaptive_fit_kernel(
     stride,
 ):
     """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`), in a ``ring`` that holds the
-    integral rows up to ``made`` (:func:`prime`); ``pos``: :func:`integral_positions`, ``w_scratch``: (W,).
+    integral rows up to ``made`` and ``cols`` the column sums after it (:func:`prime`); ``pos``:
+    :func:`integral_positions`, ``w_scratch``: (W,).
 
     The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
     pixel takes its plane from the fitted pixels around it (:func:`assemble_row`), so a band fits the rows
     up to two beyond its own.
 
-    Integral rows are sums from row 0 down, so a band starting at v0 first runs the integral rows
-    above it through its ring (no fits: :func:`prime`): the same additions in the same order as one sweep,
-    so the same bits; the price is that integral pass over rows 0 .. v0 + 2 ``r_max``.
+    Integral rows are sums from row 0 down, so a band starting at v0 first sums the columns of the rows
+    above the ones it reads, then makes the integral rows it reads (no fits: :func:`prime`): the same
+    additions in the same order as one sweep, so the same bits; the price is that pass over rows
+    0 .. v0 + 2 ``r_max``, mostly column sums (vectorised).
     """
     H, W = z.shape
     L = ring.shape[0]
@@ -1176,7 +1219,7 @@ def _adaptive_fit_kernel(
     v_last -= v_last % stride
     for v in range(v_first, v_last + 1, stride):
         if made < min(H, v + 2 * r_max + 1):  # the integral rows of this row's windows (``made``: the last one)
-            made = make_rows(z, valid, ring, pos, w_scratch, made, min(H, v + 2 * r_max + 1))
+            made = make_rows(z, valid, ring, cols, pos, w_scratch, made, min(H, v + 2 * r_max + 1), 0)
         y = v - 0.5 * H
         for i in range(n_fit):
             z_row[i] = z[v, stride * i]
@@ -1457,11 +1500,14 @@ def adaptive_fit(
             if v0 == 0:  # the calling thread's band (bands on threads) measures the noise first
                 tables.get()
             # in two halves, so that a band stops early where the frame turns out not to be for this method (use)
-            upto = min(H, first_fitted_row(v0, stride) + 2 * r_max + 1)
+            v_first = first_fitted_row(v0, stride)
+            upto = min(H, v_first + 2 * r_max + 1)
+            first_read = v_first - 2 * r_max  # the first integral row that the band's windows read
             pos, w_scratch = integral_positions(z.shape[1], stride), np.empty(z.shape[1])
-            made = prime(z, valid, ring, pos, w_scratch, 0, upto // 2)
+            cols = np.empty((_N_COLUMNS, z.shape[1]))
+            made = prime(z, valid, ring, cols, pos, w_scratch, 0, upto // 2, first_read)
             if not (tables.done and tables.get() is None):
-                made = prime(z, valid, ring, pos, w_scratch, made, upto)
+                made = prime(z, valid, ring, cols, pos, w_scratch, made, upto, first_read)
             got = tables.get()
             if got is None:
                 return False
@@ -1485,6 +1531,7 @@ def adaptive_fit(
                 r_max,
                 np.float32(fill),
                 ring,
+                cols,
                 made,
                 pos,
                 w_scratch,

@@ -9,10 +9,10 @@ Same rule as the NumPy kernel, step for step (its module docstring explains the 
    (:func:`adaptive_weight`, :func:`blend`). Computed per frame of a batch, as if each ran alone, on the
    device, without host synchronisation.
 2. The ten moment sums (count, u, v, uu, uv, vv, w, uw, vw, ww) in integral images, float64, built with
-   the NumPy kernel's order of additions (a row prefix, then down the columns: ``torch.cumsum`` on the CPU
-   adds in that order), so that every window's sums, and so the data-dependent choices made from them,
-   are those of the NumPy kernel; the window sums use its two orders of subtraction (``box_row`` for the
-   centred windows, ``window_sums`` for the quadrant ones).
+   the NumPy kernel's order of additions (down the columns, then along the rows, the u' moments as u' times
+   the column sums: ``torch.cumsum`` on the CPU adds in that order), so that every window's sums, and so the
+   data-dependent choices made from them, are those of the NumPy kernel; the window sums use its two orders
+   of subtraction (``box_row`` for the centred windows, ``window_sums`` for the quadrant ones).
 3. The radius ladder has few rungs (1, 2, 4, 8 and 15 for the default ``max_window`` of 31), and every
    choice only ever moves a pixel up it (growth where too few pixels are valid, widening while the fit
    is within the noise). So one pass over the rungs in ascending order settles everything: at rung r,
@@ -307,10 +307,12 @@ def integral_images(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     y = (torch.arange(H, dtype=_F64, device=z.device) - 0.5 * H).view(1, H, 1).expand(B, H, W)
     w = torch.reciprocal(z)
     one = torch.ones_like(w)
-    m = torch.stack((one, x, y, x * x, x * y, y * y, w, x * w, y * w, w * w))
-    m = torch.where(valid.unsqueeze(0), m, torch.zeros_like(m))
-    m = torch.cumsum(torch.cumsum(m, dim=-1), dim=-2)
-    return F.pad(m, (1, 0, 1, 0))
+    by_column = torch.stack((one, y, y * y, w, y * w, w * w))
+    n, n_v, n_vv, s_w, s_vw, s_ww = torch.cumsum(
+        torch.where(valid.unsqueeze(0), by_column, torch.zeros_like(by_column)), dim=-2
+    )
+    m = torch.stack((n, x * n, n_v, x * x * n, x * n_v, n_vv, s_w, x * s_w, s_vw, s_ww))
+    return F.pad(torch.cumsum(m, dim=-1), (1, 0, 1, 0))
 
 
 class _Pixels:

@@ -979,6 +979,18 @@ def interpolated(p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l
     )
 
 
+@pixel
+def _put_normal(z_row, valid_row, u, o, a, gu, gv, found, fx, fy, cx, cy, fill, out_row):
+    """Eq. (2) at pixel u of row o from its plane into ``out_row`` (``fill`` where it is invalid or has none);
+    returns whether it got one."""
+    ok = valid_row[u] & found
+    nx, ny, nz = unit_normal(z_row[u], a, gu, gv, u, o, fx, fy, cx, cy)
+    out_row[3 * u] = select(ok, nx, fill)
+    out_row[3 * u + 1] = select(ok, ny, fill)
+    out_row[3 * u + 2] = select(ok, nz, fill)
+    return ok
+
+
 @njit(noalias=True, _nrt=False)
 def assembled_row(z_row, valid_row, o, up2, up1, same, dn1, dn2, cam, fill, got, out_row):
     """Eq. (2) for every pixel of row ``o`` with ``stride`` 2, from the planes of the fitted rows around it
@@ -997,28 +1009,29 @@ def assembled_row(z_row, valid_row, o, up2, up1, same, dn1, dn2, cam, fill, got,
     fx, fy, cx, cy = cam
     inf = np.inf
     odd = o % 2 == 1
-    for u in range(W):
-        w_p = 1.0 / z_row[u]
-        du = float(u % 2)
-        if odd:  # above and below, or the four diagonal ones
+    # two loops, not one with the choice inside: the compiler computed both sides of it for every pixel
+    if odd:  # above and below, or the four diagonal ones
+        for u in range(W):
+            w_p = 1.0 / z_row[u]
+            du = float(u % 2)
             p0, gu0, gv0, e0, l0 = carried(up1, u, du, 1.0, w_p)
             p1, gu1, gv1, e1, l1 = carried(up1, u + 1, -du, 1.0, w_p)
             p2, gu2, gv2, e2, l2 = carried(dn1, u, du, -1.0, w_p)
             p3, gu3, gv3, e3, l3 = carried(dn1, u + 1, -du, -1.0, w_p)
-        else:  # its own plane twice, or the left and right ones; no others (the compiler drops them)
+            a, gu, gv, found = interpolated(
+                p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3
+            )
+            got[u] = _put_normal(z_row, valid_row, u, o, a, gu, gv, found, fx, fy, cx, cy, fill, out_row)
+    else:  # its own plane twice, or the left and right ones; no others (the compiler drops them)
+        for u in range(W):
+            w_p = 1.0 / z_row[u]
+            du = float(u % 2)
             p0, gu0, gv0, e0, l0 = carried(same, u, du, 0.0, w_p)
             p1, gu1, gv1, e1, l1 = carried(same, u + 1, -du, 0.0, w_p)
-            p2, gu2, gv2, e2, l2 = 0.0, 0.0, 0.0, inf, -1.0
-            p3, gu3, gv3, e3, l3 = 0.0, 0.0, 0.0, inf, -1.0
-        a, gu, gv, found = interpolated(
-            p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3
-        )
-        ok = valid_row[u] & found
-        got[u] = ok
-        nx, ny, nz = unit_normal(z_row[u], a, gu, gv, u, o, fx, fy, cx, cy)
-        out_row[3 * u] = select(ok, nx, fill)
-        out_row[3 * u + 1] = select(ok, ny, fill)
-        out_row[3 * u + 2] = select(ok, nz, fill)
+            a, gu, gv, found = interpolated(
+                p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, 0.0, 0.0, 0.0, inf, -1.0, 0.0, 0.0, 0.0, inf, -1.0
+            )
+            got[u] = _put_normal(z_row, valid_row, u, o, a, gu, gv, found, fx, fy, cx, cy, fill, out_row)
     for u in range(W):  # the few without a plane yet: the other fitted pixels of the 5x5 neighbourhood
         if got[u] or not valid_row[u] or u % 2 == o % 2:  # fitted, or diagonal to the fitted ones: no others
             continue

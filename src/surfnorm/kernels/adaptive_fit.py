@@ -332,6 +332,13 @@ def _by_bin(xs, bins, nbins):
     return grouped, starts
 
 
+@ahead_of_time
+@njit
+def _median_abs(x):
+    """np.median(np.abs(x)) (the same value), without holding the GIL: another band's thread runs beside it."""
+    return np.median(np.abs(x))
+
+
 def _samples(z, valid, f):
     zmin, zmax = depth_range(z, valid)
     if not zmax > 0.0:
@@ -383,14 +390,15 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     n = xs.shape[1]
     if n < MIN_SAMPLES:
         return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
-    floor = float(np.median(np.abs(xs[0]))) / 0.6745
+    floor = _median_abs(xs[0]) / 0.6745
     ms = np.empty((3, N_BINS))
-    _clipped_rms(*_by_bin(xs, bins, N_BINS), _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
+    grouped, starts = _by_bin(xs, bins, N_BINS)
+    _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
     ms **= 2
     rho = np.sqrt(np.maximum(np.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
     edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)
     centres = np.sqrt(edges[:-1] * edges[1:])
-    ok = np.bincount(bins, minlength=N_BINS) >= MIN_SAMPLES
+    ok = np.diff(starts) >= MIN_SAMPLES
     if not ok.any():
         return NoiseProfile(centres, np.zeros(N_BINS), floor)
     return NoiseProfile(centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor)

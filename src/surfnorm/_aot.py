@@ -6,8 +6,8 @@ A Numba kernel is compiled on its first call (seconds to tens of seconds: about
 the kernels of the default method (``auto``: the validity map, the noise
 profile, ``d2nt_v3`` and ``adaptive_fit``) compiled ahead of time by Numba's
 AOT compiler (:mod:`surfnorm._aot_build`, run by ``setup.py``): an extension
-module per CPU level (x86-64 with AVX2 and FMA, and the baseline of the
-architecture) and an index of the exported signatures. At run time a kernel
+module per CPU level (x86-64 with AVX-512, with AVX2 and FMA, and the baseline
+of the architecture) and an index of the exported signatures. At run time a kernel
 decorated with :func:`ahead_of_time` runs the AOT code where the AOT module
 exports exactly the argument types of the call and was built from the same
 sources (a hash of the package's ``.py`` files in the index): no compilation
@@ -21,10 +21,12 @@ function calling the kernel's dispatcher, so the kernel and its callees are
 compiled with their own options: ``nogil``, ``error_model``, ``noalias``,
 ``fastmath`` contraction where set), code-generated for a fixed CPU level
 instead of the host's. Without fast-math reassociation a vector width does not
-change results, and the AVX2+FMA level is taken only where the host has FMA
-(as the JIT's host code then does), so both give the same bits (checked by
-``tests/test_aot.py`` and ``benchmarks/cold_start.py``). It may be slower than
-the host's JIT code where the host has more than the level (AVX-512).
+change results, and the AVX-512 and AVX2+FMA levels are taken only where the
+host has FMA (as the JIT's host code then does), so both give the same bits
+(checked by ``tests/test_aot.py`` and ``benchmarks/cold_start.py``). The level
+matters for speed: on an AMD Zen 5 host the AVX2 level's default method took
+1.3x the AVX-512 level's time (which is the JIT's), so AVX-512 hosts get their
+own level.
 
 ``SURFNORM_AOT=0`` in the environment switches the AOT code off (always the JIT); ``SURFNORM_AOT=<module>``
 (e.g. ``_aot_x86_64``, the baseline) takes that level whatever the host has (for tests).
@@ -48,10 +50,12 @@ __all__ = ["ahead_of_time", "Kernel", "jit_only", "available", "source_hash", "R
 PACKAGE = Path(__file__).resolve().parent
 #: The index the build writes beside the extension modules.
 INDEX = "_aot_index.json"
+_V3 = ("avx", "avx2", "bmi", "bmi2", "f16c", "fma", "lzcnt", "movbe")
 #: CPU levels, best first: (module name, LLVM CPU name, host features it needs). The last one needs nothing.
 LEVELS = {
     "x86_64": [
-        ("_aot_x86_64_v3", "x86-64-v3", ("avx", "avx2", "bmi", "bmi2", "f16c", "fma", "lzcnt", "movbe")),
+        ("_aot_x86_64_v4", "x86-64-v4", _V3 + ("avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl")),
+        ("_aot_x86_64_v3", "x86-64-v3", _V3),
         ("_aot_x86_64", "", ()),
     ],
 }

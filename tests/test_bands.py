@@ -209,3 +209,71 @@ def test_the_caller_runs_the_first_band_and_every_band_ends_before_an_error_is_r
     with pytest.raises(KeyError, match="band 0"):
         split_with_caller(first_fails, 2)
     assert 11 in ended
+
+
+def test_a_part_runs_once_on_whichever_thread_takes_it_first_and_its_owner_runs_it_if_nobody_did():
+    import threading
+
+    from surfnorm._bands import Offers, Part
+
+    calls = []
+    part = Part(lambda: calls.append(threading.get_ident()) or 42)
+    threads = [threading.Thread(target=part.take) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert part.result() == 42 and len(calls) == 1  # taken by one of the threads, not run again
+
+    alone = Part(lambda: 7)
+    assert alone.result() == 7  # nobody took it: run here
+
+    def fails():
+        raise ZeroDivisionError("in the part")
+
+    broken = Part(fails)
+    assert broken.take()
+    with pytest.raises(ZeroDivisionError, match="in the part"):  # raised where the result is asked for
+        broken.result()
+
+    offers = Offers()
+    offers.help()  # nobody measuring: returns at once (bands run one after another would wait for ever)
+    offers.open()
+    helped = []
+    helper = threading.Thread(target=lambda: (offers.help(), helped.append("returned")))
+    helper.start()
+    first = offers.offer(Part(lambda: threading.get_ident()))
+    assert first.result() == helper.ident or first.result() == threading.get_ident()
+    offers.close()
+    helper.join(timeout=5)
+    assert helped == ["returned"]  # help returns once the offers are closed
+
+
+def test_bands_waiting_for_the_noise_never_wait_for_ever_when_measuring_it_fails(monkeypatch):
+    """The band measuring the noise offers parts of it to the others (Offers); when it fails, the others still
+    return and the error reaches the caller, on every number of bands."""
+    import threading
+
+    from surfnorm.kernels import adaptive_fit as af
+
+    def broken(z, valid, f, offers=None):
+        raise RuntimeError("noise measurement failed")
+
+    monkeypatch.setattr(af, "noise_profile", broken)
+    rng = np.random.default_rng(0)
+    z = rng.uniform(1.0, 2.0, (120, 90)).astype(np.float32)
+    cam = Intrinsics(100.0, 100.0, 45.0, 60.0)
+    outcome = []
+
+    def run():
+        for workers in (2, 3):
+            try:
+                af.adaptive_fit(z, z > 0, cam, np.empty(z.shape + (3,), np.float32), bands=_bands.on_threads(workers))
+            except RuntimeError as exc:
+                outcome.append(str(exc))
+
+    t = threading.Thread(target=run)
+    t.start()
+    t.join(timeout=60)
+    assert not t.is_alive(), "a band waited for ever"
+    assert outcome == ["noise measurement failed"] * 2

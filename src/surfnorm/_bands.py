@@ -136,3 +136,76 @@ def on_threads(workers: int):
         return results
 
     return bands
+
+
+class Part:
+    """A piece of one band's work that a waiting band's thread may do instead (see :class:`Offers`): it runs
+    once, on the first thread that takes it; ``result`` runs it where nobody has, else waits for it."""
+
+    def __init__(self, func):
+        self._func = func
+        self._lock = threading.Lock()
+        self._taken = False
+        self._done = threading.Event()
+        self._value = None
+        self._error: BaseException | None = None
+
+    def take(self) -> bool:
+        """Run it here unless a thread has taken it already (False then)."""
+        with self._lock:
+            if self._taken:
+                return False
+            self._taken = True
+        try:
+            self._value = self._func()
+        except BaseException as exc:  # raised where the result is asked for
+            self._error = exc
+        finally:
+            self._done.set()
+        return True
+
+    def result(self):
+        if not self.take():
+            self._done.wait()
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
+class Offers:
+    """Parts that the band measuring something all bands need (the noise of a frame) hands to the bands waiting
+    for it: ``open`` when it starts measuring, ``offer`` parts meanwhile, ``close`` when done; a waiting band
+    calls ``help``, which returns once closed, or at once where nobody has started measuring (a ``bands`` that
+    runs the bands one after another: nobody else would). A part nobody took is run by its owner
+    (:meth:`Part.result`), so nothing ever waits for a thread that is not working on it."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._parts: list[Part] = []
+        self._open = False
+        self._closed = False
+
+    def open(self) -> None:
+        with self._cond:
+            self._open = True
+
+    def offer(self, part: Part) -> Part:
+        with self._cond:
+            self._parts.append(part)
+            self._cond.notify()
+        return part
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def help(self) -> None:
+        while True:
+            with self._cond:
+                while not self._parts and self._open and not self._closed:
+                    self._cond.wait()
+                if not self._parts:
+                    return
+                part = self._parts.pop(0)
+            part.take()

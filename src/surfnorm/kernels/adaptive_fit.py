@@ -83,7 +83,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._aot import ahead_of_time
-from .._bands import whole
+from .._bands import Offers, Part, whole
 from .._config import njit, pixel, select
 from ._spare import Spares
 
@@ -370,7 +370,7 @@ class NoiseProfile(NamedTuple):
     floor: float
 
 
-def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
+def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> NoiseProfile:
     """The frame's noise against depth (see :class:`NoiseProfile`).
 
     In each depth bin (log-spaced between the nearest and farthest valid depth),
@@ -385,12 +385,19 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     ``_NOISE_SAMPLES`` pixels). Bins with fewer than ``MIN_SAMPLES`` samples
     take the value of the nearest bins that have enough; with none, rho is 0
     (3x3 windows).
+
+    ``offers``: a :class:`surfnorm._bands.Offers` of the bands waiting for this profile, one of which may take
+    the floor's median while this thread sums the bins (the same value either way).
     """
     zmin, zmax, xs, bins = _samples(z, valid, f)
     n = xs.shape[1]
     if n < MIN_SAMPLES:
         return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
-    floor = _median_abs(xs[0]) / 0.6745
+    # The floor (a median) does not depend on the rest: another band's thread may take it (``offers``, see
+    # surfnorm._bands.Offers) while this one sums the bins.
+    median = Part(lambda: _median_abs(xs[0]))
+    if offers is not None:
+        offers.offer(median)
     ms = np.empty((3, N_BINS))
     grouped, starts = _by_bin(xs, bins, N_BINS)
     _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
@@ -399,9 +406,11 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float) -> NoiseProfile:
     edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)
     centres = np.sqrt(edges[:-1] * edges[1:])
     ok = np.diff(starts) >= MIN_SAMPLES
-    if not ok.any():
-        return NoiseProfile(centres, np.zeros(N_BINS), floor)
-    return NoiseProfile(centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor)
+    if ok.any():
+        rho = np.interp(np.log(centres), np.log(centres[ok]), rho[ok])
+    else:
+        rho = np.zeros(N_BINS)
+    return NoiseProfile(centres, rho, median.result() / 0.6745)
 
 
 #: Largest share of the valid pixels that are not fitted with ``stride`` 2 that may have no valid fitted pixel
@@ -1496,7 +1505,8 @@ def adaptive_fit(
         The frame's :func:`noise_profile` when the caller has it already, or a function that returns it
         (``Once.get``: measured by the first band that needs it). None: measured here. Either way, with
         several bands, the one on the calling thread measures it while the others make the integral rows
-        above their own rows, which do not depend on it.
+        above their own rows, which do not depend on it, and then take parts of its measuring
+        (:class:`surfnorm._bands.Offers`).
     use : callable, optional
         ``use(profile)``: False when the frame is not for this method after all (``auto`` on clean depth);
         then nothing is written and the result is None.
@@ -1515,11 +1525,20 @@ def adaptive_fit(
     stride = choose_stride(valid) if stride is None else stride
     H = z.shape[0]
 
+    # bands waiting for the noise take parts of its measuring (Offers.help) until it is done
+    offers = None if bands is whole else Offers()
+
     def measured():
-        if profile is None:
-            p = noise_profile(z, valid, f)
-        else:
-            p = profile() if callable(profile) else profile
+        if offers is not None:
+            offers.open()
+        try:
+            if profile is None:
+                p = noise_profile(z, valid, f, offers)
+            else:
+                p = profile() if callable(profile) else profile
+        finally:
+            if offers is not None:
+                offers.close()
         if use is not None and not use(p):
             return None
         return radius_table(p.depths, p.rho, alpha=alpha, window=window, max_window=max_window)
@@ -1544,6 +1563,8 @@ def adaptive_fit(
             made = prime(z, valid, ring, cols, pos, w_scratch, 0, upto // 2, first_read)
             if not (tables.done and tables.get() is None):
                 made = prime(z, valid, ring, cols, pos, w_scratch, made, upto, first_read)
+            if offers is not None and v0 > 0:
+                offers.help()
             got = tables.get()
             if got is None:
                 return False
@@ -1578,6 +1599,8 @@ def adaptive_fit(
             )
             return True
         finally:
+            if v0 == 0 and offers is not None:  # never leave the other bands waiting for it
+                offers.close()
             _rings.give(shape, (ring,))
             spent.append((v0, v1, time.perf_counter() - start))
 

@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from .adaptive_fit import NoiseProfile, Once, adaptive_fit, noise_profile
+from .adaptive_fit import NoiseProfile, adaptive_fit, noise_profile
 
 __all__ = ["auto", "choose", "adaptive_weight", "CLEAN_FLOOR", "NOISY_FLOOR"]
 
@@ -99,18 +99,22 @@ def auto(
     """
     from .d2nt_v3 import d2nt_v3
 
-    # Sensor depth first: adaptive_fit's bands make their integral rows while the calling thread measures the noise
-    # (Once: measured once, by the first band that needs it), and write nothing where the frame is not sensor depth.
-    profile = Once(lambda: noise_profile(z, valid, math.sqrt(cam.fx * cam.fy)))
-    sensor = adaptive_fit(
-        z, valid, cam, out, fill=fill, profile=profile.get, use=lambda p: adaptive_weight(p) == 1.0, **bands
-    )
+    # Sensor depth first: adaptive_fit's bands make their integral rows while the calling thread measures the noise,
+    # and write nothing where the frame is not sensor depth; ``use`` hands us the profile.
+    measured: list[NoiseProfile] = []
+
+    def sensor_depth(p: NoiseProfile) -> bool:
+        measured.append(p)
+        return adaptive_weight(p) == 1.0
+
+    sensor = adaptive_fit(z, valid, cam, out, fill=fill, use=sensor_depth, **bands)
     if sensor is not None:
         return sensor
-    t = adaptive_weight(profile.get())
+    profile = measured[0]
+    t = adaptive_weight(profile)
     d2nt_options = dict(dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", tie_tol=tie_tol, relative=relative, **bands)
     if t == 0.0:
         return d2nt_v3(z, valid, cam, out, fill=fill, **d2nt_options)
     a = d2nt_v3(z, valid, cam, np.empty_like(out), fill=np.nan, **d2nt_options)
-    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile.get(), **bands)
+    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile, **bands)
     return blend(a, b, t, fill, out)

@@ -382,8 +382,8 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
     """The profile given, measured here, or measured by the first band that needs it (while the others make
     the integral rows above their own) gives the same bits on one band and on several; ``use`` False writes
     nothing and returns None."""
-    from surfnorm._bands import on_threads
-    from surfnorm.kernels.adaptive_fit import Once, adaptive_fit, noise_profile
+    from surfnorm._bands import Part, on_threads
+    from surfnorm.kernels.adaptive_fit import adaptive_fit, noise_profile
 
     z, K = scene(4, H=120, W=96, holes=0.1)  # 120 rows: up to three bands of 40
     z = z.astype(np.float32)
@@ -392,7 +392,7 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
     f = np.sqrt(cam.fx * cam.fy)
     ref = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32))
     for bands in (on_threads(1), on_threads(2), on_threads(3)):
-        for profile in (None, noise_profile(z, valid, f), Once(lambda: noise_profile(z, valid, f)).get):
+        for profile in (None, noise_profile(z, valid, f), Part(lambda: noise_profile(z, valid, f)).result):
             got = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), profile=profile, bands=bands)
             np.testing.assert_array_equal(got, ref)
         out = np.full(z.shape + (3,), 7.0, np.float32)

@@ -139,8 +139,10 @@ def on_threads(workers: int):
 
 
 class Part:
-    """A piece of one band's work that a waiting band's thread may do instead (see :class:`Offers`): it runs
-    once, on the first thread that takes it; ``result`` runs it where nobody has, else waits for it."""
+    """A value that the bands of one frame need, made once, by the first thread that takes it (``take``, or
+    ``result``, which makes it where nobody has and else waits for it), so that a waiting band's thread may do
+    a piece of another band's work (see :class:`Offers`). An error is raised to every thread that asks for the
+    result. ``done``: made already (``result`` then returns at once)."""
 
     def __init__(self, func):
         self._func = func
@@ -163,6 +165,10 @@ class Part:
         finally:
             self._done.set()
         return True
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
 
     def result(self):
         if not self.take():

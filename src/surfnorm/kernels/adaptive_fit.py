@@ -1440,28 +1440,6 @@ def _adaptive_fit_kernel(
             _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)
 
 
-class Once:
-    """A value made by the first thread that asks for it (``get``); a thread asking meanwhile waits for it.
-    ``done``: made already (``get`` then returns at once)."""
-
-    def __init__(self, make):
-        self._make = make
-        self._lock = threading.Lock()
-        self._made = False
-        self._value = None
-
-    @property
-    def done(self) -> bool:
-        return self._made
-
-    def get(self):
-        with self._lock:
-            if not self._made:
-                self._value = self._make()
-                self._made = True
-        return self._value
-
-
 def adaptive_fit(
     z: np.ndarray,
     valid: np.ndarray,
@@ -1503,7 +1481,7 @@ def adaptive_fit(
         Value of pixels without a normal.
     profile : NoiseProfile, callable or None
         The frame's :func:`noise_profile` when the caller has it already, or a function that returns it
-        (``Once.get``: measured by the first band that needs it). None: measured here. Either way, with
+        (``Part.result``: measured by the first band that needs it). None: measured here. Either way, with
         several bands, the one on the calling thread measures it while the others make the integral rows
         above their own rows, which do not depend on it, and then take parts of its measuring
         (:class:`surfnorm._bands.Offers`).
@@ -1543,7 +1521,7 @@ def adaptive_fit(
             return None
         return radius_table(p.depths, p.rho, alpha=alpha, window=window, max_window=max_window)
 
-    tables = Once(measured)
+    tables = Part(measured)
     shape = (4 * r_max + 3, _N_MOMENTS, z.shape[1] + 1)
 
     spent: list = []
@@ -1553,7 +1531,7 @@ def adaptive_fit(
         ring = kept[0] if kept is not None else np.empty(shape)
         try:
             if v0 == 0:  # the calling thread's band (bands on threads) measures the noise first
-                tables.get()
+                tables.result()
             # in two halves, so that a band stops early where the frame turns out not to be for this method (use)
             v_first = first_fitted_row(v0, stride)
             upto = min(H, v_first + 2 * r_max + 1)
@@ -1561,11 +1539,11 @@ def adaptive_fit(
             pos, w_scratch = integral_positions(z.shape[1], stride), np.empty(z.shape[1])
             cols = np.empty((_N_COLUMNS, z.shape[1]))
             made = prime(z, valid, ring, cols, pos, w_scratch, 0, upto // 2, first_read)
-            if not (tables.done and tables.get() is None):
+            if not (tables.done and tables.result() is None):
                 made = prime(z, valid, ring, cols, pos, w_scratch, made, upto, first_read)
             if offers is not None and v0 > 0:
                 offers.help()
-            got = tables.get()
+            got = tables.result()
             if got is None:
                 return False
             z0, inv_step, r_table, rho_table = got

@@ -401,16 +401,39 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     ms = np.empty((3, N_BINS))
     grouped, starts = _by_bin(xs, bins, N_BINS)
     _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
-    ms **= 2
-    rho = np.sqrt(np.maximum(np.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
-    edges = np.geomspace(zmin, zmax, N_BINS + 1) if zmax > zmin else np.full(N_BINS + 1, zmin)
-    centres = np.sqrt(edges[:-1] * edges[1:])
-    ok = np.diff(starts) >= MIN_SAMPLES
-    if ok.any():
-        rho = np.interp(np.log(centres), np.log(centres[ok]), rho[ok])
-    else:
-        rho = np.zeros(N_BINS)
+    centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
     return NoiseProfile(centres, rho, median.result() / 0.6745)
+
+
+@ahead_of_time
+@njit
+def _by_depth(rms, starts, zmin, zmax, min_samples):
+    """The bins' centres and rho (see :func:`noise_profile`) from the clipped RMS ``rms`` (3, nbins) of the second
+    differences at strides 1, 2 and 4 and the bins' ``starts`` (nbins + 1): the centres are the geometric means of
+    log-spaced edges (np.geomspace's arithmetic), and a bin with fewer than ``min_samples`` samples takes rho
+    interpolated in log depth between the nearest that have enough (0 everywhere without any)."""
+    nbins = rms.shape[1]
+    rho = np.empty(nbins)
+    for b in range(nbins):
+        m0, m1, m2 = rms[0, b] * rms[0, b], rms[1, b] * rms[1, b], rms[2, b] * rms[2, b]
+        rho[b] = math.sqrt(max(max(16.0 * m0 - m1, 16.0 * m1 - m2), 0.0) / 15.0)
+    edges = np.full(nbins + 1, zmin)
+    if zmax > zmin:
+        lo, hi = math.log10(zmin), math.log10(zmax)
+        step = (hi - lo) / nbins
+        for i in range(1, nbins):
+            edges[i] = 10.0 ** (i * step + lo)
+        edges[nbins] = zmax
+    centres = np.empty(nbins)
+    for b in range(nbins):
+        centres[b] = math.sqrt(edges[b] * edges[b + 1])
+    ok = np.empty(nbins, np.bool_)
+    for b in range(nbins):
+        ok[b] = starts[b + 1] - starts[b] >= min_samples
+    if not ok.any():
+        return centres, np.zeros(nbins)
+    log_c = np.log(centres)
+    return centres, np.interp(log_c, log_c[ok], rho[ok])
 
 
 #: Largest share of the valid pixels that are not fitted with ``stride`` 2 that may have no valid fitted pixel
@@ -562,16 +585,46 @@ def radius_table(
     holds the radius r = ceil(alpha sqrt(rho)) (or ``(window - 1) / 2``) and rho
     interpolated in log depth.
     """
-    z0, z1 = float(depths[0]), float(depths[-1])
-    zs = np.linspace(z0, z1, _TABLE) if z1 > z0 else np.full(_TABLE, z0)
-    rho_t = np.interp(np.log(zs), np.log(depths), rho) if z1 > z0 else np.full(_TABLE, rho[0])
     r_max = (max_window - 1) // 2
-    if window is None:
-        r_t = allowed_radii(np.clip(np.ceil(alpha * np.sqrt(rho_t)), 1, r_max), r_max)
+    fixed = -1 if window is None else (window - 1) // 2
+    return _radius_table(
+        np.asarray(depths, np.float64), np.asarray(rho, np.float64), float(alpha), fixed, r_max, np.asarray(RADII)
+    )
+
+
+@ahead_of_time
+@njit
+def _radius_table(depths, rho, alpha, fixed, r_max, ladder):
+    """:func:`radius_table`, ``fixed``: the radius everywhere, or -1 (from rho); ``ladder``: RADII."""
+    z0, z1 = depths[0], depths[-1]
+    n = _TABLE
+    if z1 > z0:
+        step = (z1 - z0) / (n - 1)  # np.linspace's arithmetic
+        zs = np.empty(n)
+        for i in range(n):
+            zs[i] = i * step + z0
+        zs[n - 1] = z1
+        rho_t = np.interp(np.log(zs), np.log(depths), rho)
+        inv_step = (n - 1) / (z1 - z0)
     else:
-        r_t = np.full(_TABLE, (window - 1) // 2, np.int64)
-    inv_step = (_TABLE - 1) / (z1 - z0) if z1 > z0 else 0.0
-    return z0, inv_step, r_t, rho_t.astype(np.float64)
+        rho_t = np.full(n, rho[0])
+        inv_step = 0.0
+    r_t = np.empty(n, np.int64)
+    for i in range(n):
+        if fixed >= 0:
+            r_t[i] = fixed
+        else:
+            r_t[i] = _allowed_radius(min(max(np.ceil(alpha * math.sqrt(rho_t[i])), 1.0), float(r_max)), r_max, ladder)
+    return z0, inv_step, r_t, rho_t
+
+
+@pixel
+def _allowed_radius(r, r_max, ladder):
+    """The smallest radius of ``ladder`` (RADII) that is at least r, at most r_max."""
+    for k in range(ladder.shape[0]):
+        if ladder[k] >= r:
+            return min(ladder[k], r_max)
+    return r_max
 
 
 def allowed_radii(r: np.ndarray, r_max: int) -> np.ndarray:

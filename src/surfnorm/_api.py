@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from ._bands import map_threads, on_threads, whole
+from ._bands import CORES, map_threads, on_threads, whole
 from ._choices import DLF_NAMES
 from ._validate import (
     as_depth,
@@ -97,7 +95,7 @@ def _valid(z, mask, bands=whole):
 
 
 def _workers(threads) -> int:
-    workers = threads if threads is not None else (os.cpu_count() or 1)
+    workers = threads if threads is not None else CORES
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise InputError(f"threads: expected a positive integer, got {threads!r}")
     return workers

@@ -31,6 +31,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+#: Logical cores, read once (``os.cpu_count`` reads a file of the system each time: 5 us, twice a call).
+CORES = os.cpu_count() or 1
+
 #: Fewest rows in a band: a band costs a task on the thread pool (tens of microseconds) and the
 #: rows that a rolling-buffer kernel primes; below this a frame stays on fewer threads.
 MIN_ROWS = 32
@@ -55,7 +58,7 @@ if hasattr(os, "register_at_fork"):
 
 def map_threads(func, n: int, workers: int) -> None:
     """``func(i)`` for i in range(n) on ``workers`` threads; the first exception is raised here."""
-    if workers > (os.cpu_count() or 1):
+    if workers > CORES:
         with ThreadPoolExecutor(max_workers=workers) as pool:
             list(pool.map(func, range(n)))
         return
@@ -70,7 +73,7 @@ def split_with_caller(func, n: int) -> None:
     """``func(i)`` for i in range(n): i = 0 on the calling thread, the others on a kept pool of n - 1 threads at the
     same time (the caller's caches already hold the frame, and one thread fewer is woken); every call has ended
     when this returns, and the first exception (in the order of i) is raised here."""
-    if n - 1 > (os.cpu_count() or 1):
+    if n - 1 > CORES:
         map_threads(func, n, n)
         return
     with _pools_lock:

@@ -142,6 +142,9 @@ import math
 
 import numpy as np
 
+from ._aot import ahead_of_time
+from ._config import njit
+
 __all__ = [
     "REFERENCE_DEPTH",
     "TIE_TOLERANCE",
@@ -174,16 +177,28 @@ def range_exponent(z: np.ndarray) -> int:
     values of the frame ``z`` (float32, C-contiguous) has a median outside [2^-20, 2^20]. Cheap: at most
     about 1024 values are read, and the median is taken only when some of them lie outside."""
     flat = z.reshape(-1)
-    sample = flat[:: max(1, flat.size // _SAMPLES)]
+    step = max(1, flat.size // _SAMPLES)
+    lo, hi = 2.0**-SAFE_EXPONENT, 2.0**SAFE_EXPONENT
+    if _inside(flat, step, lo, hi):  # the usual case, in one pass
+        return 0
+    sample = flat[::step]
     with np.errstate(invalid="ignore"):
         sample = sample[(sample > 0) & (sample < np.inf)]
     if sample.size == 0:
         return 0
-    lo, hi = 2.0**-SAFE_EXPONENT, 2.0**SAFE_EXPONENT
-    if sample.min() >= lo and sample.max() <= hi:
-        return 0
     m = float(np.median(sample.astype(np.float64)))
     return 0 if lo <= m <= hi else power_of_two_exponent(m)
+
+
+@ahead_of_time
+@njit(noalias=True, _nrt=False)
+def _inside(flat, step, lo, hi):
+    """True when every valid (finite, positive) value of flat[::step] lies in [lo, hi], or none is valid."""
+    for i in range(0, flat.shape[0], step):
+        x = flat[i]
+        if x > 0 and x < np.inf and not (lo <= x <= hi):
+            return False
+    return True
 
 
 def scaled_frame(src: np.ndarray, k: int) -> np.ndarray:

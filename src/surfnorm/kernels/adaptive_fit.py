@@ -488,16 +488,36 @@ def _unreached(valid):
 
 @ahead_of_time
 @njit
-def _row_counts(valid):
-    """The valid pixels of each row (float64; NumPy's count along rows takes five times as long)."""
-    counts = np.zeros(valid.shape[0])
-    for v in range(valid.shape[0]):
+def _band_weights(valid, stride, factors):
+    """Each row's cost on several threads (see :func:`adaptive_fit`): a quarter of the width, plus its valid
+    pixels over ``stride`` on the fitted rows (every ``stride``-th), times its ``factors`` (:class:`Balance`)."""
+    H, W = valid.shape
+    weights = np.empty(H)
+    for v in range(H):
         n = 0
-        row = valid[v]
-        for u in range(row.shape[0]):
-            n += row[u]
-        counts[v] = n
-    return counts
+        if v % stride == 0:
+            row = valid[v]
+            for u in range(W):
+                n += row[u]
+        weights[v] = (0.25 * W + n / stride) * factors[v]
+    return weights
+
+
+@ahead_of_time
+@njit
+def _balanced(factors, weights, edges, spent):
+    """:meth:`Balance.learn`'s arithmetic, in place on ``factors``: band k (rows edges[k] .. edges[k + 1] - 1)
+    took ``spent[k]`` seconds."""
+    total = spent.sum() / max(weights.sum(), 1e-300)
+    for k in range(spent.shape[0]):
+        w = weights[edges[k] : edges[k + 1]].sum()
+        if w > 0.0 and spent[k] > 0.0:
+            step = math.sqrt(spent[k] / w / total)
+            for v in range(edges[k], edges[k + 1]):
+                factors[v] *= step
+    mean = factors.mean()
+    for v in range(factors.shape[0]):
+        factors[v] = min(max(factors[v] / mean, 0.25), 4.0)
 
 
 def choose_stride(valid: np.ndarray) -> int:
@@ -551,13 +571,9 @@ class Balance:
             return
         old = self.factors(key)
         factors = np.ones(weights.shape[0]) if old is None else old.copy()
-        total = sum(t for _, _, t in spent) / max(float(weights.sum()), 1e-300)
-        for v0, v1, t in spent:
-            w = float(weights[v0:v1].sum())
-            if w > 0.0 and t > 0.0:
-                factors[v0:v1] *= math.sqrt(t / w / total)
-        factors /= factors.mean()
-        np.clip(factors, 0.25, 4.0, out=factors)
+        spent = sorted(spent)
+        edges = np.array([v0 for v0, _, _ in spent] + [spent[-1][1]], np.int64)
+        _balanced(factors, weights, edges, np.array([t for _, _, t in spent]))
         with self._lock:
             self._factors.pop(key, None)
             if len(self._factors) >= self.KEEP:
@@ -1642,11 +1658,9 @@ def adaptive_fit(
     if bands is whole:
         weights = None
     else:
-        weights = 0.25 * z.shape[1] + _row_counts(valid) / stride * (np.arange(H) % stride == 0)
         key = (z.shape, stride, max_window, window)
         factors = _balance.factors(key)
-        if factors is not None:
-            weights = weights * factors
+        weights = _band_weights(valid, stride, np.ones(H) if factors is None else factors)
     start = time.perf_counter()
     done = bands(rows, H, weights=weights)
     if weights is not None and all(done):

@@ -249,6 +249,42 @@ def test_a_part_runs_once_on_whichever_thread_takes_it_first_and_its_owner_runs_
     assert helped == ["returned"]  # help returns once the offers are closed
 
 
+def test_a_finished_part_runs_nowhere_after_finish_returns():
+    """``finish``: a part that nobody took is given up (never run); one that runs elsewhere is waited for (the
+    calling band gives its ring back only then)."""
+    import threading
+
+    from surfnorm._bands import Part
+
+    calls = []
+    idle = Part(lambda: calls.append("ran"))
+    idle.finish()
+    assert not idle.take() and calls == []  # given up: nobody runs it any more
+    with pytest.raises(RuntimeError, match="given up"):
+        idle.result()
+
+    release, started, ended = threading.Event(), threading.Event(), []
+
+    def slow():
+        started.set()
+        release.wait(5)
+        ended.append("end")
+
+    busy = Part(slow)
+    runner = threading.Thread(target=busy.take)
+    runner.start()
+    assert started.wait(5)
+    finished = []
+    waiter = threading.Thread(target=lambda: (busy.finish(), finished.append(list(ended))))
+    waiter.start()
+    waiter.join(timeout=0.2)
+    assert waiter.is_alive() and finished == []  # still running elsewhere: finish waits
+    release.set()
+    waiter.join(timeout=5)
+    runner.join(timeout=5)
+    assert finished == [["end"]]  # returned only after the part's end
+
+
 def test_bands_waiting_for_the_noise_never_wait_for_ever_when_measuring_it_fails(monkeypatch):
     """The band measuring the noise offers parts of it to the others (Offers); when it fails, the others still
     return and the error reaches the caller, on every number of bands."""

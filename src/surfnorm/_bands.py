@@ -169,6 +169,17 @@ class Part:
             self._done.set()
         return True
 
+    def finish(self) -> None:
+        """Return once nobody runs it: where nobody has taken it, it is taken without being run (``result`` then
+        raises); else this waits for its end."""
+        with self._lock:
+            if not self._taken:
+                self._taken = True
+                self._error = RuntimeError("a part given up before anybody ran it")
+                self._done.set()
+                return
+        self._done.wait()
+
     @property
     def done(self) -> bool:
         return self._done.is_set()

@@ -1552,8 +1552,8 @@ def adaptive_fit(
         The frame's :func:`noise_profile` when the caller has it already, or a function that returns it
         (``Part.result``: measured by the first band that needs it). None: measured here. Either way, with
         several bands, the one on the calling thread measures it while the others make the integral rows
-        above their own rows, which do not depend on it, and then take parts of its measuring
-        (:class:`surfnorm._bands.Offers`).
+        above their own rows, which do not depend on it, and then take the calling band's first integral rows
+        and parts of its measuring (:class:`surfnorm._bands.Offers`).
     use : callable, optional
         ``use(profile)``: False when the frame is not for this method after all (``auto`` on clean depth);
         then nothing is written and the result is None.
@@ -1598,20 +1598,32 @@ def adaptive_fit(
     def rows(v0, v1):
         kept = _rings.take(shape)
         ring = kept[0] if kept is not None else np.empty(shape)
+        primed = None
         try:
-            if v0 == 0:  # the calling thread's band (bands on threads) measures the noise first
-                tables.result()
-            # in two halves, so that a band stops early where the frame turns out not to be for this method (use)
             v_first = first_fitted_row(v0, stride)
             upto = min(H, v_first + 2 * r_max + 1)
             first_read = v_first - 2 * r_max  # the first integral row that the band's windows read
             pos, w_scratch = integral_positions(z.shape[1], stride), np.empty(z.shape[1])
             cols = np.empty((_N_COLUMNS, z.shape[1]))
-            made = prime(z, valid, ring, cols, pos, w_scratch, 0, upto // 2, first_read)
-            if not (tables.done and tables.result() is None):
-                made = prime(z, valid, ring, cols, pos, w_scratch, made, upto, first_read)
-            if offers is not None and v0 > 0:
-                offers.help()
+
+            def primer():
+                # in two halves, so that a band stops early where the frame turns out not to be for this method
+                made = prime(z, valid, ring, cols, pos, w_scratch, 0, upto // 2, first_read)
+                if not (tables.done and tables.result() is None):
+                    made = prime(z, valid, ring, cols, pos, w_scratch, made, upto, first_read)
+                return made
+
+            if v0 > 0:
+                made = primer()
+                if offers is not None:
+                    offers.help()
+            elif offers is None:
+                tables.result()
+                made = primer()
+            else:  # the calling thread's band measures the noise; a waiting band may make its first integral rows
+                primed = offers.offer(Part(primer))
+                tables.result()
+                made = primed.result()
             got = tables.result()
             if got is None:
                 return False
@@ -1648,6 +1660,8 @@ def adaptive_fit(
         finally:
             if v0 == 0 and offers is not None:  # never leave the other bands waiting for it
                 offers.close()
+            if primed is not None:
+                primed.finish()  # nobody writes the ring once it is given back
             _rings.give(shape, (ring,))
             spent.append((v0, v1, time.perf_counter() - start))
 

@@ -204,3 +204,20 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
             nvec = np.array([fx * gu, fy * gv, a - gu * (u - cx) - gv * (v - cy)])
             out[v, u] = -nvec / np.linalg.norm(nvec)
     return out
+
+
+def blend(a, b, t, fill):
+    """auto's blend, pixel by pixel in float32: the unit normal along (1 - t) a + t b where both have a normal (a NaN
+    x component: none), the one that has one, the one of larger weight where the two cancel, else fill."""
+    out = np.empty(a.shape, np.float32)
+    wa, wb = np.float32(1.0 - t), np.float32(t)
+    for idx in np.ndindex(a.shape[:-1]):
+        pa, pb = a[idx], b[idx]
+        has_a, has_b = not np.isnan(pa[0]), not np.isnan(pb[0])
+        if not (has_a or has_b):
+            out[idx] = fill
+            continue
+        m = wa * pa + wb * pb if has_a and has_b else (pa if has_a else pb)
+        norm = np.float32(np.sqrt(np.float32(np.float32(m[0] * m[0] + m[1] * m[1]) + m[2] * m[2])))
+        out[idx] = (pb if t >= 0.5 else pa) if norm < 1e-6 else m / norm
+    return out

@@ -6,8 +6,8 @@ extension module per CPU level of this architecture and ``_aot_index.json``
 into the package directory (default: this package's). Needs a C compiler
 (Numba's ``pycc`` links its own small runtime) and takes a few minutes.
 
-Steps: the default method is run by the JIT on small frames (clean and noisy
-depth, with a mask, on two threads, scale-invariant) so that every kernel
+Steps: the default method is run by the JIT on small frames (clean depth, noisy
+depth and depth between the two, with a mask, on two threads, scale-invariant) so that every kernel
 decorated with :func:`surfnorm._aot.ahead_of_time` is compiled for exactly the
 argument types that ``surfnorm.estimate`` passes it; each such signature is
 exported through a one-line function that calls the kernel, so that Numba
@@ -38,9 +38,11 @@ def _warm_up():
     v, u = np.mgrid[0:h, 0:w]
     clean = (2.0 + 0.004 * u + 0.002 * v).astype(np.float32)
     noisy = clean + np.random.default_rng(0).normal(0.0, 0.01, clean.shape).astype(np.float32)
+    # a noise floor between auto's two: both estimators and their blend
+    between = clean + np.random.default_rng(0).normal(0.0, 0.004, clean.shape).astype(np.float32)
     K = [[90.0, 0, 47.5], [0, 90.0, 39.5], [0, 0, 1]]
     with jit_only():
-        for z in (clean, noisy):
+        for z in (clean, between, noisy):
             z[5, 7] = 0.0
             for kwargs in (
                 {},

@@ -34,6 +34,8 @@ import math
 
 import numpy as np
 
+from .._aot import ahead_of_time
+from .._config import njit
 from .adaptive_fit import NoiseProfile, adaptive_fit, noise_profile
 
 __all__ = ["auto", "choose", "adaptive_weight", "CLEAN_FLOOR", "NOISY_FLOOR"]
@@ -66,14 +68,42 @@ def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray) 
     Where only one has a normal, that one; where neither, ``fill``. Where the two point in opposite
     directions (the mean vanishes), the one with the larger weight.
     """
-    have_a, have_b = ~np.isnan(a[..., 0]), ~np.isnan(b[..., 0])
-    m = (1.0 - t) * np.nan_to_num(a, nan=0.0) + t * np.nan_to_num(b, nan=0.0)
-    m = np.where((have_a & ~have_b)[..., None], a, np.where((have_b & ~have_a)[..., None], b, m))
-    norm = np.linalg.norm(m, axis=-1, keepdims=True)
-    cancelled = norm[..., 0] < 1e-6
-    m = np.where(cancelled[..., None], b if t >= 0.5 else a, m / np.where(cancelled[..., None], 1.0, norm))
-    out[...] = np.where((have_a | have_b)[..., None], m, np.float32(fill))
+    _blend(
+        a.reshape(-1, 3),
+        b.reshape(-1, 3),
+        np.float32(1.0 - t),
+        np.float32(t),
+        t >= 0.5,
+        np.float32(fill),
+        out.reshape(-1, 3),
+    )
     return out
+
+
+@ahead_of_time
+@njit(noalias=True, _nrt=False)
+def _blend(a, b, wa, wb, b_wins, fill, out):
+    """:func:`blend` pixel by pixel, in float32 (``wa`` = 1 - t and ``wb`` = t rounded to float32; ``b_wins``: t >= 0.5)."""
+    for i in range(a.shape[0]):
+        have_a = not np.isnan(a[i, 0])
+        have_b = not np.isnan(b[i, 0])
+        if not (have_a or have_b):
+            out[i, 0] = out[i, 1] = out[i, 2] = fill
+            continue
+        if have_a and have_b:
+            m0 = wa * a[i, 0] + wb * b[i, 0]
+            m1 = wa * a[i, 1] + wb * b[i, 1]
+            m2 = wa * a[i, 2] + wb * b[i, 2]
+        elif have_a:
+            m0, m1, m2 = a[i, 0], a[i, 1], a[i, 2]
+        else:
+            m0, m1, m2 = b[i, 0], b[i, 1], b[i, 2]
+        norm = np.float32(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2))
+        if norm < 1e-6:  # opposite directions: the one with the larger weight
+            src = b if b_wins else a
+            out[i, 0], out[i, 1], out[i, 2] = src[i, 0], src[i, 1], src[i, 2]
+        else:
+            out[i, 0], out[i, 1], out[i, 2] = m0 / norm, m1 / norm, m2 / norm
 
 
 def auto(

@@ -68,6 +68,28 @@ def test_matches_naive_reference(seed, stride):
     assert agree.mean() >= 0.995, f"{(~agree).sum()} of {both.sum()} pixels differ"
 
 
+@pytest.mark.parametrize("stride", [1, 2])
+@pytest.mark.parametrize("seed", range(3))
+def test_rows_without_depth_match_naive_reference(seed, stride):
+    """Rows without a valid pixel (a LiDAR frame's upper part, gaps between its scan bands) add nothing to the
+    integral rows and have no fits; the rows around them still fit across them, as in the naive reference, and
+    on two threads to the bit."""
+    z, K = scene(seed, H=64, holes=0.05)
+    z[:12] = 0.0  # the upper rows
+    z[30:33] = 0.0  # a gap of three rows: fitted and other rows at either stride
+    z[45] = 0.0
+    got = surfnorm.estimate(z, K, method="adaptive_fit", stride=stride, threads=1)
+    ref = naive.adaptive_fit(z, K, stride=stride)
+    assert not got[:12].any() and not got[30:33].any() and not got[45].any()
+    has_got = np.any(got != 0, axis=-1)
+    has_ref = np.any(ref != 0, axis=-1)
+    assert (has_got == has_ref).mean() >= 0.995
+    both = has_got & has_ref
+    agree = angles_deg(got[both], ref[both]) < 1e-3
+    assert agree.mean() >= 0.995, f"{(~agree).sum()} of {both.sum()} pixels differ"
+    assert np.array_equal(surfnorm.estimate(z, K, method="adaptive_fit", stride=stride, threads=2), got)
+
+
 @pytest.mark.parametrize("seed", range(8))
 @pytest.mark.parametrize("quantum", [0.0, 0.001])
 def test_planes_any_orientation_and_distance(seed, quantum):

@@ -1197,6 +1197,50 @@ def _emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, ou
     )
 
 
+@njit(noalias=True, _nrt=False)
+def _row_done(
+    z,
+    valid,
+    v,
+    v0,
+    v1,
+    stride,
+    v_first,
+    valid_row,
+    a,
+    g_u,
+    g_v,
+    dof,
+    limit,
+    ok_row,
+    fitted,
+    none,
+    cam,
+    fill,
+    got,
+    out_flat,
+):
+    """Fitted row v's planes (a, g_u, g_v where valid_row and dof > 0) into the ring ``fitted``, then the normals
+    of the band's rows (``v0`` .. ``v1`` - 1) whose planes are all known now: row v (stride 1), or the two
+    before it (stride 2; :func:`_emit_row`)."""
+    W = z.shape[1]
+    reach = stride - 1
+    rows = fitted[(v // stride) % 3]
+    for i in range(ok_row.shape[0]):
+        ok_row[i] = select(valid_row[i] & (dof[i] > 0.0), 1.0, 0.0)
+    if stride == 1:
+        for u in range(W):
+            rows[0, u] = a[u]
+            rows[1, u] = g_u[u]
+            rows[2, u] = g_v[u]
+            rows[3, u] = ok_row[u]
+    else:
+        expand_row(a, g_u, g_v, ok_row, limit, rows)
+    for o in range(v - 2 * reach, v + 1 - reach):
+        if v0 <= o < v1:
+            _emit_row(z, valid, o, stride, fitted, v_first, v, none, cam, fill, got, out_flat)
+
+
 @pixel
 def first_fitted_row(v0, stride):
     """The first fitted row that the band starting at row v0 reads: every stride-th row of the frame, with stride 2
@@ -1211,17 +1255,30 @@ def make_rows(z, valid, ring, cols, pos, w_scratch, made, upto, first_read):
     :func:`integral_row`; column sums ``cols``, columns at ``pos``, scratch ``w_scratch`` (W,)), those before
     ``first_read`` as column sums only (:func:`column_row`: a band's rows above the ones it reads); row 0,
     zeros, and ``cols`` zeroed where ``made`` is 0. Returns upto."""
-    H = z.shape[0]
+    H, W = z.shape
     L = ring.shape[0]
     if made == 0:
         ring[0, :, :] = 0.0
         cols[:, :] = 0.0
     for i in range(made + 1, upto + 1):
         y = i - 1 - 0.5 * H
-        if i < first_read:
-            column_row(z[i - 1], valid[i - 1], y, w_scratch, cols)
+        row = valid[i - 1]
+        n = 0
+        for u in range(W):
+            n += row[u]
+        if n == 0 and (i - 1 >= first_read or i == 1):
+            # an image row without valid pixels (a LiDAR frame's upper rows) adds nothing: the integral row
+            # before, already in the ring, again (the same bits as summing the unchanged columns)
+            src = ring[(i - 1) % L]
+            dst = ring[i % L]
+            for c in range(src.shape[0]):
+                for u in range(src.shape[1]):
+                    dst[c, u] = src[c, u]
+        elif i < first_read:
+            if n > 0:
+                column_row(z[i - 1], row, y, w_scratch, cols)
         else:
-            integral_row(z[i - 1], valid[i - 1], y, pos, w_scratch, cols, ring[i % L])
+            integral_row(z[i - 1], row, y, pos, w_scratch, cols, ring[i % L])
     return upto
 
 
@@ -1335,9 +1392,35 @@ def _adaptive_fit_kernel(
         if made < min(H, v + 2 * r_max + 1):  # the integral rows of this row's windows (``made``: the last one)
             made = make_rows(z, valid, ring, cols, pos, w_scratch, made, min(H, v + 2 * r_max + 1), 0)
         y = v - 0.5 * H
+        any_valid = False
         for i in range(n_fit):
             z_row[i] = z[v, stride * i]
             valid_row[i] = valid[v, stride * i]
+            any_valid |= valid_row[i]
+        if not any_valid:  # no fits (a LiDAR frame's upper rows): valid_row alone gives the fill and no planes
+            _row_done(
+                z,
+                valid,
+                v,
+                v0,
+                v1,
+                stride,
+                v_first,
+                valid_row,
+                a,
+                g_u,
+                g_v,
+                dof,
+                limit,
+                ok_row,
+                fitted,
+                none,
+                cam,
+                fill,
+                got,
+                out_flat,
+            )
+            continue
         # Each pixel's radius from its depth; then window sums radius by radius, growing the
         # radius where too few of the window's pixels are valid (sparse depth).
         present[:] = False
@@ -1490,20 +1573,28 @@ def _adaptive_fit_kernel(
                     g_v[i] = gv_k
                     a[i] = a_p
                     dof[i] = dof_k
-        rows = fitted[(v // stride) % 3]
-        for i in range(n_fit):
-            ok_row[i] = select(valid_row[i] & (dof[i] > 0.0), 1.0, 0.0)
-        if stride == 1:
-            rows[0, :W] = a
-            rows[1, :W] = g_u
-            rows[2, :W] = g_v
-            rows[3, :W] = ok_row
-        else:
-            expand_row(a, g_u, g_v, ok_row, limit, rows)
-        # the rows whose planes are all known now: this one (stride 1), or the two before it (stride 2)
-        for o in range(v - 2 * reach, v + 1 - reach):
-            if v0 <= o < v1:
-                _emit_row(z, valid, o, stride, fitted, v_first, v, none, cam, fill, got, out_flat)
+        _row_done(
+            z,
+            valid,
+            v,
+            v0,
+            v1,
+            stride,
+            v_first,
+            valid_row,
+            a,
+            g_u,
+            g_v,
+            dof,
+            limit,
+            ok_row,
+            fitted,
+            none,
+            cam,
+            fill,
+            got,
+            out_flat,
+        )
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:
             _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)

@@ -644,10 +644,11 @@ def _allowed_radius(r, r_max, ladder):
 
 
 def allowed_radii(r: np.ndarray, r_max: int) -> np.ndarray:
-    """For each r, the smallest radius of ``RADII`` that is at least r, at most r_max (int64)."""
+    """For each r, the smallest radius of ``RADII`` that is at least r, at most r_max (int64): :func:`_allowed_radius`
+    element by element (for the small tables of :func:`_tables`)."""
     ladder = np.asarray(RADII)
-    at = np.minimum(np.searchsorted(ladder, r, side="left"), ladder.size - 1)
-    return np.minimum(np.where(ladder[at] >= r, ladder[at], r_max), r_max).astype(np.int64)
+    r = np.asarray(r, np.float64)
+    return np.array([_allowed_radius(x, r_max, ladder) for x in r.ravel()], np.int64).reshape(r.shape)
 
 
 @functools.lru_cache(maxsize=None)
@@ -1198,31 +1199,12 @@ def _emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, ou
 
 
 @njit(noalias=True, _nrt=False)
-def _row_done(
-    z,
-    valid,
-    v,
-    v0,
-    v1,
-    stride,
-    v_first,
-    valid_row,
-    a,
-    g_u,
-    g_v,
-    dof,
-    limit,
-    ok_row,
-    fitted,
-    none,
-    cam,
-    fill,
-    got,
-    out_flat,
-):
+def _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band):
     """Fitted row v's planes (a, g_u, g_v where valid_row and dof > 0) into the ring ``fitted``, then the normals
     of the band's rows (``v0`` .. ``v1`` - 1) whose planes are all known now: row v (stride 1), or the two
-    before it (stride 2; :func:`_emit_row`)."""
+    before it (stride 2; :func:`_emit_row`). ``band``: what stays the same from row to row, (z, valid, v0, v1,
+    stride, v_first, fitted, none, cam, fill, got, out_flat) as in :func:`_adaptive_fit_kernel`."""
+    z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat = band
     W = z.shape[1]
     reach = stride - 1
     rows = fitted[(v // stride) % 3]
@@ -1388,6 +1370,7 @@ def _adaptive_fit_kernel(
     v_first = first_fitted_row(v0, stride)
     v_last = min(v1 - 1 + 2 * reach, H - 1)
     v_last -= v_last % stride
+    band = (z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat)
     for v in range(v_first, v_last + 1, stride):
         if made < min(H, v + 2 * r_max + 1):  # the integral rows of this row's windows (``made``: the last one)
             made = make_rows(z, valid, ring, cols, pos, w_scratch, made, min(H, v + 2 * r_max + 1), 0)
@@ -1398,28 +1381,7 @@ def _adaptive_fit_kernel(
             valid_row[i] = valid[v, stride * i]
             any_valid |= valid_row[i]
         if not any_valid:  # no fits (a LiDAR frame's upper rows): valid_row alone gives the fill and no planes
-            _row_done(
-                z,
-                valid,
-                v,
-                v0,
-                v1,
-                stride,
-                v_first,
-                valid_row,
-                a,
-                g_u,
-                g_v,
-                dof,
-                limit,
-                ok_row,
-                fitted,
-                none,
-                cam,
-                fill,
-                got,
-                out_flat,
-            )
+            _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
             continue
         # Each pixel's radius from its depth; then window sums radius by radius, growing the
         # radius where too few of the window's pixels are valid (sparse depth).
@@ -1573,28 +1535,7 @@ def _adaptive_fit_kernel(
                     g_v[i] = gv_k
                     a[i] = a_p
                     dof[i] = dof_k
-        _row_done(
-            z,
-            valid,
-            v,
-            v0,
-            v1,
-            stride,
-            v_first,
-            valid_row,
-            a,
-            g_u,
-            g_v,
-            dof,
-            limit,
-            ok_row,
-            fitted,
-            none,
-            cam,
-            fill,
-            got,
-            out_flat,
-        )
+        _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:
             _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)

@@ -254,3 +254,21 @@ def test_one_real_frame_matches_the_published_peer_score(tmp_path):
     assert recs["d2nt_v3"]["coverage"] > 0.9
     if has_rgbd_normals():
         assert recs["opencv_fals_w7"]["angle"] == pytest.approx(11.9, abs=0.1)
+
+
+def test_speed_vs_linemod_without_opencv_says_so_and_exits_2(monkeypatch, capsys):
+    """benchmarks/speed_vs_linemod.py needs OpenCV's RgbdNormals: without it, one line naming it, and exit 2."""
+    import importlib.util
+
+    import surfnorm.bench.sensor as sensor
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "speed_vs_linemod.py"
+    spec = importlib.util.spec_from_file_location("speed_vs_linemod", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    monkeypatch.setattr(peers_mod, "single_thread", lambda: {})
+    monkeypatch.setattr(sensor, "make_entries", lambda names: ([], {"opencv_linemod_w5": "cv2 has no RgbdNormals"}))
+    assert script.main([]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert err.startswith("speed_vs_linemod: OpenCV's RgbdNormals is needed") and "cv2 has no RgbdNormals" in err

@@ -221,3 +221,50 @@ def blend(a, b, t, fill):
         norm = np.float32(np.sqrt(np.float32(np.float32(m[0] * m[0] + m[1] * m[1]) + m[2] * m[2])))
         out[idx] = (pb if t >= 0.5 else pa) if norm < 1e-6 else m / norm
     return out
+
+
+def noise_extras(z, valid, f, *, samples=12_000, max_gap=4, min_samples=64):
+    """(terraced, step, smooth) of the noise profile, written from the docstrings of NoiseProfile and auto.
+
+    On the same sampled pixels and stencils as :func:`noise_profile`: where a stencil is found at gap 1, its
+    centre and two neighbours count as "changed" unless all three depths are equal, and as a jump when exactly
+    one neighbour equals the centre (height |1/z_0 - 1/z_other| z_0 f); ``smooth`` is the 10 % quantile (the
+    value at rank floor(0.1 (n - 1))) over 0.12566 of the geometric mean of |second difference at stride 2 a|
+    and |x_4 - 4 x_2| / sqrt(70 / 6), each quantile taken on its own.
+    """
+    H, W = z.shape
+    step = max(1, int(round(math.sqrt(z.size / samples))))
+    changed, jumps, x2, x4 = 0, [], [], []
+    for v in range(0, H, step):
+        for u in range(0, W, step):
+            if not valid[v, u]:
+                continue
+            for dv, du in ((0, 1), (1, 0)):
+                for a in range(1, max_gap + 1):
+                    pts = [(v + o * a * dv, u + o * a * du) for o in (-4, -2, -1, 1, 2, 4)]
+                    if not all(0 <= p < H and 0 <= q < W and valid[p, q] for p, q in pts):
+                        continue
+                    depths = [z[p, q] for p, q in pts] + [z[v, u]]
+                    if max(depths) > 1.25 * min(depths):
+                        break
+                    second = (1 / z[pts[1]] - 2 / z[v, u] + 1 / z[pts[4]]) * z[v, u] * f / math.sqrt(6)
+                    fourth = (1 / z[pts[0]] - 2 / z[v, u] + 1 / z[pts[5]]) * z[v, u] * f / math.sqrt(6)
+                    x2.append(second)
+                    x4.append(abs(fourth - 4 * second) / math.sqrt(70 / 6))
+                    if a == 1:
+                        left, centre, right = z[pts[2]], z[v, u], z[pts[3]]
+                        if not (left == centre == right):
+                            changed += 1
+                            if (left == centre) != (right == centre):
+                                other = right if left == centre else left
+                                jumps.append(abs(1 / centre - 1 / other) * centre * f)
+                    break
+    if changed < min_samples or not jumps:
+        terraced, step_h = 0.0, 0.0
+    else:
+        terraced, step_h = len(jumps) / changed, float(np.median(jumps))
+    smooth = 0.0
+    if len(x2) >= min_samples:
+        k = int(0.1 * (len(x2) - 1))
+        smooth = math.sqrt(float(np.sort(np.abs(x2))[k]) * float(np.sort(x4)[k])) / 0.12566
+    return terraced, step_h, smooth

@@ -15,7 +15,7 @@ Importing surfnorm compiles nothing and imports neither torch nor dask.
 from __future__ import annotations
 
 from . import metrics
-from ._api import estimate, refine
+from ._api import auto_decision, estimate, refine
 from .batch import convert
 from .camera import Intrinsics
 from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
@@ -26,6 +26,7 @@ __version__ = "0.1.0"
 __all__ = [
     "estimate",
     "refine",
+    "auto_decision",
     "convert",
     "methods",
     "metrics",

@@ -22,7 +22,7 @@ from .camera import Intrinsics
 from .errors import InputError
 from .methods import DEFAULT_METHOD, resolve
 
-__all__ = ["estimate", "refine"]
+__all__ = ["estimate", "refine", "auto_decision"]
 
 
 def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
@@ -275,3 +275,59 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
         user_mask = unmasked if user_mask is None else user_mask & unmasked
     valid = _valid(z, user_mask)
     return mnr(z, valid, n, np.empty_like(n), dlf=dlf, fill=fill)
+
+
+def auto_decision(depth, K, *, mask=None, disparity: bool = False):
+    """What the default method, ``auto``, runs on a frame, and the measurements it decided on.
+
+    ``auto`` measures the depth's noise once per frame (the noise floor at the pixel scale, the noise at
+    twice that scale in the quietest tenth of the frame, and the quantisation noise of depth terraces) and
+    runs ``d2nt_v3`` on clean depth, ``adaptive_fit`` on sensor depth, their blend between; see
+    :mod:`surfnorm.kernels.auto`. This function measures the same and returns the decision without
+    estimating any normal.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W) or (N, H, W)
+        Depth as given to :func:`estimate`.
+    K : array_like of shape (3, 3) or (N, 3, 3), or Intrinsics
+        As for :func:`estimate`.
+    mask : ndarray of bool, optional
+        As for :func:`estimate`.
+    disparity : bool
+        As for :func:`estimate`: the input holds disparity.
+
+    Returns
+    -------
+    Decision, or a list of them for a stack
+        ``method`` ("d2nt_v3", "adaptive_fit" or "blend"), ``weight`` (adaptive_fit's share), ``reading``
+        (the noise level decided on, in point spacings z / f) and the measurements behind it; ``str()`` of it
+        is one line for a person.
+
+    Examples
+    --------
+    >>> import numpy as np, surfnorm
+    >>> K = [[500.0, 0, 31.5], [0, 500.0, 23.5], [0, 0, 1]]
+    >>> v, u = np.mgrid[0:48, 0:64]
+    >>> slope = 2.0 + 0.01 * u                      # a plane seen at an angle, exact
+    >>> surfnorm.auto_decision(slope, K).method
+    'd2nt_v3'
+    >>> terraces = np.round(slope * 40) / 40        # the same plane in 2.5 cm steps
+    >>> surfnorm.auto_decision(terraces, K).method
+    'adaptive_fit'
+    """
+    from .kernels.auto import decide
+
+    depth, unmasked = split_masked(depth)
+    z = as_depth(depth)
+    user_mask = as_mask(mask, z.shape)
+    if unmasked is not None:
+        user_mask = unmasked if user_mask is None else user_mask & unmasked
+    if check_bool("disparity", disparity):
+        from .units import relative_depth
+
+        z = relative_depth(np.asarray(depth), valid_pixels(z, user_mask), disparity=True)
+    if z.ndim == 2:
+        return decide(z, _valid(z, user_mask), _intrinsics_list(K, None))
+    cams = _intrinsics_list(K, z.shape[0])
+    return [decide(z[i], _valid(z[i], None if user_mask is None else user_mask[i]), cams[i]) for i in range(len(z))]

@@ -185,6 +185,9 @@ def estimate(
     fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
+    verbose: bool = typer.Option(
+        False, "--verbose", "-v", help="Also print what the default method ran on this frame, and why."
+    ),
 ):
     """Estimate the normals of one depth image."""
     from . import estimate as estimate_
@@ -198,6 +201,12 @@ def estimate(
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
         normals = estimate_(z, cam, method=method, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity)
+        if verbose and method.split("+")[0].split(":")[0] == DEFAULT_METHOD:
+            from ._api import auto_decision
+
+            console.print(str(auto_decision(z, cam, mask=user_mask, disparity=disparity)), highlight=False)
+        elif verbose:
+            console.print(f"ran {method}, as named", highlight=False)
         if output.is_dir():
             fail(f"output: expected a file prefix, got the directory {output}")
         for f in formats:

@@ -445,9 +445,10 @@ def run_folder(
     folders = find_sensor_frames(root)
     frames = [read_sensor_frame(f) for f in folders]  # all read first: a bad file fails before hours of work
     progress = progress or (lambda stage, done, total: None)
-    records, errors = [], []
+    records, errors, decisions = [], [], {}
     for i, frame in enumerate(frames):
         valid = frame.depth > 0
+        decisions[frame.name] = _decision(frame)
         times, scores = {}, {}
         for e in entries:
             try:
@@ -491,7 +492,15 @@ def run_folder(
         "records": records,
         "errors": errors,
         "repeats": repeats,
+        "decisions": decisions,
     }
+
+
+def _decision(frame: SensorFrame) -> dict:
+    """What the default method (auto) runs on the frame, and the measurements behind it (surfnorm.auto_decision)."""
+    from .._api import auto_decision
+
+    return auto_decision(frame.depth, frame.K)._asdict()
 
 
 def _fmt(v, d=1) -> str:
@@ -544,6 +553,24 @@ def folder_markdown(result: dict) -> str:
         covs = [get[(f, e)]["coverage"] if (f, e) in get else None for f in frames]
         ok = [c for c in covs if c is not None and np.isfinite(c)]
         out.append(f"| {e} | " + " | ".join(_fmt(c, 3) for c in covs) + f" | {_fmt(min(ok) if ok else None, 3)} |")
+    if result.get("decisions"):
+        out += [
+            "",
+            "## What the default ran",
+            "",
+            "`auto` decides per frame on its noise reading (point spacings z / f): the largest of the noise floor, "
+            "the smooth noise and the terraces' quantisation noise; `d2nt_v3` at or below 0.10, `adaptive_fit` at "
+            "or above 0.20, their blend between (`surfnorm.auto_decision`).",
+            "",
+            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for f in frames:
+            d = result["decisions"].get(f)
+            if d is None:
+                continue
+            nums = [_fmt(d[k], 3) for k in ("weight", "reading", "floor", "smooth", "terraced", "step", "quantisation")]
+            out.append(f"| {f} | {d['method']} | " + " | ".join(nums) + " |")
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):
         out += ["", "## Absent peers (library not installed)", ""]

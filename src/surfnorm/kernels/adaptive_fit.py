@@ -191,9 +191,25 @@ def _spread(z0, z1, z2, z3, z4, z5, z6):
     return hi > _MAX_SPREAD * lo
 
 
+@pixel
+def _terrace(z_m, z_0, z_p, f, jumps, n_jumps):
+    """(1 when the depth changes along z_m, z_0, z_p at all, else 0; ``n_jumps``, plus 1 after writing a jump's
+    height into ``jumps``) for a flat step beside a jump: one neighbour at exactly z_0's depth, the other not.
+    The height |1/z_0 - 1/z_other| z_0 f is in point spacings (z_0 / f)."""
+    flat_m = z_m == z_0
+    flat_p = z_p == z_0
+    if flat_m and flat_p:
+        return 0, n_jumps
+    if flat_m != flat_p:
+        other = z_p if flat_m else z_m
+        jumps[n_jumps] = abs(1.0 / z_0 - 1.0 / other) * z_0 * f
+        n_jumps += 1
+    return 1, n_jumps
+
+
 @ahead_of_time
 @njit
-def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
+def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins, jumps):
     """Second differences of w = 1/z at strides a, 2a and 4a along rows and columns, in units of
     the point spacing z/f.
 
@@ -204,10 +220,18 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
     (w is affine there); white noise sigma_z in depth gives each the RMS rho = sigma_z f / z; a
     smooth curved surface gives x_2 = 4 x_1 and x_4 = 4 x_2. A stencil whose depths differ by more
     than ``_MAX_SPREAD`` (x1.25) spans a discontinuity and is left out (only a surface seen at
-    over 80 degrees from its normal changes depth that fast). Returns how many.
+    over 80 degrees from its normal changes depth that fast).
+
+    Terraces: where the stencil is found at a = 1, its centre and two neighbours are also tested for
+    quantisation terraces (:func:`terrace_statistics`): a stencil whose depth changes at all
+    (``changed``) and whose one neighbour has exactly the centre's depth while the other differs (a
+    flat step beside a jump) puts the jump's height |w_0 - w_+-1| z_0 f (point spacings) into
+    ``jumps``. Returns (how many samples, changed, how many jumps).
     """
     H, W = z.shape
     k = 0
+    changed = 0
+    n_jumps = 0
     scale = f / math.sqrt(6.0)
     lo = math.log(zmin)
     span = math.log(zmax) - lo
@@ -240,6 +264,9 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
                     xs[2, k] = (1.0 / z[v, u - 4 * a] - w0 + 1.0 / z[v, u + 4 * a]) * zb * scale
                     bins[k] = b
                     k += 1
+                    if a == 1:
+                        c, n_jumps = _terrace(z[v, u - 1], zb, z[v, u + 1], f, jumps, n_jumps)
+                        changed += c
                     break
             for a in range(1, _MAX_GAP + 1):
                 if (
@@ -261,8 +288,11 @@ def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins):
                     xs[2, k] = (1.0 / z[v - 4 * a, u] - w0 + 1.0 / z[v + 4 * a, u]) * zb * scale
                     bins[k] = b
                     k += 1
+                    if a == 1:
+                        c, n_jumps = _terrace(z[v - 1, u], zb, z[v + 1, u], f, jumps, n_jumps)
+                        changed += c
                     break
-    return k
+    return k, changed, n_jumps
 
 
 @ahead_of_time
@@ -332,6 +362,32 @@ def _by_bin(xs, bins, nbins):
     return grouped, starts
 
 
+#: The quiet share of the samples that :attr:`NoiseProfile.smooth` reads, and the quantile of |N(0, 1)| at that
+#: share (so that white noise of RMS rho reads rho).
+SMOOTH_SHARE = 0.10
+_SMOOTH_GAUSS = 0.12566
+#: RMS of x_4 - 4 x_2 under white noise of RMS 1 in each x (sqrt((1 + 16 + 36 + 16 + 1) / 6): its stencil's weights).
+_FOURTH_RMS = math.sqrt(70.0 / 6.0)
+
+
+@ahead_of_time
+@njit
+def _quiet(xs, share, gauss, fourth_rms):
+    """:attr:`NoiseProfile.smooth` from the samples ``xs`` (3, n > 0): the geometric mean of two estimates of the
+    noise at strides 2 and 4, each the value at rank floor(share (n - 1)) of its magnitudes sorted, over
+    ``gauss``: of |x_2|, which curvature raises (a sphere filling the frame) but fine detail does not reach where
+    the scene is smooth; and of |x_4 - 4 x_2| / ``fourth_rms``, a fourth difference in which curvature cancels
+    but fine detail does not (the foliage of a tree). Noise raises both; either kind of geometry only one.
+    White noise of RMS rho reads rho in each, so in their mean. Without the GIL."""
+    n = xs.shape[1]
+    k = int(share * (n - 1))
+    second = np.partition(np.abs(xs[1]), k)[k]
+    fourth = np.empty(n)
+    for j in range(n):
+        fourth[j] = abs(xs[2, j] - 4.0 * xs[1, j]) / fourth_rms
+    return math.sqrt(second * np.partition(fourth, k)[k]) / gauss
+
+
 @ahead_of_time
 @njit
 def _median_abs(x):
@@ -340,15 +396,18 @@ def _median_abs(x):
 
 
 def _samples(z, valid, f):
+    """(zmin, zmax, the second differences (3, n), their depth bins (n), the terraces' jump heights, how many
+    stencils changed depth): see :func:`_second_differences`."""
     zmin, zmax = depth_range(z, valid)
     if not zmax > 0.0:
-        return zmin, zmax, np.empty((3, 0)), np.empty(0, np.int64)
+        return zmin, zmax, np.empty((3, 0)), np.empty(0, np.int64), np.empty(0), 0
     step = max(1, int(round(math.sqrt(z.size / _NOISE_SAMPLES))))
     size = 2 * ((z.shape[0] + step - 1) // step) * ((z.shape[1] + step - 1) // step)
     xs = np.empty((3, size))
     bins = np.empty(size, np.int64)
-    n = _second_differences(z, valid, float(f), zmin, zmax, N_BINS, step, xs, bins)
-    return zmin, zmax, xs[:, :n], bins[:n]
+    jumps = np.empty(size)
+    n, changed, n_jumps = _second_differences(z, valid, float(f), zmin, zmax, N_BINS, step, xs, bins, jumps)
+    return zmin, zmax, xs[:, :n], bins[:n], jumps[:n_jumps], changed
 
 
 class NoiseProfile(NamedTuple):
@@ -361,13 +420,43 @@ class NoiseProfile(NamedTuple):
         0.6745 (white Gaussian noise of rho gives rho). Depth rendered without noise has most
         second differences at 0 (smooth surfaces between edges) however detailed the scene:
         the 12 3F2N sample frames give 0.00-0.08. Sensor depth has a floor: 0.3-4 on the
-        PrimeSense, Kinect v1, RealSense D435 and LiDAR frames we measured. NaN when too
-        few pixels have valid neighbours.
+        PrimeSense, Kinect v1 (registered), RealSense D435 and LiDAR frames we measured; raw
+        structured light and stereo matchers often 0 (their depth lies on flat terraces: see
+        ``terraced``). NaN when too few pixels have valid neighbours.
+    terraced : float
+        Of the stencils found at gap 1 whose three central depths are not all equal, the share
+        that are a flat step beside a jump (one neighbour at exactly the centre's depth, the
+        other not): quantised depth on surfaces that are not fronto-parallel. The 12 3F2N sample
+        frames give 0.00-0.10 (exactly equal neighbours only on fronto-parallel surfaces); raw
+        Kinect v1 and Xtion frames (TUM RGB-D, NYU raw, SUN RGB-D), stereo matchers' depth and
+        millimetre-stored RealSense depth 0.4-0.9. 0 when fewer than ``MIN_SAMPLES`` changed.
+    step : float
+        The median height of those jumps, in point spacings (0 without any). For disparity in
+        1/8-pixel steps it is z / (8 B) at depth z and baseline B: about 4 for a Kinect at 2.5 m.
+    smooth : float
+        The noise at strides 2 and 4 in the quietest tenth of the samples: the geometric mean
+        of the 10 % quantiles of |x_2| and of the fourth difference |x_4 - 4 x_2| / sqrt(70 / 6),
+        each over 0.12566 (white noise of RMS rho gives rho). Error smooth over a few pixels
+        (a stereo network's float output) shows less at stride 1 than here; curvature raises
+        only the first (a sphere filling the frame), fine detail only the second (a tree's
+        foliage), noise both. The 12 3F2N sample frames give 0.000-0.012.
     """
 
     depths: np.ndarray
     rho: np.ndarray
     floor: float
+    terraced: float = 0.0
+    step: float = 0.0
+    smooth: float = 0.0
+
+
+def terrace_statistics(jumps: np.ndarray, changed: int) -> tuple[float, float]:
+    """(terraced, step) of :class:`NoiseProfile` from the jump heights and the count of stencils that changed
+    depth (:func:`_second_differences`): the share of jumps among them (0 when fewer than ``MIN_SAMPLES``
+    changed), and the median height (0 without jumps)."""
+    if changed < MIN_SAMPLES or jumps.size == 0:
+        return 0.0, 0.0
+    return jumps.size / changed, float(_median_abs(jumps))  # heights are >= 0: their median
 
 
 def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> NoiseProfile:
@@ -389,20 +478,24 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     ``offers``: a :class:`surfnorm._bands.Offers` of the bands waiting for this profile, one of which may take
     the floor's median while this thread sums the bins (the same value either way).
     """
-    zmin, zmax, xs, bins = _samples(z, valid, f)
+    zmin, zmax, xs, bins, jumps, changed = _samples(z, valid, f)
     n = xs.shape[1]
     if n < MIN_SAMPLES:
         return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
-    # The floor (a median) does not depend on the rest: another band's thread may take it (``offers``, see
-    # surfnorm._bands.Offers) while this one sums the bins.
+    # The floor (a median), the smooth noise and the terraces do not depend on the rest: another band's thread may
+    # take them (``offers``, see surfnorm._bands.Offers) while this one sums the bins.
     median = Part(lambda: _median_abs(xs[0]))
+    smooth = Part(lambda: _quiet(xs, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS))
+    terraces = Part(lambda: terrace_statistics(jumps, changed))
     if offers is not None:
-        offers.offer(median)
+        for part in (median, smooth, terraces):
+            offers.offer(part)
     ms = np.empty((3, N_BINS))
     grouped, starts = _by_bin(xs, bins, N_BINS)
     _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
     centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
-    return NoiseProfile(centres, rho, median.result() / 0.6745)
+    terraced, step = terraces.result()
+    return NoiseProfile(centres, rho, median.result() / 0.6745, terraced, step, smooth.result())
 
 
 @ahead_of_time

@@ -4,33 +4,49 @@ Clean depth (rendered, or from a sensor whose noise is far below the distance
 between neighbouring pixels' points) is where small stencils and
 discontinuity awareness win: D2NT with DAG and MNR (``d2nt_v3``) is the most
 accurate there. Sensor depth (quantised, noisy, sparse) is where wide support
-wins: the adaptive plane fit of inverse depth (``adaptive_fit``). The choice
-is the depth's noise floor (:class:`surfnorm.kernels.adaptive_fit.NoiseProfile`): the
-median second difference of inverse depth, in units of the point spacing.
-Rendered frames measure 0.00-0.08, real PrimeSense, Kinect v1, RealSense D435
-and LiDAR frames 0.3-4.
+wins: the adaptive plane fit of inverse depth (``adaptive_fit``).
 
-Between ``CLEAN_FLOOR`` and ``NOISY_FLOOR`` the two are blended: the normal is
-the normalised mean of both, weighted linearly by where the floor lies in that
-band. A hard threshold would make the output jump where a floor sits on it:
+The choice is made on the frame's *noise reading* (:func:`reading`), in units of
+the point spacing z / f, the larger of two measurements of
+:class:`surfnorm.kernels.adaptive_fit.NoiseProfile`:
+
+* the noise floor: the median second difference of inverse depth at the pixel
+  scale. Rendered frames measure 0.00-0.08, real PrimeSense, Kinect v1 (registered),
+  RealSense D435 and LiDAR frames 0.3-4;
+* the quantisation noise of terraces: step / sqrt(12), where ``step`` is the median
+  height of the jumps between flat terraces, counted where depth is terraced
+  (``terraced``, the share of the pixel triples whose depth changes that are a flat
+  step beside a jump, from ``TERRACED_LOW`` up to ``TERRACED_HIGH``). Raw
+  structured light (Kinect v1, Xtion: disparity in 1/8-pixel steps, its error
+  correlated over the matcher's window) and stereo matchers (disparity in fixed
+  point, aggregated) deliver depth on clean terraces several pixels wide: the
+  median second difference there is exactly 0, so the floor alone reads such
+  frames as clean, but the steps are 1-5 point spacings high. Such frames measure
+  ``terraced`` 0.4-0.9; rendered depth 0.00-0.10 (exactly equal neighbours only
+  on fronto-parallel surfaces, which are flat on both sides, not a step).
+
+At or below ``CLEAN_FLOOR`` ``d2nt_v3`` runs alone, at or above ``NOISY_FLOOR``
+``adaptive_fit``; between them the two are blended: the normal is the
+normalised mean of both, weighted linearly by where the reading lies in that
+band. A hard threshold would make the output jump where a reading sits on it:
 between the units of one depth map (millimetres against metres move the floor
 by about 1e-4 of itself), between a frame with and without a hole, and between
 consecutive frames of a video. Blended, the output moves continuously with the
-floor, and both estimators run only for frames inside the band.
+reading, and both estimators run only for frames inside the band.
 
-A limit: the floor is measured at the pixel scale. Depth whose error is smooth
-over several pixels (a stereo matcher's aggregation, a sensor's spatial
-post-filter) reads as clean there, so ``auto`` runs ``d2nt_v3``, which follows
-the smooth error. On 3F2N frames with Gaussian-correlated noise (correlation
-sigma 2 px, one point spacing RMS) the floor reads 0.09-0.10; ``d2nt_v3`` then
-measures 15-26 degrees and ``adaptive_fit`` 7-15. Fine clean geometry (the
-foliage of 3F2N's tree) looks the same at two pixels, so the floor cannot
-tell them apart: for such depth name ``method="adaptive_fit"``.
+What each family of depth gets, and the cost of a wrong call, are measured in the
+documentation's "Which method when" page. A limit: depth whose error is smooth
+over several pixels *and* not quantised (a float-valued stereo network's output)
+shows neither a floor nor terraces, and reads as clean; ``d2nt_v3`` then follows
+the smooth error. Fine clean geometry (the foliage of 3F2N's tree) looks the
+same at two pixels, so no pixel-scale statistic can tell them apart: for such
+depth name ``method="adaptive_fit"``.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,28 +54,118 @@ from .._aot import ahead_of_time
 from .._config import njit
 from .adaptive_fit import NoiseProfile, adaptive_fit, noise_profile
 
-__all__ = ["auto", "choose", "adaptive_weight", "CLEAN_FLOOR", "NOISY_FLOOR"]
+__all__ = [
+    "auto",
+    "choose",
+    "decide",
+    "Decision",
+    "reading",
+    "quantisation",
+    "adaptive_weight",
+    "CLEAN_FLOOR",
+    "NOISY_FLOOR",
+    "TERRACED_LOW",
+    "TERRACED_HIGH",
+]
 
-#: Noise floor (units of the point spacing) at or below which depth counts as clean: ``d2nt_v3`` alone.
+#: Noise reading (units of the point spacing) at or below which depth counts as clean: ``d2nt_v3`` alone.
 CLEAN_FLOOR = 0.10
-#: Noise floor at or above which depth counts as sensor depth: ``adaptive_fit`` alone.
+#: Noise reading at or above which depth counts as sensor depth: ``adaptive_fit`` alone.
 NOISY_FLOOR = 0.20
+#: ``NoiseProfile.terraced`` at or below which the steps between equal depths are not counted as noise. The 12
+#: rendered 3F2N sample frames measure 0.000-0.097 (the most: fronto-parallel walls, whose steps are rounding).
+TERRACED_LOW = 0.15
+#: ``NoiseProfile.terraced`` at or above which the steps count in full. Raw structured light and stereo matchers
+#: measure 0.4-0.9, and so do registered Kinect v1, RealSense and float16 depth (their floors read noisy already).
+TERRACED_HIGH = 0.30
+
+
+def quantisation(profile: NoiseProfile) -> float:
+    """The quantisation noise of the frame's terraces in point spacings: ``step`` / sqrt(12) (the RMS of
+    rounding to steps of that height), times the share in which the frame counts as terraced (0 at or below
+    ``TERRACED_LOW``, 1 at or above ``TERRACED_HIGH``, linear between)."""
+    share = min(max((profile.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW), 0.0), 1.0)
+    return share * profile.step / math.sqrt(12.0)
+
+
+def reading(profile: NoiseProfile) -> float:
+    """The noise level ``auto`` decides on: the largest of the floor, the smooth noise and :func:`quantisation`
+    (NaN with the floor)."""
+    if not profile.floor == profile.floor:
+        return float("nan")
+    return max(profile.floor, profile.smooth, quantisation(profile))
 
 
 def adaptive_weight(profile: NoiseProfile) -> float:
-    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth).
+    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth), from :func:`reading`.
 
     A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
     """
-    if not profile.floor == profile.floor:
+    r = reading(profile)
+    if not r == r:
         return 1.0
-    return min(max((profile.floor - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)
+    return min(max((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)
+
+
+class Decision(NamedTuple):
+    """What ``auto`` runs on a frame, and the measurements it decided on (see the module docstring).
+
+    method : str
+        ``"d2nt_v3"``, ``"adaptive_fit"`` or ``"blend"`` (both, weighted).
+    weight : float
+        ``adaptive_fit``'s weight in the blend: 0 for ``d2nt_v3`` alone, 1 for ``adaptive_fit`` alone.
+    reading : float
+        The noise level decided on (point spacings): the largest of ``floor``, ``smooth`` and ``quantisation``;
+        NaN when too few pixels have valid neighbours (sparse depth: ``adaptive_fit``).
+    floor, smooth, terraced, step : float
+        The :class:`~surfnorm.kernels.adaptive_fit.NoiseProfile`'s.
+    quantisation : float
+        :func:`quantisation`.
+    """
+
+    method: str
+    weight: float
+    reading: float
+    floor: float
+    smooth: float
+    terraced: float
+    step: float
+    quantisation: float
+
+    def __str__(self) -> str:
+        ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
+        return (
+            f"auto ran {ran}: noise reading {self.reading:.3f} point spacings (clean at or below {CLEAN_FLOOR:g}, "
+            f"sensor at or above {NOISY_FLOOR:g}); floor {self.floor:.3f}, smooth {self.smooth:.3f}, "
+            f"terraced {self.terraced:.3f}, "
+            f"step {self.step:.3f}, quantisation {self.quantisation:.3f}"
+        )
+
+
+def decision(profile: NoiseProfile) -> Decision:
+    """The :class:`Decision` for a measured profile."""
+    t = adaptive_weight(profile)
+    method = "d2nt_v3" if t == 0.0 else "adaptive_fit" if t == 1.0 else "blend"
+    return Decision(
+        method,
+        t,
+        reading(profile),
+        profile.floor,
+        profile.smooth,
+        profile.terraced,
+        profile.step,
+        quantisation(profile),
+    )
+
+
+def decide(z: np.ndarray, valid: np.ndarray, cam) -> Decision:
+    """What ``auto`` runs on this frame, and why (:class:`Decision`)."""
+    return decision(noise_profile(z, valid, math.sqrt(cam.fx * cam.fy)))
 
 
 def choose(z: np.ndarray, valid: np.ndarray, cam) -> str:
     """What ``auto`` runs on this frame: ``"d2nt_v3"``, ``"adaptive_fit"`` or ``"blend"`` (both, weighted)."""
-    t = adaptive_weight(noise_profile(z, valid, math.sqrt(cam.fx * cam.fy)))
-    return "d2nt_v3" if t == 0.0 else "adaptive_fit" if t == 1.0 else "blend"
+    return decide(z, valid, cam).method
 
 
 def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray) -> np.ndarray:

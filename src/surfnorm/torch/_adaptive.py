@@ -69,6 +69,11 @@ TIE = 1e-3
 MAX_UNREACHED = 0.01
 CLEAN_FLOOR = 0.10
 NOISY_FLOOR = 0.20
+TERRACED_LOW = 0.15
+TERRACED_HIGH = 0.30
+SMOOTH_SHARE = 0.10
+_SMOOTH_GAUSS = 0.12566
+_FOURTH_RMS = math.sqrt(70.0 / 6.0)
 #: The quadrant windows (dv, du) / r, in the NumPy kernel's order.
 _SHIFTS = ((1, 1), (1, -1), (-1, 1), (-1, -1))
 
@@ -138,11 +143,16 @@ class NoiseTables(NamedTuple):
     radius: torch.Tensor  # (B, _TABLE) int64
     rho: torch.Tensor  # (B, _TABLE)
     floor: torch.Tensor  # (B,) NaN where too few samples
+    terraced: torch.Tensor  # (B,) NoiseProfile.terraced
+    step: torch.Tensor  # (B,) NoiseProfile.step
+    smooth: torch.Tensor  # (B,) NoiseProfile.smooth
 
 
 def _samples(z, valid, f, lo, span):
     """``adaptive_fit._second_differences`` on every frame: xs (3, B, N), taken (B, N), bins (B, N), in the
-    NumPy kernel's sample order (row-major over the sampled pixels, horizontal then vertical)."""
+    NumPy kernel's sample order (row-major over the sampled pixels, horizontal then vertical); and its terrace
+    test: changed (B, N), the stencils taken at a = 1 whose depth changes, and jumps (B, N), the jump height
+    where such a stencil is a flat step beside a jump, else NaN."""
     B, H, W = z.shape
     step = max(1, round(math.sqrt(H * W / _NOISE_SAMPLES)))
     pad = 4 * _MAX_GAP
@@ -165,6 +175,8 @@ def _samples(z, valid, f, lo, span):
         found = torch.zeros_like(ok_b)
         taken = torch.zeros_like(ok_b)
         xs = [torch.zeros_like(zb) for _ in range(3)]
+        changed = torch.zeros_like(ok_b)
+        jumps = torch.full_like(zb, math.nan)
         for a in range(1, _MAX_GAP + 1):
             offsets = (-4 * a, -2 * a, -a, a, 2 * a, 4 * a)
             views = [at(0, o) if axis == 0 else at(o, 0) for o in offsets]
@@ -180,13 +192,23 @@ def _samples(z, valid, f, lo, span):
             for i, (z_m, z_p) in enumerate(((z_m1, z_p1), (z_m2, z_p2), (z_m4, z_p4))):
                 x = ((torch.reciprocal(z_m) - w0 + torch.reciprocal(z_p)) * zb) * scale
                 xs[i] = torch.where(take, x, xs[i])
+            if a == 1:  # the terrace test (adaptive_fit._terrace)
+                flat_m, flat_p = z_m1 == zb, z_p1 == zb
+                changed = take & ~(flat_m & flat_p)
+                other = torch.where(flat_m, z_p1, z_m1)
+                height = torch.abs(torch.reciprocal(zb) - torch.reciprocal(other)) * zb * f.view(B, 1, 1)
+                jumps = torch.where(take & (flat_m != flat_p), height, jumps)
             taken = taken | take
             found = found | ok
-        per_axis.append((xs, taken))
-    xs = torch.stack([torch.stack((h, v), dim=-1).reshape(B, -1) for h, v in zip(per_axis[0][0], per_axis[1][0])])
-    taken = torch.stack((per_axis[0][1], per_axis[1][1]), dim=-1).reshape(B, -1)
+        per_axis.append((xs, taken, changed, jumps))
+
+    def interleaved(h, v):
+        return torch.stack((h, v), dim=-1).reshape(B, -1)
+
+    xs = torch.stack([interleaved(h, v) for h, v in zip(per_axis[0][0], per_axis[1][0])])
+    taken, changed, jumps = (interleaved(per_axis[0][i], per_axis[1][i]) for i in (1, 2, 3))
     bins = bins.unsqueeze(-1).expand(-1, -1, -1, 2).reshape(B, -1)
-    return xs, taken, bins
+    return xs, taken, bins, changed, jumps
 
 
 def _sequential_sum(x: torch.Tensor) -> torch.Tensor:
@@ -224,6 +246,16 @@ def _interp_ok(lc, rho, ok):
     return torch.where(ok, rho, out)
 
 
+def _median(x: torch.Tensor, where: torch.Tensor) -> torch.Tensor:
+    """Per frame (B,), NumPy's median of x (B, N) where ``where`` (the mean of the two middle values when their
+    count is even); any value for a frame with none."""
+    n = where.sum(dim=1)
+    srt = torch.sort(torch.where(where, x, torch.full_like(x, math.inf)), dim=1).values
+    lo_i = ((n - 1) // 2).clamp(min=0).view(-1, 1)
+    hi_i = (n // 2).clamp(max=srt.shape[1] - 1).view(-1, 1)
+    return (srt.gather(1, lo_i) + srt.gather(1, hi_i)).view(-1) / 2
+
+
 def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, window=None, r_max: int) -> NoiseTables:
     """``adaptive_fit.noise_profile`` then ``radius_table`` for every frame: z (B, H, W) float64 (any value
     where invalid), valid (B, H, W), f (B,) = sqrt(fx fy)."""
@@ -236,15 +268,27 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     zmax_s = torch.where(any_valid, zmax, torch.ones_like(zmax))
     lo = torch.log(zmin_s)
     span = torch.log(zmax_s) - lo
-    xs, taken, bins = _samples(z, valid, f, lo, span)
+    xs, taken, bins, changed, jumps = _samples(z, valid, f, lo, span)
     n = taken.sum(dim=1)
     enough = n >= MIN_SAMPLES
-    # the floor: median |x_1| / 0.6745 (NumPy's median: the mean of the two middle values when n is even)
-    mags = torch.sort(torch.where(taken, xs[0].abs(), torch.full_like(xs[0], math.inf)), dim=1).values
-    lo_i = ((n - 1) // 2).clamp(min=0).view(B, 1)
-    hi_i = (n // 2).clamp(max=mags.shape[1] - 1).view(B, 1)
-    median = (mags.gather(1, lo_i) + mags.gather(1, hi_i)).view(B) / 2
-    floor = torch.where(enough, median / 0.6745, torch.full_like(median, math.nan))
+    # the floor: median |x_1| / 0.6745
+    floor = torch.where(enough, _median(xs[0].abs(), taken) / 0.6745, torch.full_like(lo, math.nan))
+    # the terraces (adaptive_fit.terrace_statistics): the share of jumps among the stencils that changed, their
+    # median height; 0 and 0 with fewer than MIN_SAMPLES changed or no jump
+    is_jump = ~torch.isnan(jumps)
+    n_changed, n_jumps = changed.sum(dim=1), is_jump.sum(dim=1)
+    counted = (n_changed >= MIN_SAMPLES) & (n_jumps > 0)
+    terraced = torch.where(counted, n_jumps.to(_F64) / n_changed.clamp(min=1).to(_F64), torch.zeros_like(lo))
+    heights = torch.where(counted, _median(jumps, is_jump), torch.zeros_like(lo))
+    # the smooth noise (NoiseProfile.smooth, adaptive_fit._quiet): the geometric mean of |x_2| and
+    # |x_4 - 4 x_2| / its white-noise RMS, each at rank floor(SMOOTH_SHARE (n - 1)), over _SMOOTH_GAUSS
+    rank = torch.floor((n - 1).clamp(min=0).to(_F64) * SMOOTH_SHARE).long().view(B, 1)
+
+    def quiet(x):
+        return torch.sort(torch.where(taken, x, torch.full_like(x, math.inf)), dim=1).values.gather(1, rank).view(B)
+
+    fourth = torch.abs(xs[2] - 4.0 * xs[1]) / _FOURTH_RMS
+    smooth = torch.where(enough, _sqrt(quiet(xs[1].abs()) * quiet(fourth)) / _SMOOTH_GAUSS, torch.zeros_like(lo))
     # the clipped mean squares per depth bin and stride
     member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & taken.unsqueeze(1)
     ms = []
@@ -292,7 +336,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     inv_step = torch.where(
         wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0), torch.zeros_like(z0)
     )
-    return NoiseTables(z0, inv_step, radius, rho_t, floor)
+    return NoiseTables(z0, inv_step, radius, rho_t, floor, terraced, heights, smooth)
 
 
 # --- the fit ---------------------------------------------------------------------------------------
@@ -743,11 +787,21 @@ def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float, stride=N
     )
 
 
-def adaptive_weight(floor: torch.Tensor) -> torch.Tensor:
+def reading(tables: NoiseTables) -> torch.Tensor:
+    """``auto.reading`` per frame: the largest of the noise floor, the smooth noise and the terraces'
+    quantisation noise (NaN with the floor)."""
+    share = ((tables.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW)).clamp(0.0, 1.0)
+    quantisation = share * tables.step / math.sqrt(12.0)
+    level = torch.maximum(torch.maximum(tables.floor, tables.smooth), quantisation)
+    return torch.where(torch.isnan(tables.floor), tables.floor, level)
+
+
+def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
     """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
-    (adaptive_fit), linear between; 1 for a NaN floor (too few samples)."""
-    t = ((floor - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR)).clamp(0.0, 1.0)
-    return torch.where(torch.isnan(floor), torch.ones_like(t), t)
+    (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples)."""
+    r = reading(tables)
+    t = ((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR)).clamp(0.0, 1.0)
+    return torch.where(torch.isnan(r), torch.ones_like(t), t)
 
 
 def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> torch.Tensor:
@@ -771,7 +825,7 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
 
 
 def auto(g: Grid, cam, *, tau: float, fill: float):
-    """``surfnorm.auto``: per frame, ``d2nt_v3`` where the depth's noise floor is at or below CLEAN_FLOOR,
+    """``surfnorm.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
     ``adaptive_fit`` at or above NOISY_FLOOR, their blend between; ``cam`` in float64.
 
     On the CPU each estimator runs on the frames that need it only; elsewhere both run on the whole batch
@@ -783,7 +837,7 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
     r_max = (MAX_WINDOW - 1) // 2
     with torch.no_grad():
         tables = noise_tables(z.detach(), g.valid, _sqrt(cam64[0] * cam64[1]).reshape(-1), r_max=r_max)
-    t = adaptive_weight(tables.floor)
+    t = adaptive_weight(tables)
 
     def d2nt_v3(grid, c, fill_value):
         c = tuple(x.to(grid.z.dtype) for x in c)

@@ -1,0 +1,243 @@
+"""auto, the default: what it measures (terraces, smooth noise), what it decides on each family of depth, and
+how it says so (surfnorm.auto_decision, ``surfnorm estimate --verbose``, the sensor benchmark's report)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import surfnorm
+from surfnorm.bench.simulate import SENSORS, simulate
+from surfnorm.io.threef2n import find_frames, read_frame
+from surfnorm.kernels.adaptive_fit import NoiseProfile, noise_profile
+from surfnorm.kernels.auto import (
+    CLEAN_FLOOR,
+    NOISY_FLOOR,
+    TERRACED_HIGH,
+    TERRACED_LOW,
+    adaptive_weight,
+    quantisation,
+    reading,
+)
+
+from . import naive_adaptive_fit as naive
+from .conftest import SAMPLE
+from .surfaces import camera, plane, sphere
+
+
+def slanted_plane(H=120, W=160, distance=2.0, tilt=(0.4, 0.3)):
+    K = camera(W, H, fov_deg=60)
+    z, _, hit = plane(K, H, W, [tilt[0], tilt[1], -1.0], distance)
+    return np.where(hit, z, 0.0), K
+
+
+def terraced(z, K, baseline=0.075, step_px=1 / 8):
+    """Depth through a structured-light sensor without dithering: disparity f B / z rounded to ``step_px``."""
+    f = K[0, 0]
+    d = np.round(f * baseline / np.where(z > 0, z, 1.0) / step_px) * step_px
+    return np.where(z > 0, f * baseline / d, 0.0).astype(np.float32)
+
+
+# --- the measurements against the naive reference ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_terraces_and_smooth_noise_match_the_naive_reference(seed):
+    rng = np.random.default_rng(seed)
+    z, K = slanted_plane(tilt=(rng.uniform(-0.6, 0.6), rng.uniform(-0.6, 0.6)), distance=rng.uniform(1, 4))
+    f = math.sqrt(K[0, 0] * K[1, 1])
+    for depth in (terraced(z, K), (z + rng.normal(0, 0.002, z.shape)).astype(np.float32), z.astype(np.float32)):
+        depth = np.where(rng.random(depth.shape) < 0.1, 0.0, depth).astype(np.float32)  # holes
+        valid = depth > 0
+        got = noise_profile(depth, valid, f)
+        terraced_share, step, smooth = naive.noise_extras(depth.astype(np.float64), valid, f)
+        assert got.terraced == terraced_share
+        assert got.step == pytest.approx(step, rel=1e-12)
+        assert got.smooth == pytest.approx(smooth, rel=1e-9, abs=1e-12)
+
+
+def test_terrace_statistics_on_closed_forms():
+    """A plane in disparity steps is terraced with steps of z / (8 B) point spacings (the relation the docs
+    give); the same plane exact, or a sphere, has no terraces; a fronto-parallel wall changes nowhere."""
+    z, K = slanted_plane(distance=2.0)
+    f = K[0, 0]
+    steps = noise_profile(terraced(z, K), z > 0, f)
+    assert steps.terraced > 0.8
+    expected = np.median(z[z > 0]) / (8 * 0.075)  # z / (8 B): the height of one 1/8-px disparity step
+    assert steps.step == pytest.approx(expected, rel=0.25)
+    assert steps.floor < CLEAN_FLOOR  # what the floor alone read: clean
+    exact = noise_profile(z.astype(np.float32), z > 0, f)
+    assert exact.terraced < TERRACED_LOW and exact.smooth < 0.01
+    zs, _, hit = sphere(K, 120, 160, [0.0, 0.0, 2.0], 0.8)
+    ball = noise_profile(np.where(hit, zs, 0).astype(np.float32), hit, f)
+    assert ball.terraced < TERRACED_LOW and ball.smooth < CLEAN_FLOOR
+    wall = noise_profile(np.full((60, 80), 2.0, np.float32), np.ones((60, 80), bool), f)
+    assert wall.terraced == 0.0 and wall.step == 0.0 and wall.smooth == 0.0
+
+
+def test_the_reading_is_the_largest_measurement_and_terraces_count_by_their_share():
+    one = np.ones(1)
+    base = NoiseProfile(one, one, 0.05, 0.0, 0.0, 0.0)
+    assert reading(base) == 0.05
+    assert reading(base._replace(smooth=0.3)) == 0.3
+    full = base._replace(terraced=TERRACED_HIGH, step=2.0)
+    assert quantisation(full) == pytest.approx(2.0 / math.sqrt(12))
+    assert reading(full) == pytest.approx(2.0 / math.sqrt(12))
+    assert quantisation(base._replace(terraced=TERRACED_LOW, step=2.0)) == 0.0
+    half = base._replace(terraced=0.5 * (TERRACED_LOW + TERRACED_HIGH), step=2.0)
+    assert quantisation(half) == pytest.approx(1.0 / math.sqrt(12))
+    assert math.isnan(reading(base._replace(floor=float("nan"), smooth=5.0)))
+    assert adaptive_weight(base._replace(floor=float("nan"))) == 1.0
+    assert adaptive_weight(base._replace(smooth=NOISY_FLOOR)) == 1.0
+    assert adaptive_weight(base._replace(terraced=1.0, step=math.sqrt(12) * CLEAN_FLOOR)) == pytest.approx(0.0)
+
+
+# --- the simulated families against what real frames of each family measure ---------------------------------
+
+#: What the real frames of each family measure (the benchmark's frames: ``surfnorm bench --sensor DIR`` prints the
+#: same per frame in "What the default ran"; the median terrace width from the runs of equal depth along rows).
+#: Raw structured light: TUM RGB-D fr2/desk (two frames), fr3, NYU Depth v2 raw (PGM disparity), SUN RGB-D Xtion.
+#: Stereo: OpenCV's SGBM on Middlebury 2001 Venus, 2003 Cones and Teddy, 2005 Art, 2006 Flowerpots.
+REAL = {
+    "kinect_v1_raw": dict(terraced=(0.68, 0.88), floor=(0.0, 0.28), width=(1.0, 3.0)),
+    "stereo_sgbm": dict(terraced=(0.51, 0.69), floor=(0.0, 0.86), width=(1.0, 2.0)),
+}
+#: How far a preset's median over the 3F2N sample frames may lie outside the real frames' range.
+TOLERANCE = dict(terraced=0.12, floor=0.15, width=1.0)
+
+
+def run_width(z):
+    """Median length (pixels) of the runs of equal valid depth along rows."""
+    runs = []
+    for row in z:
+        cuts = np.flatnonzero(np.diff(row) != 0) + 1
+        edges = np.concatenate([[0], cuts, [row.size]])
+        lengths, values = np.diff(edges), row[edges[:-1]]
+        runs.extend(lengths[values > 0])
+    return float(np.median(runs))
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    """Each sensor preset on the 12 sample frames (seed 0): {preset: [(name, depth, K, profile), ...]}."""
+    out = {}
+    for sensor in SENSORS:
+        rows = []
+        for name in find_frames(SAMPLE):
+            fr = read_frame(SAMPLE, name)
+            z = simulate(fr.depth, fr.K, sensor, seed=[0, len(rows)], mask=fr.mask, normals=fr.normals)
+            rows.append((name, z, fr.K, noise_profile(z, z > 0, math.sqrt(fr.K.fx * fr.K.fy))))
+        out[sensor] = rows
+    return out
+
+
+@pytest.mark.parametrize("sensor", sorted(REAL))
+def test_presets_measure_what_real_frames_of_their_family_measure(simulated, sensor):
+    rows = simulated[sensor]
+    got = dict(
+        terraced=float(np.median([p.terraced for *_, p in rows])),
+        floor=float(np.median([p.floor for *_, p in rows])),
+        width=float(np.median([run_width(z) for _, z, _, _ in rows])),
+    )
+    for key, (lo, hi) in REAL[sensor].items():
+        assert lo - TOLERANCE[key] <= got[key] <= hi + TOLERANCE[key], (sensor, key, got[key], (lo, hi))
+
+
+def test_raw_structured_light_has_disparity_steps_and_few_levels(simulated):
+    """The raw preset's depth lies on 1/8-px disparity levels (as the real sensor's), a few hundred of them on an
+    object, where the dithered ``kinect_v1`` preset's per-pixel noise shows as a floor the real raw frames lack."""
+    for name, z, K, p in simulated["kinect_v1_raw"]:
+        d = K.fx * 0.075 / z[z > 0].astype(np.float64)  # disparity in the frame's pixels (scale drops out of steps)
+        levels = np.unique(np.round(d * 8, 6))
+        assert levels.size < 1500, name
+        assert p.step == pytest.approx(2.5 / (8 * 0.075), rel=0.1), name
+    raw = np.median([p.floor for *_, p in simulated["kinect_v1_raw"]])
+    dithered = np.median([p.floor for *_, p in simulated["kinect_v1"]])
+    assert raw < CLEAN_FLOOR < NOISY_FLOOR < dithered
+
+
+# --- the decision on each family ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("sensor", [s for s in SENSORS if s not in ("exact", "smooth_error")])
+def test_every_sensor_family_gets_adaptive_fit(simulated, sensor):
+    for name, z, K, _ in simulated[sensor]:
+        d = surfnorm.auto_decision(z, K)
+        assert d.method == "adaptive_fit", (sensor, name, str(d))
+
+
+def test_smooth_float_error_leans_to_adaptive_fit(simulated):
+    """Error smooth over ~2 px without steps shows neither terraces nor much of a floor: the smooth noise reads it.
+    On most frames adaptive_fit alone; on the rest a blend that leans to it (the scene with the widest depth
+    range, room, reads 0.14)."""
+    decisions = [surfnorm.auto_decision(z, K) for _, z, K, _ in simulated["smooth_error"]]
+    assert sum(d.method == "adaptive_fit" for d in decisions) >= 0.75 * len(decisions)
+    assert min(d.weight for d in decisions) >= 0.3
+    assert all(d.smooth > d.floor and d.terraced < TERRACED_LOW for d in decisions)
+
+
+def test_clean_depth_gets_d2nt_v3(simulated):
+    for name, z, K, _ in simulated["exact"]:
+        assert surfnorm.auto_decision(z, K).method == "d2nt_v3", name
+    for name in find_frames(SAMPLE):
+        fr = read_frame(SAMPLE, name)
+        d = surfnorm.auto_decision(fr.depth, fr.K, mask=fr.mask)
+        assert d.method == "d2nt_v3" and d.reading < CLEAN_FLOOR, (name, str(d))
+
+
+def test_terraced_depth_that_the_floor_reads_as_clean_is_decided_by_its_steps():
+    z, K = slanted_plane(distance=2.5)
+    steps = terraced(z, K)
+    d = surfnorm.auto_decision(steps, K)
+    assert d.floor < CLEAN_FLOOR and d.quantisation >= NOISY_FLOOR and d.method == "adaptive_fit"
+    n = surfnorm.estimate(steps, K)
+    np.testing.assert_array_equal(n, surfnorm.estimate(steps, K, method="adaptive_fit"))
+    # the same plane at 0.3 m in steps of 0.1 mm, a twentieth of its point spacing (2.2 mm): terraced, not noise
+    close = np.round(z * 0.3 / 2.5 * 10000) / 10000
+    assert surfnorm.auto_decision(close.astype(np.float32), K).method == "d2nt_v3"
+
+
+def test_auto_decision_follows_the_frames_of_a_stack_and_their_masks():
+    z, K = slanted_plane()
+    stack = np.stack([z, terraced(z, K)]).astype(np.float32)
+    got = surfnorm.auto_decision(stack, K)
+    assert [d.method for d in got] == ["d2nt_v3", "adaptive_fit"]
+    masked = surfnorm.auto_decision(stack[1], K, mask=np.zeros(z.shape, bool))
+    assert masked.method == "adaptive_fit" and math.isnan(masked.reading)  # nothing to measure: sparse rule
+    assert str(got[1]).startswith("auto ran adaptive_fit: noise reading ")
+
+
+def test_torch_reads_the_same(simulated):
+    torch = pytest.importorskip("torch")
+    from surfnorm.torch import _adaptive
+
+    for sensor in ("kinect_v1_raw", "stereo_sgbm", "smooth_error", "exact"):
+        for name, z, K, p in simulated[sensor][:4]:
+            d = torch.from_numpy(z)[None].double()
+            valid = d > 0
+            f = torch.tensor([math.sqrt(K.fx * K.fy)], dtype=torch.float64)
+            t = _adaptive.noise_tables(torch.where(valid, d, 1.0), valid, f, r_max=15)
+            assert t.terraced.item() == p.terraced and t.step.item() == p.step, (sensor, name)
+            assert t.smooth.item() == p.smooth, (sensor, name)
+            assert _adaptive.adaptive_weight(t).item() == adaptive_weight(p), (sensor, name)
+
+
+# --- saying what it did -------------------------------------------------------------------------------------
+
+
+def test_cli_estimate_verbose_prints_the_decision(tmp_path):
+    from typer.testing import CliRunner
+
+    from surfnorm.cli import app
+
+    z, K = slanted_plane()
+    np.save(tmp_path / "d.npy", terraced(z, K))
+    args = ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "o"), "--fx", str(K[0, 0]), "--fy", str(K[1, 1])]
+    args += ["--cx", str(K[0, 2]), "--cy", str(K[1, 2]), "--verbose"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "auto ran adaptive_fit: noise reading" in result.output
+    named = CliRunner().invoke(app, args[:-1] + ["-m", "d2nt_v3", "--verbose"])
+    assert named.exit_code == 0 and "ran d2nt_v3, as named" in named.output

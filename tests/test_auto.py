@@ -241,3 +241,30 @@ def test_cli_estimate_verbose_prints_the_decision(tmp_path):
     assert "auto ran adaptive_fit: noise reading" in result.output
     named = CliRunner().invoke(app, args[:-1] + ["-m", "d2nt_v3", "--verbose"])
     assert named.exit_code == 0 and "ran d2nt_v3, as named" in named.output
+
+
+# --- real raw structured light ------------------------------------------------------------------------------
+
+TUM = SAMPLE.parent / "tum-rgbd"
+
+
+@pytest.mark.parametrize("name", ["tum_fr2_desk_slb1", "tum_fr3_o3d"])
+def test_real_raw_kinect_frames_get_adaptive_fit_and_its_accuracy(name):
+    """The frames the floor alone read as clean (TUM RGB-D raw depth, terraces): auto now runs adaptive_fit, whose
+    plane error is a fraction of d2nt_v3's (what auto ran before on them)."""
+    import json
+
+    from surfnorm.io.depth import read_depth
+    from surfnorm.metrics import plane_error
+
+    folder = TUM / name
+    depth = read_depth(folder / "raw.png", depth_scale=5000)
+    K = surfnorm.Intrinsics(**json.loads((folder / "K.json").read_text()))
+    planes = np.load(folder / "planes.npz")
+    d = surfnorm.auto_decision(depth, K)
+    assert d.method == "adaptive_fit" and d.terraced > TERRACED_HIGH and d.quantisation >= NOISY_FLOOR, str(d)
+    auto = surfnorm.estimate(depth, K)
+    np.testing.assert_array_equal(auto, surfnorm.estimate(depth, K, method="adaptive_fit"))
+    err_auto, cov = plane_error(auto, planes["normals"], planes["masks"])
+    err_d2nt, _ = plane_error(surfnorm.estimate(depth, K, method="d2nt_v3"), planes["normals"], planes["masks"])
+    assert cov >= 0.97 and err_auto < 0.5 * err_d2nt, (err_auto, err_d2nt, cov)

@@ -8,6 +8,8 @@ estimators the paper compares against, behind one front door::
     surfnorm.methods()                                        # registered names
     surfnorm.refine(normals, depth)                           # MNR on any normal map
     surfnorm.convert("scans/", "normals/", intrinsics="camera_info.yaml", depth_scale=1000, jobs=4)
+    surfnorm.points(depth, K)                                 # (H, W, 3) back-projected points, same frame
+    surfnorm.to_opengl(normals)                               # y up, z backward (renderers, Blender)
 
 Importing surfnorm compiles nothing and imports neither torch nor dask.
 """
@@ -17,8 +19,9 @@ from __future__ import annotations
 from . import metrics
 from ._api import estimate, refine
 from .batch import convert
-from .camera import Intrinsics
+from .camera import Intrinsics, IntrinsicsWarning
 from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
+from .geometry import from_opengl, points, to_opengl, to_world
 from .methods import methods
 
 __version__ = "0.1.0"
@@ -29,7 +32,12 @@ __all__ = [
     "convert",
     "methods",
     "metrics",
+    "points",
+    "to_opengl",
+    "from_opengl",
+    "to_world",
     "Intrinsics",
+    "IntrinsicsWarning",
     "SurfnormError",
     "InputError",
     "DataFileError",

@@ -169,6 +169,13 @@ def estimate(
     InputError (a ValueError)
         Bad depth, K, mask, method name or option; the message names which.
 
+    Warns
+    -----
+    IntrinsicsWarning
+        ``K`` does not look like the intrinsics of this frame: a principal point outside it or far from its
+        centre towards one corner, or an image size in ``K`` other than the frame's (see
+        :meth:`surfnorm.Intrinsics.check_frame`).
+
     Examples
     --------
     >>> import numpy as np, surfnorm
@@ -206,10 +213,14 @@ def estimate(
 
     if z.ndim == 2:
         cam = _intrinsics_list(K, None)
+        cam.check_frame(z.shape, stacklevel=2)
         bands = on_threads(workers)
         z_0, valid_0, options_0 = frame(None, bands)
         return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative, bands)
     cams = _intrinsics_list(K, z.shape[0])
+    one_camera = all(c is cams[0] for c in cams)
+    for i, cam_i in {id(c): (i, c) for i, c in enumerate(cams)}.values():  # each distinct camera once
+        cam_i.check_frame(z.shape, name="K" if one_camera else f"K[{i}]", stacklevel=2)
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
 

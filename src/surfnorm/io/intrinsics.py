@@ -123,11 +123,32 @@ def _from_matrix(path: Path, key: str, value) -> Intrinsics:
         raise DataFileError(str(exc)) from exc
 
 
+def _with_size(path, data: dict, cam: Intrinsics) -> Intrinsics:
+    """``cam`` with the image size the mapping states (ROS ``image_width``/``image_height``, or ``width``/``height``).
+
+    A size that is missing, partial or not a positive whole number is left out: the size only feeds
+    :class:`surfnorm.IntrinsicsWarning`.
+    """
+    for wk, hk in (("image_width", "image_height"), ("width", "height")):
+        w, h = data.get(wk), data.get(hk)
+        if all(isinstance(x, int) and not isinstance(x, bool) and 0 < x < 1 << 31 for x in (w, h)):
+            return Intrinsics(cam.fx, cam.fy, cam.cx, cam.cy, w, h)
+    return cam
+
+
 def intrinsics_from_mapping(data, *, source="intrinsics") -> Intrinsics:
-    """Intrinsics from a dict with fx, fy, cx, cy, or one of the matrix keys of :func:`read_intrinsics`."""
+    """Intrinsics from a dict with fx, fy, cx, cy, or one of the matrix keys of :func:`read_intrinsics`.
+
+    An image size in the mapping (``image_width`` and ``image_height`` as in ROS camera_info, or ``width`` and
+    ``height``) is kept as the intrinsics' ``width`` and ``height``.
+    """
     path = source
     if not isinstance(data, dict):
         raise DataFileError(f"{path}: expected a mapping with {_EXPECTED}, got {type(data).__name__}")
+    return _with_size(path, data, _mapping_intrinsics(path, data))
+
+
+def _mapping_intrinsics(path, data: dict) -> Intrinsics:
     if all(k in data for k in ("fx", "fy", "cx", "cy")):
         for k in ("fx", "fy", "cx", "cy"):
             if not _is_number(data[k]):

@@ -26,6 +26,19 @@ from .methods import methods
 
 __version__ = "0.1.0"
 
+#: Sub-packages loaded on first use, so that ``import surfnorm`` stays cheap and ``surfnorm.io.read_depth(...)``
+#: still works after a bare ``import surfnorm``.
+_LAZY = ("io", "noise", "units", "reference", "bench", "kernels", "demo", "torch", "precompile")
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'surfnorm' has no attribute {name!r}")
+
+
 __all__ = [
     "estimate",
     "refine",

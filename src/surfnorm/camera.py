@@ -63,6 +63,7 @@ class Intrinsics:
     height: int | None = field(default=None, compare=False)
 
     def __repr__(self) -> str:
+        """The four parameters, and the image size where it is known."""
         size = "" if self.width is None else f", width={self.width}, height={self.height}"
         return f"Intrinsics(fx={self.fx!r}, fy={self.fy!r}, cx={self.cx!r}, cy={self.cy!r}{size})"
 
@@ -70,7 +71,9 @@ class Intrinsics:
         """Check that every parameter is a finite number in range (an InputError naming it otherwise)."""
         sizes = (self.width, self.height)
         if (sizes[0] is None) != (sizes[1] is None):
-            raise InputError(f"intrinsics.width, height: expected both or neither, got width={sizes[0]!r}, height={sizes[1]!r}")
+            raise InputError(
+                f"intrinsics.width, height: expected both or neither, got width={sizes[0]!r}, height={sizes[1]!r}"
+            )
         for name in ("width", "height"):
             value = getattr(self, name)
             if value is None:

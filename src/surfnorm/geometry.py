@@ -25,7 +25,9 @@ OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0])
 def _vectors(normals, name: str = "normals") -> np.ndarray:
     arr = np.asarray(normals)
     if not np.issubdtype(arr.dtype, np.floating) or arr.ndim < 1 or arr.shape[-1] != 3:
-        raise InputError(f"{name}: expected a float array of shape (..., 3), got shape {arr.shape} and dtype {arr.dtype}")
+        raise InputError(
+            f"{name}: expected a float array of shape (..., 3), got shape {arr.shape} and dtype {arr.dtype}"
+        )
     return arr
 
 
@@ -66,7 +68,11 @@ def points(depth, K, *, mask=None, fill: float = 0.0) -> np.ndarray:
     """
     depth, unmasked = split_masked(depth)
     z = np.asarray(depth)
-    if z.ndim != 2 or not (np.issubdtype(z.dtype, np.floating) or np.issubdtype(z.dtype, np.integer)) or z.dtype == bool:
+    if (
+        z.ndim != 2
+        or not (np.issubdtype(z.dtype, np.floating) or np.issubdtype(z.dtype, np.integer))
+        or z.dtype == bool
+    ):
         raise InputError(f"depth: expected a 2-D array of real depth values, got shape {z.shape} and dtype {z.dtype}")
     cam = Intrinsics.from_matrix(K)
     user_mask = as_mask(mask, z.shape)

@@ -153,9 +153,8 @@ def _mapping_intrinsics(path, data: dict) -> Intrinsics:
         for k in ("fx", "fy", "cx", "cy"):
             if not _is_number(data[k]):
                 raise DataFileError(f"{path}: expected numbers for fx, fy, cx, cy, got {k}: {_describe(data[k])}")
-        values = {k: float(data[k]) for k in ("fx", "fy", "cx", "cy")}
         try:
-            return Intrinsics(**values)
+            return Intrinsics(float(data["fx"]), float(data["fy"]), float(data["cx"]), float(data["cy"]))
         except InputError as exc:
             raise DataFileError(f"{path}: {exc}") from exc
     for key in _MATRIX_KEYS:

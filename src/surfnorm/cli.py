@@ -257,6 +257,26 @@ def list_methods(
 
 
 @app.command()
+def sample(
+    name: str = typer.Argument(
+        ..., help="A sample frame shipped in surfnorm: realsense-d435, 3f2n-easy, 3f2n-medium, 3f2n-hard."
+    ),
+    path: Path = typer.Argument(
+        Path("frame.png"), help="The 16-bit PNG to write; its intrinsics go beside it as .json."
+    ),
+    depth_scale: float = typer.Option(1000.0, help="Stored value per unit of depth (1000: millimetres)."),
+):
+    """Write a sample frame as a camera would: a 16-bit depth PNG and its intrinsics as JSON, to try the commands on."""
+    from .io.samples import write_sample
+
+    try:
+        png, js = write_sample(name, path, depth_scale=depth_scale)
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    console.print(f"wrote {png} (depth x {depth_scale:g}) and {js}", highlight=False)
+
+
+@app.command()
 def demo(
     out: Path = typer.Argument(Path("demo-output"), help="Folder for the normal and error maps (PNG)."),
 ):

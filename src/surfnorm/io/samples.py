@@ -117,6 +117,7 @@ def write_sample(name: str, path, *, depth_scale: float = 1000.0) -> tuple[Path,
         raise InputError(
             f"depth_scale: expected at most {65535 / float(depth.max()):g} for {name!r} (16-bit PNG), got {depth_scale!r}"
         )
+    png.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(png), scaled.astype(np.uint16)):
         raise OSError(f"{png}: could not write PNG")
     js = png.with_suffix(".json")

@@ -1,10 +1,13 @@
 """Method options everywhere: ``-m NAME:opt=val`` in estimate and convert, ``surfnorm methods NAME``, the registry's text."""
 
+import warnings
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 import surfnorm
+from surfnorm import IntrinsicsWarning
 from surfnorm.cli import app
 from surfnorm.io import read_depth, read_intrinsics, write_sample
 from surfnorm.methods import _REGISTRY, options_of, parse_method
@@ -130,3 +133,14 @@ def test_the_methods_page_shows_every_option_of_every_method():
         for o in options_of(name):
             assert o.doc.replace("|", "\\|") in page
     assert hooks.OPTIONS_MARKER in (root / "docs" / "methods.md").read_text()
+
+
+def test_estimate_warns_in_one_line_where_the_intrinsics_do_not_fit(tmp_path):
+    png, _ = write_sample("realsense-d435", tmp_path / "frame.png")
+    args = ["estimate", str(png), str(tmp_path / "o"), "--fx", "525", "--fy", "525", "--cx", "319.5", "--cy", "239.5"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", IntrinsicsWarning)  # the suite ignores it (pyproject.toml)
+        result = runner.invoke(app, args + ["--depth-scale", "1000", "-m", "d2nt_basic"])
+    assert result.exit_code == 0, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning: K: intrinsics that do not fit the frame"), lines

@@ -179,3 +179,16 @@ def test_no_warning_for_any_frame_of_the_sensor_sample():
             K = Intrinsics(**json.loads((folder / "K.json").read_text()))
             K.check_frame(depth.shape)
             surfnorm.estimate(depth, K, method="d2nt_basic")
+
+
+def test_opencv_calibration_yaml_keeps_the_image_size(tmp_path):
+    path = tmp_path / "calib.yml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 1280)
+    fs.write("image_height", 720)
+    fs.write("camera_matrix", np.array([[921.0, 0, 642.0], [0, 921.0, 359.0], [0, 0, 1]]))
+    fs.release()
+    K = read_intrinsics(path)
+    assert (K.fx, K.cx, K.width, K.height) == (921.0, 642.0, 1280, 720)
+    with pytest.warns(IntrinsicsWarning, match="for a 1280x720 image, but the frame is 640x480"):
+        K.check_frame((480, 640))

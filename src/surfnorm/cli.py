@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
@@ -201,9 +202,14 @@ def estimate(
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
         name, options = parse_method(method)
-        normals = estimate_(
-            z, cam, method=name, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity, **options
-        )
+        with warnings.catch_warnings(record=True) as caught:  # each warning as one line, not Python's two
+            normals = estimate_(
+                z, cam, method=name, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity, **options
+            )
+        for w in caught:
+            err_console.print(
+                f"[yellow]warning:[/] {escape(one_line(str(w.message)))}", highlight=False, soft_wrap=True
+            )
         if output.is_dir():
             fail(f"output: expected a file prefix, got the directory {output}")
         for f in formats:

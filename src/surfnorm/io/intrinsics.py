@@ -264,7 +264,12 @@ def _read_opencv_yaml(path: Path, text: str) -> Intrinsics:
                 raise DataFileError(f"{path}: cannot read {key!r} as an opencv-matrix ({reason})") from exc
             if mat is None:
                 raise DataFileError(f"{path}: expected {key!r} to be an opencv-matrix")
-            return _from_matrix(path, key, mat)
+            size = {}
+            for name in ("image_width", "image_height"):  # OpenCV's calibration sample writes them
+                node = fs.getNode(name)
+                if not node.empty() and node.isInt():
+                    size[name] = int(node.real())
+            return _with_size(path, size, _from_matrix(path, key, mat))
     finally:
         fs.release()
     raise DataFileError(f"{path}: expected an OpenCV matrix named camera_matrix, K or cameraMatrix")

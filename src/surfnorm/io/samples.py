@@ -100,8 +100,9 @@ def write_sample(name: str, path, *, depth_scale: float = 1000.0) -> tuple[Path,
     --------
     >>> import pathlib, tempfile
     >>> from surfnorm.io import read_depth, read_intrinsics, write_sample
-    >>> png, js = write_sample("realsense-d435", pathlib.Path(tempfile.mkdtemp()) / "frame.png")
-    >>> read_depth(png, depth_scale=1000).shape, read_intrinsics(js).width
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     png, js = write_sample("realsense-d435", pathlib.Path(folder) / "frame.png")
+    ...     read_depth(png, depth_scale=1000).shape, read_intrinsics(js).width
     ((720, 1280), 1280)
     """
     import json

@@ -24,7 +24,7 @@ PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 NOT_RUN = re.compile(r"<!--\s*not run:\s*(.+?)\s*-->")
 FENCE = re.compile(r"^```(\w*)\s*$")
 
-COUNTS: dict[str, int] = {"python": 0, "shell": 0, "not run": 0}
+COUNTS: dict[str, int] = {"python": 0, "surfnorm": 0, "shell": 0, "not run": 0}
 NOT_RUN_LIST: list[str] = []
 
 
@@ -103,7 +103,7 @@ def test_every_example_of_the_page_runs(page, tmp_path, monkeypatch):
                 exec(compile(b.code, where, "exec"), namespace)  # noqa: S102 - the documentation's own examples
         else:
             for line in shell_lines(b.code):
-                COUNTS["shell"] += 1
+                COUNTS["surfnorm" if shlex.split(line, comments=True)[0] == "surfnorm" else "shell"] += 1
                 run_shell_line(line, where, tmp_path)
 
 
@@ -116,8 +116,8 @@ def test_blocks_without_a_language_are_text():
 def summary_lines() -> list[str]:
     """The counts, for the end of the test run (tests/conftest.py prints them)."""
     lines = [
-        f"documentation examples: {COUNTS['python']} python blocks and {COUNTS['shell']} surfnorm/shell lines run, "
-        f"{COUNTS['not run']} blocks marked not run"
+        f"documentation examples: {COUNTS['python']} python blocks, {COUNTS['surfnorm']} surfnorm command lines "
+        f"(and {COUNTS['shell']} other shell lines) run; {COUNTS['not run']} blocks marked not run"
     ]
     lines += [f"  not run: {x}" for x in NOT_RUN_LIST]
     return lines

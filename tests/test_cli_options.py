@@ -144,3 +144,14 @@ def test_estimate_warns_in_one_line_where_the_intrinsics_do_not_fit(tmp_path):
     assert result.exit_code == 0, result.output
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("warning: K: intrinsics that do not fit the frame"), lines
+
+
+def test_sample_writes_a_frame_and_refuses_an_unknown_name(tmp_path):
+    result = runner.invoke(app, ["sample", "3f2n-hard", str(tmp_path / "f.png")])
+    assert result.exit_code == 0, result.output
+    depth, K = surfnorm.io.sample_frame("3f2n-hard")
+    assert read_intrinsics(tmp_path / "f.json") == K
+    assert abs(read_depth(tmp_path / "f.png", depth_scale=1000) - depth).max() <= 0.0005 + 1e-6
+    bad = runner.invoke(app, ["sample", "kinect", str(tmp_path / "g.png")])
+    assert bad.exit_code == 2 and "name: expected one of realsense-d435" in bad.output
+    assert not (tmp_path / "g.png").exists()

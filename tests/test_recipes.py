@@ -61,6 +61,11 @@ def test_write_sample_round_trips_in_millimetres(tmp_path):
     assert read_intrinsics(js) == K and read_intrinsics(js).width == 1280
     with pytest.raises(InputError, match="path"):
         write_sample("3f2n-easy", tmp_path / "frame.npy")
+    for bad in (0, -1000.0, "1000", float("nan")):
+        with pytest.raises(InputError, match="depth_scale: expected a positive finite number"):
+            write_sample("3f2n-easy", tmp_path / "frame.png", depth_scale=bad)
+    with pytest.raises(InputError, match="depth_scale: expected at most"):
+        write_sample("realsense-d435", tmp_path / "frame.png", depth_scale=1e6)
 
 
 # ---------------------------------------------------------------------------- recipes

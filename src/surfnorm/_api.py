@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from ._bands import CORES, map_threads, on_threads, whole
@@ -217,8 +219,7 @@ def estimate(
         bands = on_threads(workers)
         z_0, valid_0, options_0 = frame(None, bands)
         return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative, bands)
-    cams = _intrinsics_list(K, z.shape[0])
-    assert isinstance(cams, list)
+    cams = cast(list, _intrinsics_list(K, z.shape[0]))  # a list for a stack
     one_camera = all(c is cams[0] for c in cams)
     for i, cam_i in {id(c): (i, c) for i, c in enumerate(cams)}.values():  # each distinct camera once
         cam_i.check_frame(z.shape, name="K" if one_camera else f"K[{i}]", stacklevel=2)

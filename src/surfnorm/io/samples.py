@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validate import check_positive
 from ..camera import Intrinsics
-from ..errors import InputError
+from ..errors import DataFileError, InputError
+from ._atomic import atomic_write
 
 __all__ = ["sample_frame", "sample_frames", "write_sample"]
 
@@ -109,6 +111,7 @@ def write_sample(name: str, path, *, depth_scale: float = 1000.0) -> tuple[Path,
 
     import cv2
 
+    depth_scale = check_positive("depth_scale", depth_scale)
     depth, cam = sample_frame(name)
     png = Path(path)
     if png.suffix.lower() != ".png":
@@ -119,10 +122,14 @@ def write_sample(name: str, path, *, depth_scale: float = 1000.0) -> tuple[Path,
             f"depth_scale: expected at most {65535 / float(depth.max()):g} for {name!r} (16-bit PNG), got {depth_scale!r}"
         )
     png.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(png), scaled.astype(np.uint16)):
-        raise OSError(f"{png}: could not write PNG")
+    stored = scaled.astype(np.uint16)
+
+    def write_png(tmp: Path):
+        if not cv2.imwrite(str(tmp), stored):  # tmp ends in .png
+            raise DataFileError(f"{png}: could not write PNG")
+
+    atomic_write(png, write_png)
     js = png.with_suffix(".json")
-    js.write_text(
-        json.dumps({"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width, "height": cam.height})
-    )
+    fields = {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width, "height": cam.height}
+    atomic_write(js, lambda tmp: tmp.write_text(json.dumps(fields) + "\n"))
     return png, js

@@ -197,3 +197,21 @@ def test_opencv_calibration_yaml_keeps_the_image_size(tmp_path):
     assert (K.fx, K.cx, K.width, K.height) == (921.0, 642.0, 1280, 720)
     with pytest.warns(IntrinsicsWarning, match="for a 1280x720 image, but the frame is 640x480"):
         K.check_frame((480, 640))
+
+
+def test_the_torch_backend_warns_alike_for_intrinsics_it_can_read():
+    torch = pytest.importorskip("torch")
+    import surfnorm.torch
+
+    depth = torch.ones(48, 64, dtype=torch.float64) * 2
+    with pytest.warns(IntrinsicsWarning, match="outside the 64x48 frame") as caught:
+        surfnorm.torch.estimate(depth, [[60.0, 0, 100.5], [0, 60.0, 23.5], [0, 0, 1]], method="d2nt_basic")
+    assert caught[0].filename == __file__
+    with pytest.warns(IntrinsicsWarning, match="for a 640x480 image"):
+        surfnorm.torch.estimate(depth, Intrinsics(60.0, 60.0, 31.5, 23.5, 640, 480), method="d2nt_basic")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        surfnorm.torch.estimate(depth, Intrinsics(60.0, 60.0, 31.5, 23.5, 64, 48), method="d2nt_basic")
+        surfnorm.torch.estimate(
+            depth, torch.tensor([[60.0, 0, 100.5], [0, 60.0, 23.5], [0, 0, 1]]), method="d2nt_basic"
+        )

@@ -5,6 +5,8 @@
 #   make lint   ruff (lint, docstrings, formatting) and mypy (the modules that are not Numba kernels)
 #   make docs   the documentation site, warnings as errors -> site/index.html
 #   make bench  speed of the D2NT family next to the authors' d2nt package -> bench-output/speed.{md,json}
+#   make pictures  the documentation's pictures from the shipped frames -> docs/images/*.png
+#               (OpenCV 5 for RgbdNormals; SENSOR_SAMPLE=DIR adds the sensor benchmark's figure)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -16,7 +18,7 @@ TORCH_STAMP := $(VENV)/.torch-installed-$(TORCH_VERSION)
 # The authors' d2nt package: the peer that the speed benchmark and the tests compare with
 D2NT_STAMP := $(VENV)/.d2nt-installed-0.1.3
 
-.PHONY: demo test lint docs doctest bench clean
+.PHONY: demo test lint docs doctest bench pictures clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -64,6 +66,10 @@ $(D2NT_STAMP): $(STAMP)
 
 bench: $(D2NT_STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) benchmarks/speed.py --out bench-output
+
+SENSOR_SAMPLE ?=
+pictures: $(STAMP)
+	$(PY) benchmarks/docs_pictures.py $(if $(SENSOR_SAMPLE),--sensor $(SENSOR_SAMPLE))
 
 clean:
 	rm -rf $(VENV) demo-output bench-output site .mypy_cache .ruff_cache

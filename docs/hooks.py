@@ -2,7 +2,9 @@
 
 - ``kernels.md``: every registered method and where its code lives, read from ``surfnorm.methods()``;
 - ``reference/cli.md``: the ``--help`` of ``surfnorm`` and of each of its commands;
-- ``changelog.md``: ``CHANGELOG.md`` of the repository.
+- ``changelog.md``: ``CHANGELOG.md`` of the repository;
+- in ``methods.md``, the section that :data:`OPTIONS_MARKER` marks: every option of every method with its meaning,
+  default and allowed values, from the registry's own text (what ``surfnorm methods NAME`` prints).
 
 The kernel page shows every field of the registry's entries beyond name, category, paper, summary and options,
 so a field that says where a kernel lives appears by itself once the registry has it; until then it shows the
@@ -37,6 +39,39 @@ def on_files(files, config):
     for path, text in pages.items():
         files.append(File.generated(config, path, content=text))
     return files
+
+
+#: The line of docs/methods.md that the generated options section replaces.
+OPTIONS_MARKER = "<!-- options of every method: generated from the registry by docs/hooks.py -->"
+
+
+def on_page_markdown(markdown, page, config, files):
+    """Put the generated options section where methods.md marks it."""
+    if page.file.src_uri == "methods.md":
+        if OPTIONS_MARKER not in markdown:
+            raise RuntimeError(f"docs/methods.md: expected the line {OPTIONS_MARKER!r}")
+        markdown = markdown.replace(OPTIONS_MARKER, options_section())
+    return markdown
+
+
+def options_section() -> str:
+    """Every option of every registered method: default, allowed values, meaning (``surfnorm.methods.options_of``)."""
+    import surfnorm
+    from surfnorm.methods import options_of
+
+    lines = []
+    for name, info in surfnorm.methods().items():
+        lines += [f"### `{name}`", "", f"{info.summary}. Paper: {info.reference}.", ""]
+        lines += ["| option | default | allowed | meaning |", "|---|---|---|---|"]
+        for o in options_of(name):
+            cells = [f"`{o.name}`", f"`{o.default!r}`", o.allowed, o.doc]
+            lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+        lines.append("")
+    lines += [
+        "Any method followed by `+mnr` also takes `mnr_dlf`: " + _cell(options_of("d2nt_basic+mnr")[-1].doc) + ".",
+        "",
+    ]
+    return "\n".join(lines)
 
 
 def on_page_content(html, page, config, files):
@@ -137,10 +172,7 @@ def kernels_page() -> str:
             cells.append(text)
         cells += [f"`{where}`" if where else "", info.reference]
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
-    lines += ["", "## Options", "", "| method | options and their defaults |", "|---|---|"]
-    for name, info in infos.items():
-        opts = ", ".join(f"`{k}={v!r}`" for k, v in info.options.items())
-        lines.append(f"| `{name}` | {_cell(opts)} |")
+    lines += ["", "Each method's options, with their meaning and values: [Methods, options](methods.md#options)."]
     return "\n".join(lines) + "\n"
 
 

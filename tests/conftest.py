@@ -1,4 +1,5 @@
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -15,3 +16,11 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 def shared_sample():
     """The 12-frame 3F2N sample (tests/data/3f2n-sample), in the dataset's layout."""
     return SAMPLE
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Print how many documentation examples ran, and which were marked not run (tests/test_examples.py)."""
+    module = sys.modules.get("tests.test_examples") or sys.modules.get("test_examples")
+    if module is not None and any(module.COUNTS.values()):
+        for line in module.summary_lines():
+            terminalreporter.write_line(line)

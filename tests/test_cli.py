@@ -166,7 +166,8 @@ USAGE_ERRORS = [
     (["demo", "a", "b"], "unexpected extra argument"),
     (["demo", "afile"], "afile"),
     # methods
-    (["methods", "extra"], "unexpected extra argument"),
+    (["methods", "auto", "extra"], "unexpected extra argument"),
+    (["methods", "extra"], "got 'extra'"),
     (["methods", "--bogus"], "No such option: --bogus"),
 ]
 

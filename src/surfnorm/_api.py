@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from ._bands import CORES, map_threads, on_threads, whole
@@ -34,7 +36,7 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
     if arr is None:
         if len(K) != n:
             raise InputError(f"K: expected one intrinsics for all {n} frames or one per frame, got {len(K)}")
-        return list(K)
+        return [Intrinsics.from_matrix(k, name=f"K[{i}]") for i, k in enumerate(K)]
     if arr.ndim == 3:
         if arr.shape[0] != n:
             raise InputError(f"K: expected shape (3, 3) or ({n}, 3, 3) for {n} frames, got shape {arr.shape}")
@@ -169,6 +171,13 @@ def estimate(
     InputError (a ValueError)
         Bad depth, K, mask, method name or option; the message names which.
 
+    Warns
+    -----
+    IntrinsicsWarning
+        ``K`` does not look like the intrinsics of this frame: a principal point outside it or far from its
+        centre towards one corner, or an image size in ``K`` other than the frame's (see
+        :meth:`surfnorm.Intrinsics.check_frame`).
+
     Examples
     --------
     >>> import numpy as np, surfnorm
@@ -205,11 +214,15 @@ def estimate(
         return z_i, _valid(z_i, m_i, bands), dict(options)
 
     if z.ndim == 2:
-        cam = _intrinsics_list(K, None)
+        cam = Intrinsics.from_matrix(K)
+        cam.check_frame(z.shape, stacklevel=2)
         bands = on_threads(workers)
         z_0, valid_0, options_0 = frame(None, bands)
         return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative, bands)
-    cams = _intrinsics_list(K, z.shape[0])
+    cams = cast(list, _intrinsics_list(K, z.shape[0]))  # a list for a stack
+    one_camera = all(c is cams[0] for c in cams)
+    for i, cam_i in {id(c): (i, c) for i, c in enumerate(cams)}.values():  # each distinct camera once
+        cam_i.check_frame(z.shape, name="K" if one_camera else f"K[{i}]", stacklevel=2)
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
@@ -123,6 +124,10 @@ def method_names() -> list[str]:
     return list(methods())
 
 
+METHOD_HELP = (
+    "Estimator, with options: NAME or NAME:option=value,option=value (e.g. plane_pca:window=5); "
+    "`surfnorm methods NAME` lists its options. Any name may end in +mnr."
+)
 INTRINSICS_HELP = (
     "Camera intrinsics file: JSON/YAML (fx, fy, cx, cy or K), ROS camera_info YAML, OpenCV YAML, 3F2N params.txt."
 )
@@ -166,9 +171,7 @@ def estimate(
     output: Path = typer.Argument(
         ..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."
     ),
-    method: str = typer.Option(
-        DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."
-    ),
+    method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help=METHOD_HELP),
     intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP),
     fx: Optional[float] = typer.Option(None, help="Focal length x, pixels."),
     fy: Optional[float] = typer.Option(None, help="Focal length y, pixels."),
@@ -193,6 +196,7 @@ def estimate(
     from . import estimate as estimate_
     from .io.depth import read_depth, read_mask
     from .io.normals import FORMAT_SUFFIX, write_normals
+    from .methods import parse_method
 
     written = []
     try:
@@ -200,8 +204,16 @@ def estimate(
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
-        normals = estimate_(z, cam, method=method, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity)
-        if verbose and method.split("+")[0].split(":")[0] == DEFAULT_METHOD:
+        name, options = parse_method(method)
+        with warnings.catch_warnings(record=True) as caught:  # each warning as one line, not Python's two
+            normals = estimate_(
+                z, cam, method=name, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity, **options
+            )
+        for w in caught:
+            err_console.print(
+                f"[yellow]warning:[/] {escape(one_line(str(w.message)))}", highlight=False, soft_wrap=True
+            )
+        if verbose and name.split("+")[0] == DEFAULT_METHOD:
             from ._api import auto_decision
 
             console.print(str(auto_decision(z, cam, mask=user_mask, disparity=disparity)), highlight=False)
@@ -217,10 +229,34 @@ def estimate(
 
 
 @app.command("methods")
-def list_methods():
-    """List the registered estimators with their category, paper and kernel."""
-    from .methods import methods
+def list_methods(
+    name: Optional[str] = typer.Argument(
+        None, help="A method: print each of its options with its meaning, default and allowed values."
+    ),
+):
+    """List the registered estimators with their category, paper and kernel; with NAME, that method's options."""
+    from .methods import methods, options_of
 
+    if name is not None:
+        try:
+            options = options_of(name)
+        except SurfnormError as exc:
+            fail(f"NAME: {exc}")
+        info = methods()[name.removesuffix("+mnr")]
+        console.print(f"{name} ({info.category}): {info.summary}", highlight=False, soft_wrap=True)
+        console.print(f"paper: {info.reference}", highlight=False, soft_wrap=True)
+        console.print(f"kernel: {info.kernel}", highlight=False, soft_wrap=True)
+        table = Table("option", "default", "allowed", "meaning")
+        for o in options:
+            table.add_row(o.name, repr(o.default), o.allowed, o.doc)
+        console.print(table)
+        console.print(
+            f"Set them with -m {name}:option=value,option=value (estimate, convert) or as keyword "
+            "arguments of surfnorm.estimate.",
+            highlight=False,
+            soft_wrap=True,
+        )
+        return
     table = Table("method", "category", "reference", "options", "kernel")
     for info in methods().values():
         table.add_row(
@@ -232,6 +268,27 @@ def list_methods():
         )
     console.print(table)
     console.print("Any method name followed by +mnr refines its output with MNR.")
+    console.print("`surfnorm methods NAME`: each option of a method with its meaning, default and allowed values.")
+
+
+@app.command()
+def sample(
+    name: str = typer.Argument(
+        ..., help="A sample frame shipped in surfnorm: realsense-d435, 3f2n-easy, 3f2n-medium, 3f2n-hard."
+    ),
+    path: Path = typer.Argument(
+        Path("frame.png"), help="The 16-bit PNG to write; its intrinsics go beside it as .json."
+    ),
+    depth_scale: float = typer.Option(1000.0, help="Stored value per unit of depth (1000: millimetres)."),
+):
+    """Write a sample frame as a camera would: a 16-bit depth PNG and its intrinsics as JSON, to try the commands on."""
+    from .io.samples import write_sample
+
+    try:
+        png, js = write_sample(name, path, depth_scale=depth_scale)
+    except (SurfnormError, OSError) as exc:
+        fail(str(exc))
+    console.print(f"wrote {png} (depth x {depth_scale:g}) and {js}", highlight=False)
 
 
 @app.command()
@@ -307,9 +364,7 @@ def convert(
     output_dir: Path = typer.Argument(
         ..., help="Folder for the normal files (created if missing); sub-folders mirror INPUT."
     ),
-    method: str = typer.Option(
-        DEFAULT_METHOD, "--method", "-m", help="Estimator; see `surfnorm methods`. Any name may end in +mnr."
-    ),
+    method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help=METHOD_HELP),
     depth_scale: Optional[float] = typer.Option(
         None, help="Divide stored depth by this (1000 for mm PNG, 5000 for TUM)."
     ),
@@ -354,6 +409,7 @@ def convert(
 
     from .batch import convert as convert_
     from .batch import plan_tasks
+    from .methods import parse_method
 
     _check_format(fmt)
     if jobs < 1:
@@ -371,6 +427,7 @@ def convert(
         from .io.intrinsics import resolve_intrinsics
 
         cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
+        method_name, method_options = parse_method(method)
         columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         if on_dask:
             from .batch.cluster import cluster_client
@@ -387,7 +444,7 @@ def convert(
             summary = convert_(
                 inputs,
                 output_dir,
-                method=method,
+                method=method_name,
                 fmt=fmt,
                 depth_scale=depth_scale,
                 intrinsics=cam,
@@ -399,6 +456,7 @@ def convert(
                 shard_size=shard_size,
                 kinect_disparity=kinect_disparity,
                 byte_order=byte_order,
+                **method_options,
             )
     except KeyboardInterrupt:
         fail("interrupted: finished outputs are complete; run the same command again to do the rest", 130)

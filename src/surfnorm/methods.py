@@ -29,6 +29,9 @@ __all__ = [
     "register",
     "resolve",
     "methods",
+    "OptionInfo",
+    "options_of",
+    "parse_method",
     "CATEGORIES",
     "MNR_SUFFIX",
     "DEFAULT_METHOD",
@@ -42,10 +45,25 @@ DEFAULT_METHOD = "auto"
 
 @dataclass(frozen=True)
 class Option:
-    """A keyword option of a method: its default, a checker that returns the clean value, and a description."""
+    """A keyword option of a method: its default, a checker that returns the clean value, its meaning, its values.
+
+    ``doc`` (what it does) and ``allowed`` (the values its checker accepts) are what ``surfnorm methods NAME``
+    prints and what the documentation's methods page shows: the one place where each option is explained.
+    """
 
     default: Any
     check: Callable[[str, Any], Any]
+    doc: str
+    allowed: str = ""
+
+
+@dataclass(frozen=True)
+class OptionInfo:
+    """What :func:`options_of` reports about one option of a method."""
+
+    name: str
+    default: Any
+    allowed: str
     doc: str
 
 
@@ -53,13 +71,35 @@ def _dlf(name, value):
     return check_choice(name, value, DLF_NAMES)
 
 
+_DLF_ALLOWED = ", ".join(DLF_NAMES)
+
 FILL = Option(
-    0.0, lambda name, value: check_fill(value), "value written into all three components where no valid normal exists"
+    0.0,
+    lambda name, value: check_fill(value),
+    "value written into all three components where no valid normal exists",
+    "a number float32 can hold: 0.0, nan, +-inf, or a magnitude between 1.4e-45 and 3.4e38",
 )
 DAG_OPTIONS = {
-    "dlf": Option("1d", _dlf, "discrete Laplace filter of the DAG smoothness (Table II): 1d, alpha, beta, gamma"),
-    "tau": Option(1.0, check_positive, "softness tau of the softmin (eq. 13)"),
-    "truncate": Option(True, check_bool, "use the truncated softmin (eq. 14)"),
+    "dlf": Option(
+        "1d",
+        _dlf,
+        "discrete Laplace filter of the DAG smoothness (Table II): which neighbours measure how smooth each side "
+        "of a pixel is",
+        _DLF_ALLOWED,
+    ),
+    "tau": Option(
+        1.0,
+        check_positive,
+        "softness tau of the softmin (eq. 13), in depth units (relative to each pixel's depth with "
+        "scale_invariant=True): smaller trusts the smoother side more",
+        "a positive finite number",
+    ),
+    "truncate": Option(
+        True,
+        check_bool,
+        "use the truncated softmin (eq. 14): the smoother side alone where one is clearly smoother",
+        "True, False",
+    ),
 }
 BORDER_OPTIONS = {
     "border": Option(
@@ -67,11 +107,15 @@ BORDER_OPTIONS = {
         lambda name, value: check_choice(name, value, BORDERS),
         "finite differences at the image border: one-sided, or reflect (OpenCV BORDER_REFLECT_101, "
         "as the authors' code, which zeroes the gradient there)",
+        ", ".join(BORDERS),
     ),
 }
 MNR_OPTIONS = {
     "mnr_dlf": Option(
-        "alpha", _dlf, "discrete Laplace filter of the MNR smoothness (authors' code: alpha; Sec. IV-A text: beta)"
+        "alpha",
+        _dlf,
+        "discrete Laplace filter of the MNR smoothness (authors' code: alpha; Sec. IV-A text: beta)",
+        _DLF_ALLOWED,
     ),
 }
 
@@ -160,6 +204,60 @@ def methods() -> dict[str, MethodInfo]:
         )
         for m in _REGISTRY.values()
     }
+
+
+def options_of(name: str) -> list[OptionInfo]:
+    """Every option of a method (a name from :func:`methods`, optionally ending in ``+mnr``): meaning, default, values.
+
+    The same text that ``surfnorm methods NAME`` prints and the documentation's methods page shows.
+
+    Examples
+    --------
+    >>> from surfnorm.methods import options_of
+    >>> [(o.name, o.default) for o in options_of("plane_pca")]
+    [('fill', 0.0), ('window', 3)]
+    >>> options_of("plane_pca")[1].allowed
+    'an odd integer >= 3'
+    """
+    method, refined, _ = resolve(name, {})
+    return [OptionInfo(k, o.default, o.allowed, o.doc) for k, o in option_specs(method, refined).items()]
+
+
+def _option_value(text: str):
+    """An option's value as typed on a command line: an int, a float, True/False, None, else the text itself."""
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False, "none": None}.get(text.lower(), text)
+
+
+def parse_method(text: str) -> tuple[str, dict]:
+    """A method with its options as one string, as ``surfnorm estimate -m`` takes it: ``NAME:opt=val,opt=val``.
+
+    Options follow the name after ``:`` and are separated by ``,`` or ``:`` (the sensor benchmark's
+    ``plane_pca:window=11:fill=nan`` works too). Values: integers, floats (``nan``), ``true``/``false``,
+    ``none``, else text. The options are not checked here; :func:`surfnorm.estimate` checks them.
+
+    Examples
+    --------
+    >>> from surfnorm.methods import parse_method
+    >>> parse_method("adaptive_fit:window=5,max_window=11")
+    ('adaptive_fit', {'window': 5, 'max_window': 11})
+    >>> parse_method("sda_sne:iterations=none,base=3f2n")
+    ('sda_sne', {'iterations': None, 'base': '3f2n'})
+    """
+    if not isinstance(text, str):
+        raise InputError(f"method: expected a method name (str), got {type(text).__name__} {text!r}")
+    name, sep, rest = text.strip().partition(":")
+    options: dict = {}
+    for item in rest.replace(":", ",").split(",") if sep else []:
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip() or not value.strip():
+            raise InputError(f"method: expected NAME or NAME:option=value[,option=value...], got {text!r}")
+        options[key.strip()] = _option_value(value.strip())
+    return name.strip(), options
 
 
 def option_specs(method: Method, refined: bool) -> dict[str, Option]:
@@ -344,12 +442,14 @@ SDA_OPTIONS = {
         check_iterations,
         "passes of the dynamic programming (authors' demo: 3); None runs until no pixel changes, "
         f"at most {SDA_MAX_ITERATIONS} passes",
+        "an integer >= 0, or None",
     ),
     "base": Option(
         "cp2tv",
         lambda name, value: check_choice(name, value, SDA_BASES),
         "how gradients become normals: cp2tv (on depth, the paper's SDA-SNE) or 3f2n "
         "(SDA on inverse depth, then 3F2N's median filter, as the authors' demo offers)",
+        ", ".join(SDA_BASES),
     ),
     **BORDER_OPTIONS,
 }
@@ -380,7 +480,12 @@ register(
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
 
 WINDOW_OPTIONS = {
-    "window": Option(3, check_window, "side of the square pixel neighbourhood whose points are fitted (odd, >= 3)"),
+    "window": Option(
+        3,
+        check_window,
+        "side of the square pixel neighbourhood whose points are fitted: larger smooths noise and rounds edges",
+        "an odd integer >= 3",
+    ),
 }
 
 
@@ -501,15 +606,23 @@ ADAPTIVE_OPTIONS = {
     "window": Option(
         None,
         _check_window_or_none,
-        "side of the fitted window (odd, >= 3); None: chosen per pixel from the frame's noise and the pixel's depth",
+        "side of the fitted window; None: chosen per pixel from the frame's noise and the pixel's depth, "
+        "smaller near depth edges (edge-aware quadrant windows)",
+        "None, or an odd integer >= 3 and at most max_window",
     ),
-    "max_window": Option(31, check_window, "largest window side (odd, >= 3), also for sparse depth"),
+    "max_window": Option(
+        31,
+        check_window,
+        "largest window side the per-pixel choice may take, also where sparse depth (LiDAR) needs wide windows",
+        "an odd integer >= 3",
+    ),
     "stride": Option(
         None,
         _check_stride,
         "1: every pixel's own window; 2: windows on every other row and column, the pixels between taking the "
         "planes of the fitted pixels next to them (their mean, or the closest at an edge; a quarter of the fits); "
         "None: 2 unless the depth is sparse",
+        "1, 2, or None",
     ),
 }
 
@@ -555,7 +668,10 @@ register(
         _run_auto,
         {
             "tau": Option(
-                1.0, DAG_OPTIONS["tau"].check, "softness tau of d2nt_v3's softmin (eq. 13), where auto picks d2nt_v3"
+                1.0,
+                DAG_OPTIONS["tau"].check,
+                "softness tau of d2nt_v3's softmin (eq. 13), where auto picks d2nt_v3",
+                DAG_OPTIONS["tau"].allowed,
             )
         },
         ties=True,

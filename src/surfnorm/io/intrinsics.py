@@ -123,18 +123,38 @@ def _from_matrix(path: Path, key: str, value) -> Intrinsics:
         raise DataFileError(str(exc)) from exc
 
 
+def _with_size(path, data: dict, cam: Intrinsics) -> Intrinsics:
+    """``cam`` with the image size the mapping states (ROS ``image_width``/``image_height``, or ``width``/``height``).
+
+    A size that is missing, partial or not a positive whole number is left out: the size only feeds
+    :class:`surfnorm.IntrinsicsWarning`.
+    """
+    for wk, hk in (("image_width", "image_height"), ("width", "height")):
+        w, h = data.get(wk), data.get(hk)
+        if all(isinstance(x, int) and not isinstance(x, bool) and 0 < x < 1 << 31 for x in (w, h)):
+            return Intrinsics(cam.fx, cam.fy, cam.cx, cam.cy, w, h)
+    return cam
+
+
 def intrinsics_from_mapping(data, *, source="intrinsics") -> Intrinsics:
-    """Intrinsics from a dict with fx, fy, cx, cy, or one of the matrix keys of :func:`read_intrinsics`."""
+    """Intrinsics from a dict with fx, fy, cx, cy, or one of the matrix keys of :func:`read_intrinsics`.
+
+    An image size in the mapping (``image_width`` and ``image_height`` as in ROS camera_info, or ``width`` and
+    ``height``) is kept as the intrinsics' ``width`` and ``height``.
+    """
     path = source
     if not isinstance(data, dict):
         raise DataFileError(f"{path}: expected a mapping with {_EXPECTED}, got {type(data).__name__}")
+    return _with_size(path, data, _mapping_intrinsics(path, data))
+
+
+def _mapping_intrinsics(path, data: dict) -> Intrinsics:
     if all(k in data for k in ("fx", "fy", "cx", "cy")):
         for k in ("fx", "fy", "cx", "cy"):
             if not _is_number(data[k]):
                 raise DataFileError(f"{path}: expected numbers for fx, fy, cx, cy, got {k}: {_describe(data[k])}")
-        values = {k: float(data[k]) for k in ("fx", "fy", "cx", "cy")}
         try:
-            return Intrinsics(**values)
+            return Intrinsics(float(data["fx"]), float(data["fy"]), float(data["cx"]), float(data["cy"]))
         except InputError as exc:
             raise DataFileError(f"{path}: {exc}") from exc
     for key in _MATRIX_KEYS:
@@ -244,7 +264,12 @@ def _read_opencv_yaml(path: Path, text: str) -> Intrinsics:
                 raise DataFileError(f"{path}: cannot read {key!r} as an opencv-matrix ({reason})") from exc
             if mat is None:
                 raise DataFileError(f"{path}: expected {key!r} to be an opencv-matrix")
-            return _from_matrix(path, key, mat)
+            size = {}
+            for name in ("image_width", "image_height"):  # OpenCV's calibration sample writes them
+                node = fs.getNode(name)
+                if not node.empty() and node.isInt():
+                    size[name] = int(node.real())
+            return _with_size(path, size, _from_matrix(path, key, mat))
     finally:
         fs.release()
     raise DataFileError(f"{path}: expected an OpenCV matrix named camera_matrix, K or cameraMatrix")

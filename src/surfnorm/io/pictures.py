@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import DataFileError, InputError
 from ._atomic import atomic_write
 
-__all__ = ["normal_to_rgb8", "error_to_rgb8", "write_rgb8"]
+__all__ = ["normals_to_rgb", "normal_to_rgb8", "error_to_rgb8", "write_rgb8"]
 
 COLOURINGS = ("3f2n", "opengl")
 
@@ -31,6 +31,39 @@ def normal_to_rgb8(normals: np.ndarray, *, colouring: str = "3f2n", background=(
         sq = np.einsum("hwc,hwc->hw", n, n)
     img[~(np.isfinite(sq) & (sq > 0))] = background
     return img
+
+
+def normals_to_rgb(normals, *, colouring: str = "3f2n", background=(255, 255, 255)) -> np.ndarray:
+    """A normal map (H, W, 3) as an RGB picture (H, W, 3) uint8, as ``surfnorm estimate`` and the demo draw it.
+
+    Parameters
+    ----------
+    normals : ndarray of shape (H, W, 3)
+        Unit normals in surfnorm's camera frame (x right, y down, z forward), e.g. from
+        :func:`surfnorm.estimate`.
+    colouring : {"3f2n", "opengl"}
+        ``"3f2n"`` (default) colours n as (1 - n) / 2, the 3F2N dataset's and the D2NT paper's pictures (a
+        wall facing the camera is light blue); ``"opengl"`` as (n + 1) / 2.
+    background : tuple of 3 ints
+        Colour of pixels without a normal (zero or non-finite).
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W, 3)
+        RGB; write it with ``cv2.imwrite(path, rgb[:, :, ::-1])`` (OpenCV wants BGR) or show it with Matplotlib.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from surfnorm.io import normals_to_rgb
+    >>> n = np.zeros((1, 2, 3), np.float32); n[0, 0] = [0, 0, -1]
+    >>> normals_to_rgb(n).tolist()
+    [[[128, 128, 255], [255, 255, 255]]]
+    """
+    n = np.asarray(normals)
+    if n.ndim != 3 or n.shape[-1] != 3 or not np.issubdtype(n.dtype, np.floating):
+        raise InputError(f"normals: expected a float array of shape (H, W, 3), got shape {n.shape} and dtype {n.dtype}")
+    return normal_to_rgb8(n, colouring=colouring, background=background)
 
 
 def error_to_rgb8(

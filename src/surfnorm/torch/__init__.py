@@ -209,7 +209,9 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     user_mask = as_mask(mask, z, plain)
     work, out_dtype = compute_dtype(z)
     z = z.to(work)
-    cam = as_intrinsics(K, z.shape[0], z.device, torch.float64 if run in _FLOAT64_CAMERA else work)
+    cam = as_intrinsics(
+        K, z.shape[0], z.device, torch.float64 if run in _FLOAT64_CAMERA else work, frame_shape=tuple(z.shape[-2:])
+    )
     valid = (z > 0) & (z < math.inf)  # finite and positive (NaN fails both)
     if user_mask is not None:
         valid = valid & user_mask

@@ -98,17 +98,24 @@ def as_mask(mask, depth: torch.Tensor, plain: bool) -> torch.Tensor | None:
     return mask if mask.dtype == torch.bool else mask != 0
 
 
-def as_intrinsics(K, batch: int, device: torch.device, dtype: torch.dtype):
-    """(fx, fy, cx, cy), each a (B, 1, 1) tensor of ``dtype`` on ``device``, from K of shape (3, 3) or (B, 3, 3)."""
+def as_intrinsics(K, batch: int, device: torch.device, dtype: torch.dtype, frame_shape=None):
+    """(fx, fy, cx, cy), each a (B, 1, 1) tensor of ``dtype`` on ``device``, from K of shape (3, 3) or (B, 3, 3).
+
+    A K that is not a tensor is checked value by value, and against ``frame_shape`` (H, W) where given
+    (:class:`surfnorm.IntrinsicsWarning`, as :func:`surfnorm.estimate`); a tensor is not (that would wait for the
+    device).
+    """
     if isinstance(K, Intrinsics):
-        K = K.matrix
-    if not isinstance(K, torch.Tensor):
+        if frame_shape is not None:
+            K.check_frame(frame_shape, stacklevel=3)
+        K = torch.as_tensor(K.matrix)
+    elif not isinstance(K, torch.Tensor):
         arr = np.asarray(K) if not isinstance(K, np.ndarray) else K
-        if arr.ndim == 3:
-            for i, k in enumerate(arr):
-                Intrinsics.from_matrix(k, name=f"K[{i}]")
-        else:
-            Intrinsics.from_matrix(arr)
+        cams = [Intrinsics.from_matrix(k, name=f"K[{i}]") for i, k in enumerate(arr)] if arr.ndim == 3 else []
+        cams = cams or [Intrinsics.from_matrix(arr)]
+        if frame_shape is not None:
+            for i, cam in enumerate(cams):
+                cam.check_frame(frame_shape, name="K" if len(cams) == 1 else f"K[{i}]", stacklevel=3)
         K = torch.as_tensor(np.asarray(arr, dtype=np.float64))
     if K.dtype == torch.bool or K.is_complex():
         raise InputError(f"K: expected a real (3, 3) or ({batch}, 3, 3) intrinsic matrix, got {_describe(K)}")

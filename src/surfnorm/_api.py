@@ -343,4 +343,5 @@ def auto_decision(depth, K, *, mask=None, disparity: bool = False):
     if z.ndim == 2:
         return decide(z, _valid(z, user_mask), _intrinsics_list(K, None))
     cams = _intrinsics_list(K, z.shape[0])
+    assert isinstance(cams, list)  # for a stack (n given)
     return [decide(z[i], _valid(z[i], None if user_mask is None else user_mask[i]), cams[i]) for i in range(len(z))]

@@ -387,7 +387,7 @@ def _stereo(d: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
         right[v] = np.interp(u, x[seen], left[v][seen].astype(np.float64)).astype(np.uint8)
     n_disp = int(16 * np.ceil((float(disp.max()) + 8.0) / 16.0))
     block = 5
-    sgbm = cv2.StereoSGBM_create(
+    sgbm = cv2.StereoSGBM.create(
         minDisparity=0,
         numDisparities=n_disp,
         blockSize=block,

@@ -1,0 +1,177 @@
+"""Make a frame folder for the sensor benchmark (`surfnorm bench --sensor DIR`) from a depth file or a stereo pair.
+
+    # a depth file as a camera wrote it (any file surfnorm.io.read_depth reads), with its intrinsics
+    PYTHONPATH=src python benchmarks/sensor_folder.py depth OUT/tum_fr2 1_depth.png --depth-scale 5000 \\
+        --fx 520.9 --fy 521.0 --cx 325.1 --cy 249.7 --source "TUM RGB-D fr2 desk, CC BY 4.0"
+    # OpenCV's SGBM on a rectified pair with ground-truth disparity (reference planes from the ground truth)
+    PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2003_teddy im2.png im6.png disp2.png \\
+        --gt-scale 4 --fx 450 --baseline 0.16 --source "Middlebury 2003 Teddy (quarter size)"
+
+The folder gets the layout of the benchmark's frames: the input file(s) as given (raw.*, or raw_left.*,
+raw_right.*, raw_gt.*), depth.npy (float32 metres, 0 where invalid), K.json (fx, fy, cx, cy; 0-based pixel
+centres; cx, cy default to the image centre), planes.npz (reference planes) and meta.json (where it came from, and
+how the planes were found).
+
+Reference planes: RANSAC on the back-projected valid points (Open3D's segment_plane, distance threshold
+max(4 mm, 1.2 % of the median depth), 1000 iterations, seed 0), at most 5 planes, each cut to its largest
+4-connected piece after a 5x5 erosion and kept if it has at least 2000 pixels, with its normal from an SVD of the
+piece's points, facing the camera. For a stereo pair they are found on the ground truth's depth and kept where
+SGBM gave depth, so that coverage measures the estimators, not the matcher. Open3D's RANSAC is not bit-stable
+across runs on every frame: keep the planes.npz a run wrote as the reference.
+
+SGBM: 5x5 blocks, P1 = 8 * 3 * 25, P2 = 32 * 3 * 25, disp12MaxDiff 1, uniqueness 10, speckle window 100 and
+range 2, numDisparities the multiple of 16 above the ground truth's largest disparity + 8; depth f B / d.
+
+Needs Open3D (``pip install open3d``; on Debian also ``apt-get install libusb-1.0-0``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+MAX_PLANES = 5
+MIN_PIXELS = 2000
+
+
+def reference_planes(depth: np.ndarray, fx: float, fy: float, cx: float, cy: float):
+    """(normals (P, 3), masks (P, H, W), RANSAC threshold in metres) of ``depth`` (metres, 0 = invalid)."""
+    import open3d as o3d
+
+    o3d.utility.random.seed(0)
+    H, W = depth.shape
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    z = depth.astype(np.float64)
+    points = np.stack([(u - cx) * z / fx, (v - cy) * z / fy, z], axis=-1)
+    valid = depth > 0
+    threshold = max(0.004, 0.012 * float(np.median(depth[valid])))
+    remaining = np.flatnonzero(valid.ravel())
+    flat = points.reshape(-1, 3)
+    normals, masks = [], []
+    for _ in range(MAX_PLANES):
+        if remaining.size < 3 * MIN_PIXELS // 2:
+            break
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(flat[remaining]))
+        _, inliers = cloud.segment_plane(distance_threshold=threshold, ransac_n=3, num_iterations=1000)
+        inliers = np.asarray(inliers, dtype=np.int64)
+        if inliers.size < MIN_PIXELS:
+            break
+        hit = np.zeros(H * W, np.uint8)
+        hit[remaining[inliers]] = 1
+        remaining = np.delete(remaining, inliers)
+        hit = cv2.erode(hit.reshape(H, W), np.ones((5, 5), np.uint8))
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(hit, connectivity=4)
+        if n <= 1:
+            continue
+        piece = labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        if piece.sum() < MIN_PIXELS:
+            continue
+        q = points[piece]
+        normal = np.linalg.svd(q - q.mean(axis=0), full_matrices=False)[2][2]
+        normals.append(-normal if normal @ q.mean(axis=0) > 0 else normal)
+        masks.append(piece)
+    if not normals:
+        return np.zeros((0, 3)), np.zeros((0, H, W), bool), threshold
+    return np.array(normals), np.array(masks), threshold
+
+
+def sgbm_disparity(left: np.ndarray, right: np.ndarray, largest: float) -> np.ndarray:
+    block = 5
+    sgbm = cv2.StereoSGBM.create(
+        minDisparity=0,
+        numDisparities=int(16 * np.ceil((largest + 8.0) / 16.0)),
+        blockSize=block,
+        P1=8 * 3 * block * block,
+        P2=32 * 3 * block * block,
+        disp12MaxDiff=1,
+        uniquenessRatio=10,
+        speckleWindowSize=100,
+        speckleRange=2,
+        mode=cv2.STEREO_SGBM_MODE_SGBM,
+    )
+    return sgbm.compute(left, right).astype(np.float64) / 16.0
+
+
+def write(out: Path, depth, K: dict, planes_from, raw: dict, meta: dict) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    for name, src in raw.items():
+        shutil.copyfile(src, out / name)
+    depth = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0).astype(np.float32)
+    np.save(out / "depth.npy", depth)
+    (out / "K.json").write_text(json.dumps(K))
+    normals, masks, threshold = reference_planes(planes_from, **K)
+    masks &= (depth > 0)[None]
+    np.savez_compressed(out / "planes.npz", normals=normals, masks=masks)
+    meta["planes.npz"] = (
+        f"RANSAC (Open3D segment_plane, seed 0, threshold {threshold * 1000:.1f} mm), at most {MAX_PLANES} planes, "
+        f"largest 4-connected piece after a 5x5 erosion, at least {MIN_PIXELS} px, SVD normal facing the camera"
+    )
+    (out / "meta.json").write_text(json.dumps(meta, indent=1))
+    print(f"{out}: {depth.shape[1]}x{depth.shape[0]}, {masks.shape[0]} planes {masks.sum(axis=(1, 2)).tolist()}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="kind", required=True)
+    d = sub.add_parser("depth", help="a depth file and its intrinsics")
+    d.add_argument("out", type=Path)
+    d.add_argument("depth", type=Path)
+    d.add_argument("--depth-scale", type=float, default=None, help="stored units per metre (1000 mm, 5000 TUM)")
+    d.add_argument("--kinect-disparity", action="store_true", help="NYU raw PGM: Kinect disparity")
+    s = sub.add_parser("stereo", help="a rectified pair and its ground-truth disparity")
+    s.add_argument("out", type=Path)
+    s.add_argument("left", type=Path)
+    s.add_argument("right", type=Path)
+    s.add_argument("gt", type=Path)
+    s.add_argument("--gt-scale", type=float, default=1.0, help="stored ground-truth units per pixel of disparity")
+    s.add_argument("--baseline", type=float, required=True, help="metres")
+    for p in (d, s):
+        p.add_argument("--fx", type=float, required=True)
+        p.add_argument("--fy", type=float, default=None, help="default: fx")
+        p.add_argument("--cx", type=float, default=None, help="default: the image centre")
+        p.add_argument("--cy", type=float, default=None, help="default: the image centre")
+        p.add_argument("--source", required=True, help="where the file(s) come from, and their licence")
+    args = ap.parse_args(argv)
+
+    def intrinsics(H, W):
+        return dict(
+            fx=args.fx,
+            fy=args.fy if args.fy is not None else args.fx,
+            cx=args.cx if args.cx is not None else (W - 1) / 2,
+            cy=args.cy if args.cy is not None else (H - 1) / 2,
+        )
+
+    if args.kind == "depth":
+        from surfnorm.io.depth import read_depth
+
+        depth = read_depth(args.depth, depth_scale=args.depth_scale, kinect_disparity=args.kinect_disparity)
+        K = intrinsics(*depth.shape)
+        raw = {"raw" + args.depth.suffix: args.depth}
+        write(args.out, depth, K, depth, raw, {"source": args.source, "depth": "as read by surfnorm.io.read_depth"})
+        return 0
+    left, right = (cv2.imread(str(p), cv2.IMREAD_COLOR) for p in (args.left, args.right))
+    gt = cv2.imread(str(args.gt), cv2.IMREAD_UNCHANGED)
+    if left is None or right is None or gt is None:
+        print("error: could not read the pair or the ground truth", file=sys.stderr)
+        return 2
+    gt = (gt[..., 0] if gt.ndim == 3 else gt).astype(np.float64) / args.gt_scale
+    K = intrinsics(*gt.shape)
+    disparity = sgbm_disparity(left, right, float(gt.max()))
+    fb = K["fx"] * args.baseline
+    depth = np.where(disparity > 0, fb / np.where(disparity > 0, disparity, 1.0), 0.0)
+    gt_depth = np.where(gt > 0, fb / np.where(gt > 0, gt, 1.0), 0.0).astype(np.float32)
+    raw = {f"raw_{k}{p.suffix}": p for k, p in (("left", args.left), ("right", args.right), ("gt", args.gt))}
+    meta = {"source": args.source, "depth": "OpenCV SGBM (benchmarks/sensor_folder.py), f B / d", "K": K}
+    write(args.out, depth, K, gt_depth, raw, meta)
+    np.save(args.out / "gt_depth.npy", gt_depth)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

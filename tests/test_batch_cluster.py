@@ -382,7 +382,21 @@ def cli(*args):
     return result
 
 
-CAMERA_FLAGS = ["--depth-scale", "1000", "--fx", CAM.fx, "--fy", CAM.fy, "--cx", CAM.cx, "--cy", CAM.cy]
+# the same method as OPTIONS (the local reference), named: the default would decide per frame
+CAMERA_FLAGS = [
+    "--depth-scale",
+    "1000",
+    "--fx",
+    CAM.fx,
+    "--fy",
+    CAM.fy,
+    "--cx",
+    CAM.cx,
+    "--cy",
+    CAM.cy,
+    "-m",
+    "d2nt_v3",
+]
 
 
 @needs_dask

@@ -185,23 +185,35 @@ def estimate(
     fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace output files that exist (never the files read: depth, mask, intrinsics)."
+    ),
 ):
-    """Estimate the normals of one depth image."""
+    """Estimate the normals of one depth image.
+
+    An output file that exists is an error (exit status 2) unless --overwrite; an output that is one of the
+    files read (the depth, the mask, the intrinsics) is an error always.
+    """
     from . import estimate as estimate_
+    from .io._files import check_outputs
     from .io.depth import read_depth, read_mask
     from .io.normals import FORMAT_SUFFIX, write_normals
+    from .io.threef2n import params_for
 
     written = []
     try:
         formats = [_check_format(fmt)] if fmt is not None else ["npy", "png8"]
+        if output.is_dir():
+            fail(f"output: expected a file prefix, got the directory {output}")
+        paths = [output.with_name(output.name + FORMAT_SUFFIX[f]) for f in formats]
+        reads = [depth, mask, intrinsics, params_for(depth) if intrinsics is None else None]
+        check_outputs(paths, reads, overwrite=overwrite)
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
         normals = estimate_(z, cam, method=method, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity)
-        if output.is_dir():
-            fail(f"output: expected a file prefix, got the directory {output}")
-        for f in formats:
-            written.append(write_normals(output.with_name(output.name + FORMAT_SUFFIX[f]), normals, fmt=f))
+        for path, f in zip(paths, formats):
+            written.append(write_normals(path, normals, fmt=f))
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
     console.print(f"wrote {' and '.join(map(str, written))}", highlight=False)

@@ -52,3 +52,31 @@ def decode_image(path: Path, raw: bytes, flags: int, kind: str = "an image") -> 
     if img is None:
         raise DataFileError(f"{path}: cannot decode as {kind} (empty, truncated or corrupt)")
     return img
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (or cannot be looked at): compare the paths
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_outputs(outputs, reads, *, overwrite: bool = False, name: str = "output") -> None:
+    """Refuse to write ``outputs`` over a file that the command reads (``reads``, None entries ignored), always,
+    and over any file that exists unless ``overwrite``; an InputError naming the file otherwise.
+
+    A command never replaces its own input, whatever ``overwrite`` says (the 16-bit depth would be lost to its
+    normal picture); an existing output is replaced only when the user asked for it.
+    """
+    reads = [Path(r) for r in reads if r is not None]
+    for out in map(Path, outputs):
+        for src in reads:
+            if _same_file(out, src):
+                raise InputError(
+                    f"{name}: expected a path other than the files this command reads, got {out}, which is {src}; "
+                    "choose another output name"
+                )
+        if out.is_dir():
+            raise InputError(f"{name}: expected a file path, got {out}, which is a folder")
+        if (out.exists() or out.is_symlink()) and not overwrite:
+            raise InputError(f"{name}: {out} exists; pass --overwrite to replace it, or choose another output name")

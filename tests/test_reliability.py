@@ -71,3 +71,50 @@ def test_estimate_refuses_an_output_that_links_to_its_input(frames):
     before = (frames / "d.npy").read_bytes()
     _one_line_exit_2(["estimate", "d.npy", "link", "-f", "npy", "--overwrite", *CAMERA], "reads")
     assert (frames / "d.npy").read_bytes() == before
+
+
+# ---------------------------------------------------------------------------- row 2: depth of any magnitude
+
+K = [[525.0, 0, 31.5], [0, 525.0, 23.5], [0, 0, 1]]
+MAGNITUDES = [2.0**-200, 1e-60, 1e-43, 1e-39, 1e39, 1e60, 2.0**200]
+
+
+def _surface():
+    v, u = np.mgrid[0:48, 0:64]
+    return 1.0 + 0.002 * u + 0.001 * v + 0.0003 * np.sin(u / 3.0) * np.cos(v / 4.0)
+
+
+def _method_names():
+    import surfnorm
+
+    return list(surfnorm.methods())
+
+
+@pytest.mark.parametrize("mode", ["faithful", "scale_invariant", "disparity"])
+@pytest.mark.parametrize("method", _method_names())
+def test_float64_depth_of_any_magnitude_gives_what_it_gives_at_one(method, mode):
+    import surfnorm
+
+    kw = {"scale_invariant": True} if mode == "scale_invariant" else {"disparity": True} if mode == "disparity" else {}
+    depth = 1.0 / _surface() if mode == "disparity" else _surface()
+    ref = surfnorm.estimate(depth, K, method=method, **kw)
+    assert not (ref == 0).all(axis=-1).any()
+    for s in MAGNITUDES:
+        n = surfnorm.estimate(depth * s, K, method=method, **kw)
+        filled = (n == 0).all(axis=-1)
+        assert not filled.any(), (s, filled.mean())  # never silent fill
+        assert np.abs(n - ref).mean() < 2e-3, (s, np.abs(n - ref).max())
+
+
+@pytest.mark.parametrize("method", _method_names())
+def test_both_backends_agree_at_any_magnitude(method):
+    torch = pytest.importorskip("torch")
+    import surfnorm
+    import surfnorm.torch as st
+
+    for s in (1.0, 1e-60, 1e-39, 1e39, 1e60):
+        depth = _surface() * s
+        n = surfnorm.estimate(depth, K, method=method)
+        t = st.estimate(torch.tensor(depth), torch.tensor(K), method=method)[0].permute(1, 2, 0).numpy()
+        assert not (t == 0).all(axis=-1).any(), s
+        assert np.abs(n - t).mean() < 2e-3, (s, np.abs(n - t).max())

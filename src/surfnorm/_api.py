@@ -66,13 +66,12 @@ def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np
     """The paper-faithful mode's range rescale of one frame (surfnorm.units, "Range").
 
     Depth and tau are multiplied by a power of two where the frame's depth would leave float32's range in the
-    kernels; else unchanged.
+    kernels (judged on ``src``, the caller's values, where they reach beyond float32); else unchanged. Methods
+    whose normals depend on the unit (``equivariant`` False) only where float32 would lose the depth.
     """
-    if not method.equivariant:
-        return z, options
-    from .units import range_exponent, scaled_frame
+    from .units import SAFE_EXPONENT, UNIT_EXPONENT, range_exponent, scaled_frame
 
-    k = range_exponent(z)
+    k = range_exponent(z, src, SAFE_EXPONENT if method.equivariant else UNIT_EXPONENT)
     if k == 0:
         return z, options
     if "tau" in options:
@@ -190,9 +189,10 @@ def estimate(
     if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
         from .units import REFERENCE_DEPTH, TIE_TOLERANCE, relative_depth
 
-        # Invalid pixels become 0 in the rescaled depth, and a value that over/underflows float32 when
-        # rescaled is not finite and positive, so the validity computed below from z covers both.
-        z = relative_depth(src, valid_pixels(z, user_mask), disparity=disparity)
+        # Validity from the caller's values (float64 depth of 1e-60 is 0 in float32). Invalid pixels become 0 in
+        # the rescaled depth, and a value that over/underflows float32 when rescaled is not finite and positive,
+        # so the validity computed below from z covers both.
+        z = relative_depth(src, valid_pixels(src, user_mask), disparity=disparity)
         tie_tol, relative = TIE_TOLERANCE, REFERENCE_DEPTH
     workers = _workers(threads)
 

@@ -77,7 +77,8 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
         raise InputError(f"{name}: expected at least {MIN_SIZE}x{MIN_SIZE} pixels, got shape {arr.shape}")
     if arr.ndim == 3 and arr.shape[0] == 0:
         raise InputError(f"{name}: expected at least one frame in the stack, got shape {arr.shape}")
-    return np.ascontiguousarray(arr, dtype=np.float32)
+    with np.errstate(over="ignore", under="ignore"):  # beyond float32: rescaled from the caller's values later
+        return np.ascontiguousarray(arr, dtype=np.float32)
 
 
 def split_masked(value):

@@ -158,7 +158,27 @@ def _resolve(name, options: dict):
             f"in the torch backend, got {name!r}"
         )
     method, refined, clean = numpy_resolve(name, options)
-    return _KERNELS[base], method.mnr, refined, clean
+    return _KERNELS[base], method.mnr, refined, clean, method.equivariant
+
+
+def _unit_range(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Depth, each frame multiplied by a power of two (``surfnorm.units``, "Range").
+
+    1 unless the frame's median valid depth lies outside [2^-100, 2^100], where the plane fits' products leave
+    the floating-point range; otherwise the one that :func:`surfnorm.estimate` takes for PlaneSVD and SDA-SNE
+    (whose normals depend on the unit); exact, so the other methods' normals do not change.
+    """
+    from ..units import UNIT_EXPONENT, power_of_two_exponent
+
+    with torch.no_grad():
+        med = torch.nanmedian(torch.where(valid, z, torch.full_like(z, math.nan)).flatten(1), dim=1).values
+    scales = []
+    for m in med.double().cpu().tolist():
+        inside = not (m > 0) or 2.0**-UNIT_EXPONENT <= m <= 2.0**UNIT_EXPONENT  # NaN: no valid pixel
+        scales.append(1.0 if inside else math.ldexp(1.0, power_of_two_exponent(m)))
+    if all(x == 1.0 for x in scales):
+        return z
+    return z * torch.tensor(scales, dtype=z.dtype, device=z.device).view(-1, *([1] * (z.dim() - 1)))
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torch.Tensor:
@@ -204,7 +224,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     >>> n.shape, n[0, :, 24, 32].tolist()
     (torch.Size([2, 3, 48, 64]), [0.0, 0.0, -1.0])
     """
-    run, ends_with_mnr, refined, clean = _resolve(method, options)
+    run, ends_with_mnr, refined, clean, equivariant = _resolve(method, options)
     z, plain = as_depth(depth)
     user_mask = as_mask(mask, z, plain)
     work, out_dtype = compute_dtype(z)
@@ -213,6 +233,8 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     valid = (z > 0) & (z < math.inf)  # finite and positive (NaN fails both)
     if user_mask is not None:
         valid = valid & user_mask
+    if not equivariant or "tau" not in clean:  # (tau is in depth units: those methods compute at any magnitude)
+        z = _unit_range(z, valid)
     # invalid depth -> 1: never read by the estimators, and no NaN even in discarded branches (B x H x W)
     g = _ops.Grid(torch.where(valid, z, torch.ones_like(z)), valid)
     mnr_dlf = clean.pop("mnr_dlf", None)

@@ -118,3 +118,86 @@ def test_both_backends_agree_at_any_magnitude(method):
         t = st.estimate(torch.tensor(depth), torch.tensor(K), method=method)[0].permute(1, 2, 0).numpy()
         assert not (t == 0).all(axis=-1).any(), s
         assert np.abs(n - t).mean() < 2e-3, (s, np.abs(n - t).max())
+
+
+# ---------------------------------------------------------------------------- row 3: caches that load
+
+# Runs the given calls of surfnorm.estimate in a new process and prints, as JSON, the kernels that Numba compiled
+# (its "numba:compile" event fires only where the disk cache had nothing to load) and a checksum of the normals.
+_CALLS = r"""
+import json, sys
+import numpy as np
+from numba.core import event
+import surfnorm
+
+compiled = []
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", Listener())
+K = [[525.0, 0, 31.5], [0, 525.0, 23.5], [0, 0, 1]]
+v, u = np.mgrid[0:80, 0:64]
+z = 1.0 + 0.002 * u + 0.001 * v + 0.0003 * np.sin(u / 3.0) * np.cos(v / 4.0)
+total = 0.0
+for method, kw in json.loads(sys.argv[1]):
+    for depth in (z, z.astype(np.float32), np.stack([z, z])):
+        total += float(np.nansum(surfnorm.estimate(depth, K, method=method, threads=2, **kw)))
+print(json.dumps({"compiled": compiled, "total": total}))
+"""
+
+
+def _run_calls(calls, env=None):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "SURFNORM_AOT": "0", **(env or {})}  # the JIT's kernels, not the ahead-of-time ones
+    done = subprocess.run(
+        [sys.executable, "-c", _CALLS, json.dumps(calls)], capture_output=True, text=True, env=env, timeout=1800
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _variants():
+    import surfnorm
+
+    calls = []
+    for name in surfnorm.methods():
+        calls += [[name, {}], [name, {"scale_invariant": True}], [name + "+mnr", {}]]
+    calls += [["sda_sne", {"base": "3f2n"}], ["sda_sne", {"border": "reflect", "iterations": None}]]
+    calls += [["d2nt_v3", {"disparity": True}]]
+    return calls
+
+
+def test_every_method_loads_from_the_disk_cache_in_a_new_process():
+    calls = _variants()
+    _run_calls(calls)  # compiles what no earlier process left in the cache
+    second = _run_calls(calls)
+    assert second["compiled"] == [], second["compiled"]
+
+
+def test_a_damaged_cache_recompiles_instead_of_failing(tmp_path):
+    import math
+
+    calls = [["sda_sne", {}]]
+    env = {"NUMBA_CACHE_DIR": str(tmp_path)}
+    first = _run_calls(calls, env)
+    indexes = list(tmp_path.rglob("*.nbi"))
+    assert indexes and first["compiled"]
+    for index in indexes:  # damaged index files (a crashed or concurrent writer), and truncated data files
+        index.write_bytes(index.read_bytes()[:40] + b"\x00garbage")
+    for data in tmp_path.rglob("*.nbc"):
+        data.write_bytes(data.read_bytes()[:100])
+    second = _run_calls(calls, env)  # recompiles, and repairs the index
+    assert math.isclose(second["total"], first["total"], rel_tol=0, abs_tol=1e-6) and second["compiled"]
+    third = _run_calls(calls, env)
+    assert third["compiled"] == [] and math.isclose(third["total"], first["total"], rel_tol=0, abs_tol=1e-6)

@@ -201,3 +201,42 @@ def test_a_damaged_cache_recompiles_instead_of_failing(tmp_path):
     assert math.isclose(second["total"], first["total"], rel_tol=0, abs_tol=1e-6) and second["compiled"]
     third = _run_calls(calls, env)
     assert third["compiled"] == [] and math.isclose(third["total"], first["total"], rel_tol=0, abs_tol=1e-6)
+
+
+# ---------------------------------------------------------------------------- row 6: a header that lies about its size
+
+
+@pytest.fixture
+def lying_npy(tmp_path):
+    import zipfile
+
+    path = tmp_path / "big.npy"
+    with open(path, "wb") as fh:  # 1 KB whose header claims (100000, 100000) float32: 37 GiB
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f4", "fortran_order": False, "shape": (100000, 100000)})
+        fh.write(b"\0" * 900)
+    with zipfile.ZipFile(tmp_path / "big.npz", "w") as archive:
+        archive.write(path, "depth.npy")
+    return path
+
+
+@pytest.mark.parametrize("reader", ["depth", "depth_npz", "mask", "normals"])
+def test_a_npy_header_that_claims_more_than_the_file_holds_is_a_data_file_error(lying_npy, reader):
+    from surfnorm.errors import DataFileError
+    from surfnorm.io import read_depth, read_normals
+    from surfnorm.io.depth import read_mask
+
+    read = {
+        "depth": lambda: read_depth(lying_npy),
+        "depth_npz": lambda: read_depth(lying_npy.with_suffix(".npz")),
+        "mask": lambda: read_mask(lying_npy),
+        "normals": lambda: read_normals(lying_npy),
+    }[reader]
+    with pytest.raises(DataFileError, match=r"big\.np[yz].*\(100000, 100000\).*37\.3 GiB.*truncated or corrupt"):
+        read()
+
+
+def test_cli_a_lying_npy_header_is_one_line_exit_2(lying_npy, monkeypatch):
+    monkeypatch.chdir(lying_npy.parent)
+    _one_line_exit_2(["estimate", "big.npy", "out", *CAMERA], "big.npy: cannot read as NumPy")
+    np.save(lying_npy.parent / "d.npy", _plane())
+    _one_line_exit_2(["estimate", "d.npy", "out", "--mask", "big.npy", *CAMERA], "big.npy: cannot read as NumPy")

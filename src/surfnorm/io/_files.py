@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -80,3 +81,35 @@ def check_outputs(outputs, reads, *, overwrite: bool = False, name: str = "outpu
             raise InputError(f"{name}: expected a file path, got {out}, which is a folder")
         if (out.exists() or out.is_symlink()) and not overwrite:
             raise InputError(f"{name}: {out} exists; pass --overwrite to replace it, or choose another output name")
+
+
+def _size_text(n: int) -> str:
+    for unit, size in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n} bytes"
+
+
+def check_npy_header(path: Path, fh, available: int, what: str) -> None:
+    """Refuse a ``.npy`` stream whose header declares more data than the stream holds, before NumPy allocates it.
+
+    ``fh`` is at the start of the ``.npy`` data (a file, or a member of an ``.npz`` archive) and holds
+    ``available`` bytes from there; it is left wherever the header ends. A 1 KB file whose header claims
+    (100000, 100000) would otherwise make NumPy allocate 37 GiB (MemoryError) before finding the file short.
+    A header NumPy cannot parse is left for ``np.load`` to report.
+    """
+    fmt = np.lib.format
+    try:
+        start = fh.tell()
+        version = fmt.read_magic(fh)
+        read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, _, dtype = read_header(fh, max_header_size=10_000)
+        held = available - (fh.tell() - start)
+    except Exception:  # noqa: BLE001 - not a .npy header NumPy understands: np.load says why
+        return
+    need = dtype.itemsize * math.prod(shape)
+    if need > held:
+        raise DataFileError(
+            f"{path}: cannot read as NumPy {what}: its header declares shape {tuple(shape)} of {dtype} "
+            f"({_size_text(need)}), but the file holds {_size_text(max(held, 0))} of data (truncated or corrupt)"
+        )

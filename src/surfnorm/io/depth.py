@@ -53,7 +53,7 @@ import numpy as np
 
 from .._validate import check_bool, check_choice, check_positive
 from ..errors import DataFileError, InputError, MissingDependencyError
-from ._files import as_path, check_shape, decode_image, read_bytes
+from ._files import as_path, check_npy_header, check_shape, decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
 
 __all__ = [
@@ -87,23 +87,32 @@ def depth_suffix(path) -> str:
 
 def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
     """The array of a .npy file, or of a .npz archive (the array called ``name``, or its only array)."""
+    what = f"{suffix} {name}"
     try:
         with open(path, "rb") as fh:
+            if suffix == ".npy":
+                check_npy_header(path, fh, os.fstat(fh.fileno()).st_size, what)
+                fh.seek(0)
             data = np.load(fh, allow_pickle=False)
             if suffix == ".npz":
                 with data:
                     keys = list(data.keys())
-                    if name in keys:
-                        return np.asarray(data[name])
-                    if len(keys) != 1:
+                    if name not in keys and len(keys) != 1:
                         raise DataFileError(
                             f"{path}: expected an array named {name!r} or a single array in the .npz archive, "
                             f"got {len(keys)} arrays ({', '.join(keys) or 'none'})"
                         )
-                    return np.asarray(data[keys[0]])
+                    key = name if name in keys else keys[0]
+                    member = data.zip.getinfo(key + ".npy") if key + ".npy" in data.zip.namelist() else None
+                    if member is not None:
+                        with data.zip.open(member) as stream:
+                            check_npy_header(path, stream, member.file_size, what)
+                    return np.asarray(data[key])
             return np.asarray(data)
     except DataFileError:
         raise
+    except MemoryError as exc:
+        raise DataFileError(f"{path}: cannot read as NumPy {what}: it does not fit in memory") from exc
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read {name} file ({exc.strerror or exc})") from exc
     except (ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:

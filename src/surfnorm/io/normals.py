@@ -29,7 +29,7 @@ import numpy as np
 from .._validate import check_choice, check_fill
 from ..errors import DataFileError, InputError
 from ._atomic import atomic_write
-from ._files import decode_image, read_bytes
+from ._files import check_npy_header, decode_image, read_bytes
 from .pictures import COLOURINGS, normal_to_rgb8
 
 __all__ = ["NORMAL_FORMATS", "FORMAT_SUFFIX", "write_normals", "read_normals", "encode_png16", "decode_png"]
@@ -117,8 +117,11 @@ def read_normals(path, *, colouring: str = "3f2n", fill: float = 0.0) -> np.ndar
     if suffix == ".npy":
         import io
 
+        check_npy_header(path, io.BytesIO(raw), len(raw), "normal map")
         try:
             n = np.load(io.BytesIO(raw), allow_pickle=False)
+        except MemoryError as exc:
+            raise DataFileError(f"{path}: cannot read as a NumPy normal map: it does not fit in memory") from exc
         except (ValueError, EOFError, OSError) as exc:
             raise DataFileError(f"{path}: cannot read as a NumPy normal map (truncated or corrupt: {exc})") from exc
         if n.ndim != 3 or n.shape[-1] != 3 or not np.issubdtype(n.dtype, np.floating):

@@ -240,3 +240,27 @@ def test_cli_a_lying_npy_header_is_one_line_exit_2(lying_npy, monkeypatch):
     _one_line_exit_2(["estimate", "big.npy", "out", *CAMERA], "big.npy: cannot read as NumPy")
     np.save(lying_npy.parent / "d.npy", _plane())
     _one_line_exit_2(["estimate", "d.npy", "out", "--mask", "big.npy", *CAMERA], "big.npy: cannot read as NumPy")
+
+
+# ---------------------------------------------------------------------------- row 7: a window wider than the frame
+
+
+@pytest.mark.parametrize("method", ["plane_pca", "plane_svd", "vector_svd"])
+def test_a_window_wider_than_the_frame_is_clipped_to_it(method):
+    import surfnorm
+
+    z = _surface()  # 48 x 64: a window of 2 * 64 - 1 = 127 holds the whole frame from any pixel
+    widest = surfnorm.estimate(z, K, method=method, window=129)
+    assert not (widest == 0).all(axis=-1).any()
+    for window in (127, 4001, 1000001):
+        assert np.array_equal(surfnorm.estimate(z, K, method=method, window=window), widest), window
+
+
+@pytest.mark.parametrize("method", ["plane_pca", "plane_svd", "vector_svd"])
+def test_a_window_wider_than_the_frame_is_clipped_in_torch_too(method):
+    torch = pytest.importorskip("torch")
+    import surfnorm.torch as st
+
+    z = torch.tensor(_surface())
+    widest = st.estimate(z, torch.tensor(K), method=method, window=129)
+    assert torch.equal(st.estimate(z, torch.tensor(K), method=method, window=1000001), widest)

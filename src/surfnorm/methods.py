@@ -380,7 +380,12 @@ register(
 # --- Table I: energy minimisation (plane fitting) and averaging -----------------------------------
 
 WINDOW_OPTIONS = {
-    "window": Option(3, check_window, "side of the square pixel neighbourhood whose points are fitted (odd, >= 3)"),
+    "window": Option(
+        3,
+        check_window,
+        "side of the square pixel neighbourhood whose points are fitted (odd, >= 3); one wider than the frame "
+        "is clipped to 2 max(H, W) - 1, which holds every pixel of the frame from any pixel (the same normals)",
+    ),
 }
 
 

@@ -264,3 +264,22 @@ def test_a_window_wider_than_the_frame_is_clipped_in_torch_too(method):
     z = torch.tensor(_surface())
     widest = st.estimate(z, torch.tensor(K), method=method, window=129)
     assert torch.equal(st.estimate(z, torch.tensor(K), method=method, window=1000001), widest)
+
+
+# ---------------------------------------------------------------------------- row 8: intrinsics per frame
+
+
+def test_a_mixed_list_of_intrinsics_per_frame_is_checked_and_used():
+    import surfnorm
+    from surfnorm import Intrinsics
+
+    stack = np.stack([_surface()] * 3)
+    cam = Intrinsics(fx=525.0, fy=525.0, cx=31.5, cy=23.5)
+    n = surfnorm.estimate(stack, [cam, K, np.asarray(K)], method="d2nt_basic", threads=2)
+    assert np.array_equal(n, surfnorm.estimate(stack, K, method="d2nt_basic"))
+    with pytest.raises(surfnorm.InputError, match=r"K\[2\]: expected a 3x3 intrinsic matrix"):
+        surfnorm.estimate(stack, [cam, K, np.eye(4)], method="d2nt_basic", threads=2)
+    with pytest.raises(surfnorm.InputError, match=r"K\[1\]: expected a 3x3 matrix of real numbers"):
+        surfnorm.estimate(stack, [cam, "K", K], method="d2nt_basic", threads=2)
+    with pytest.raises(surfnorm.InputError, match="K: expected"):
+        surfnorm.estimate(stack, [K, [[1, 2], [3]], K], method="d2nt_basic", threads=2)

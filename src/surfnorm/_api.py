@@ -30,11 +30,17 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
         return Intrinsics.from_matrix(K)
     if isinstance(K, Intrinsics):
         return [K] * n
-    arr = np.asarray(K) if not isinstance(K, (list, tuple)) or not K or not isinstance(K[0], Intrinsics) else None
-    if arr is None:
+    if isinstance(K, (list, tuple)) and any(isinstance(k, Intrinsics) for k in K):
+        # one per frame, each an Intrinsics or a 3x3 matrix, checked here (not in a worker thread)
         if len(K) != n:
             raise InputError(f"K: expected one intrinsics for all {n} frames or one per frame, got {len(K)}")
-        return list(K)
+        return [Intrinsics.from_matrix(k, name=f"K[{i}]") for i, k in enumerate(K)]
+    try:
+        arr = np.asarray(K)
+    except (TypeError, ValueError) as exc:  # a ragged list
+        raise InputError(
+            f"K: expected a 3x3 matrix, ({n}, 3, 3) matrices or one Intrinsics per frame, got a ragged {type(K).__name__}"
+        ) from exc
     if arr.ndim == 3:
         if arr.shape[0] != n:
             raise InputError(f"K: expected shape (3, 3) or ({n}, 3, 3) for {n} frames, got shape {arr.shape}")

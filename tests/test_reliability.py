@@ -283,3 +283,66 @@ def test_a_mixed_list_of_intrinsics_per_frame_is_checked_and_used():
         surfnorm.estimate(stack, [cam, "K", K], method="d2nt_basic", threads=2)
     with pytest.raises(surfnorm.InputError, match="K: expected"):
         surfnorm.estimate(stack, [K, [[1, 2], [3]], K], method="d2nt_basic", threads=2)
+
+
+# ---------------------------------------------------------------------------- row 4: another run's temporaries
+
+
+def test_cleanup_of_stale_temporaries_leaves_another_live_runs_file_in_flight(tmp_path):
+    from surfnorm.batch.tasks import ConvertTask, remove_stale_temporaries
+    from surfnorm.io._atomic import atomic_write
+
+    out = tmp_path / "b1.npy"
+    task = ConvertTask(tmp_path / "b1.png", out)
+    stale = tmp_path / ".b1.npy.k1ll3d_x.tmp.npy"  # as a killed run leaves it: nobody holds it
+    stale.write_bytes(b"half")
+    seen = []
+
+    def write(tmp):
+        tmp.write_bytes(b"first part")
+        seen.append(remove_stale_temporaries([task]))  # a second run starting now, into the same folder
+        assert tmp.exists()
+        with open(tmp, "ab") as fh:
+            fh.write(b", second part")
+
+    atomic_write(out, write)
+    assert out.read_bytes() == b"first part, second part"
+    assert seen == [1] and not stale.exists()  # the killed run's file went, the live one stayed
+    assert [p.name for p in tmp_path.iterdir()] == ["b1.npy"]
+
+
+# ---------------------------------------------------------------------------- row 5: a long but legal name
+
+
+def test_an_output_whose_temporary_name_would_be_too_long_is_written(tmp_path):
+    import cv2
+
+    from surfnorm.io import write_normals
+
+    stem = "s" * 240  # 240.npy is a legal name (244 bytes); ".<name>.<random>.tmp.npy" was not
+    n = np.zeros((4, 5, 3), np.float32)
+    n[..., 2] = -1
+    for fmt, suffix in (("npy", ".npy"), ("png16", ".png"), ("png8", ".png")):
+        path = write_normals(tmp_path / (stem + suffix), n, fmt=fmt)
+        assert path.exists()
+    src = tmp_path / "in"
+    src.mkdir()
+    cv2.imwrite(str(src / (stem + ".png")), np.rint(_plane() * 1000).astype(np.uint16))
+    result = runner.invoke(app, ["convert", str(src), str(tmp_path / "out"), "--depth-scale", "1000", *CAMERA])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "out" / (stem + ".npy")).exists()
+    result = runner.invoke(app, ["estimate", str(src / (stem + ".png")), str(tmp_path / ("t" * 240)), *CAMERA])
+    assert result.exit_code == 0, result.output
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_a_shortened_temporary_is_still_cleaned_up_when_stale(tmp_path):
+    from surfnorm.batch.tasks import ConvertTask, remove_stale_temporaries
+    from surfnorm.io._atomic import temporary_affixes
+
+    out = tmp_path / ("s" * 240 + ".npy")
+    prefix, suffix = temporary_affixes(out)
+    assert len((prefix + "abcd1234" + suffix).encode()) <= 255 and prefix.endswith("~.")
+    stale = tmp_path / (prefix + "abcd1234" + suffix)
+    stale.write_bytes(b"half")
+    assert remove_stale_temporaries([ConvertTask(tmp_path / "x.png", out)]) == 1 and not stale.exists()

@@ -320,12 +320,29 @@ def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
 
 # ---------------------------------------------------------------------------- many files
 
-#: The name atomic_write gives its temporary file: ".<name>.<random>.tmp<suffix>".
+#: The name atomic_write gives its temporary file: ".<name>.<random>.tmp<suffix>" (<name> shortened, ending
+#: with "~", where the whole would be too long for the filesystem).
 _TEMPORARY = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp(\.[A-Za-z0-9]+)?$")
 
 
+def _temporary_of(name: str, outputs: set[str]) -> bool:
+    """Whether ``name`` (the <name> part of a temporary file) is that of one of ``outputs``, whole or shortened."""
+    from ..io._atomic import TRUNCATED
+
+    if name in outputs:
+        return True
+    stem = name[: -len(TRUNCATED)]
+    return name.endswith(TRUNCATED) and any(o.startswith(stem) for o in outputs)
+
+
 def remove_stale_temporaries(tasks: Iterable[ConvertTask]) -> int:
-    """Remove the temporary files an interrupted run left beside the planned outputs; returns how many."""
+    """Remove the temporary files an interrupted run left beside the planned outputs; returns how many.
+
+    Only those that no live writer holds: another run writing into the same folder keeps its files in flight
+    locked (see :func:`surfnorm.io._atomic.remove_if_stale`), and they are left alone.
+    """
+    from ..io._atomic import remove_if_stale
+
     removed = 0
     by_dir: dict[Path, set[str]] = {}
     for t in tasks:
@@ -335,7 +352,6 @@ def remove_stale_temporaries(tasks: Iterable[ConvertTask]) -> int:
             continue
         for entry in folder.iterdir():
             match = _TEMPORARY.match(entry.name)
-            if match and match["name"] in names and entry.is_file():
-                entry.unlink(missing_ok=True)
+            if match and _temporary_of(match["name"], names) and entry.is_file() and remove_if_stale(entry):
                 removed += 1
     return removed

@@ -346,3 +346,23 @@ def test_a_shortened_temporary_is_still_cleaned_up_when_stale(tmp_path):
     stale = tmp_path / (prefix + "abcd1234" + suffix)
     stale.write_bytes(b"half")
     assert remove_stale_temporaries([ConvertTask(tmp_path / "x.png", out)]) == 1 and not stale.exists()
+
+
+# ---------------------------------------------------------------------------- row 10: hostile folders
+
+
+@pytest.mark.parametrize("as_glob", [False, True])
+def test_convert_names_every_input_it_could_not_read(tmp_path, as_glob):
+    import cv2
+
+    src = tmp_path / "in"
+    src.mkdir()
+    cv2.imwrite(str(src / "a.png"), np.rint(_plane() * 1000).astype(np.uint16))
+    (src / "b.png").symlink_to(src / "gone.png")  # dangling
+    (src / "c.png").symlink_to(src / "c.png")  # a loop
+    inputs = str(src / "*.png") if as_glob else str(src)
+    result = runner.invoke(app, ["convert", inputs, str(tmp_path / "out"), "--depth-scale", "1000", *CAMERA])
+    assert result.exit_code == 1, result.output
+    assert "1 written, 0 skipped (output existed), 2 failed" in result.output.replace("\n", " "), result.output
+    assert "b.png: cannot read depth file (No such file or directory)" in result.stderr
+    assert "c.png: cannot read depth file (Too many levels of symbolic links)" in result.stderr

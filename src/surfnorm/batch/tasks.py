@@ -119,9 +119,16 @@ def _output_stem(path: Path) -> str:
 
 
 def _is_depth_file(path: Path) -> bool:
+    """A depth file's name (not hidden), and a file or a symbolic link.
+
+    A dangling link or a loop becomes a task that fails by name ("cannot read depth file (No such file or
+    directory)"), not an input silently dropped.
+    """
     from ..io.depth import DEPTH_SUFFIXES, depth_suffix
 
-    return path.is_file() and depth_suffix(path) in DEPTH_SUFFIXES and not path.name.startswith(".")
+    if path.name.startswith(".") or depth_suffix(path) not in DEPTH_SUFFIXES:
+        return False
+    return path.is_symlink() or path.is_file()
 
 
 def _walk(root: Path) -> list[Path]:
@@ -179,6 +186,14 @@ def _sources(inputs) -> list[tuple[Path, Path]]:
     return out
 
 
+def _resolved(path: Path) -> Path:
+    """``path.resolve()``, or its absolute path where links loop (a loop fails by name when its task runs)."""
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):
+        return path.absolute()
+
+
 def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
     """Pair every input depth file with its output file, in a deterministic order.
 
@@ -216,7 +231,7 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
                 "its outputs would be read as inputs by the next run"
             )
         # outputs of an earlier run inside the input folder (e.g. convert data data/normals) are not inputs
-        sources = [(f, r) for f, r in sources if out_root not in f.resolve().parents]
+        sources = [(f, r) for f, r in sources if out_root not in _resolved(f).parents]
     if not sources:
         raise InputError(
             f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}"
@@ -234,7 +249,7 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
                 f"inputs: {seen[out]} and {file} would both be written to {out}; "
                 "convert them into different output folders"
             )
-        if out.resolve() == file.resolve():
+        if _resolved(out) == _resolved(file):
             raise InputError(f"output_dir: writing {out} would replace its input; choose another output folder")
         seen[out] = file
         tasks.append(ConvertTask(file, out))

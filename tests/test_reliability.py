@@ -366,3 +366,37 @@ def test_convert_names_every_input_it_could_not_read(tmp_path, as_glob):
     assert "1 written, 0 skipped (output existed), 2 failed" in result.output.replace("\n", " "), result.output
     assert "b.png: cannot read depth file (No such file or directory)" in result.stderr
     assert "c.png: cannot read depth file (Too many levels of symbolic links)" in result.stderr
+
+
+# ---------------------------------------------------------------------------- row 11: the system's reason, our names
+
+
+def test_an_output_in_a_missing_folder_names_the_output_not_the_temporary(frames):
+    line = _one_line_exit_2(["estimate", "d.npy", "/no/such/dir/o", *CAMERA], "cannot write /no/such/dir/o.npy")
+    assert "(No such file or directory)" in line and ".tmp" not in line
+
+
+_FULL_DISK = r"""
+import resource, signal, sys
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write beyond the limit fails with EFBIG, as a full disk's ENOSPC
+resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+from surfnorm.cli import app
+sys.argv = ["surfnorm", *sys.argv[1:]]
+app()
+"""
+
+
+@pytest.mark.parametrize("fmt", ["npy", "png16"])
+def test_a_write_that_the_system_refuses_is_one_line_with_its_reason(tmp_path, fmt):
+    import subprocess
+    import sys
+
+    v, u = np.mgrid[0:480, 0:640]
+    np.save(tmp_path / "d.npy", (1.0 + 0.001 * u + 0.01 * np.sin(v / 7.0)).astype(np.float32))
+    args = ["estimate", "d.npy", "o", "-f", fmt, "-m", "d2nt_basic", *CAMERA]
+    done = subprocess.run([sys.executable, "-c", _FULL_DISK, *args], cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), done.stderr
+    assert f"cannot write o.{'npy' if fmt == 'npy' else 'png'} (File too large)" in lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.npy"]  # no output, no temporary

@@ -26,6 +26,8 @@ import tempfile
 from pathlib import Path
 from typing import Callable
 
+from ..errors import DataFileError
+
 __all__ = ["atomic_write", "new_file_mode", "temporary_affixes", "remove_if_stale", "TRUNCATED"]
 
 #: The last character of a temporary file's ``<name>`` part when the output's name had to be shortened.
@@ -113,8 +115,22 @@ def new_file_mode(path) -> int:
 
 
 def atomic_write(path, write: Callable[[Path], object]) -> Path:
-    """Call ``write(tmp_path)`` and rename the result to ``path`` (same directory, same filesystem)."""
+    """Call ``write(tmp_path)`` and rename the result to ``path`` (same directory, same filesystem).
+
+    Raises
+    ------
+    DataFileError
+        The file could not be written: one line naming ``path`` (never the temporary file) and the system's
+        reason, e.g. "cannot write out.npy (No space left on device)". Nothing is left behind.
+    """
     path = Path(path)
+    try:
+        return _atomic_write(path, write)
+    except OSError as exc:
+        raise DataFileError(f"cannot write {path} ({exc.strerror or exc})") from exc
+
+
+def _atomic_write(path: Path, write: Callable[[Path], object]) -> Path:
     mode = new_file_mode(path)
     prefix, suffix = temporary_affixes(path)
     fd, tmp_name = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=path.parent)

@@ -75,10 +75,18 @@ def decode_png(img: np.ndarray, *, colouring: str = "3f2n", fill: float = 0.0) -
     return out.astype(np.float32)
 
 
+class _Chunks:
+    """A file that NumPy writes through ``write`` (a real file it would write with ``ndarray.tofile``)."""
+
+    def __init__(self, fh):
+        self.write = fh.write
+
+
 def write_normals(path, normals, *, fmt: str = "npy", colouring: str = "3f2n") -> Path:
     """Write a normal map atomically as ``fmt`` (see the module docstring); returns the path.
 
-    ``colouring`` applies to ``png8`` only. The bytes depend only on the normals.
+    ``colouring`` applies to ``png8`` only. The bytes depend only on the normals. A file that cannot be
+    written (no such folder, a full disk) is a DataFileError naming ``path`` and the system's reason.
     """
     check_choice("fmt", fmt, NORMAL_FORMATS)
     check_choice("colouring", colouring, COLOURINGS)
@@ -88,7 +96,9 @@ def write_normals(path, normals, *, fmt: str = "npy", colouring: str = "3f2n") -
 
         def write(tmp: Path):
             with open(tmp, "wb") as fh:
-                np.save(fh, n, allow_pickle=False)
+                # Through fh.write in chunks (not ndarray.tofile, whose error on a full disk is "921600 requested
+                # and 262112 written", without the system's reason): the same bytes.
+                np.save(_Chunks(fh), n, allow_pickle=False)
     else:
         rgb = encode_png16(n) if fmt == "png16" else normal_to_rgb8(n, colouring=colouring)
         bgr = np.ascontiguousarray(rgb[:, :, ::-1])

@@ -400,3 +400,28 @@ def test_a_write_that_the_system_refuses_is_one_line_with_its_reason(tmp_path, f
     assert len(lines) == 1 and lines[0].startswith("error: "), done.stderr
     assert f"cannot write o.{'npy' if fmt == 'npy' else 'png'} (File too large)" in lines[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.npy"]  # no output, no temporary
+
+
+# ---------------------------------------------------------------------------- row 9: only our one line
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif", ".pgm", "mask"])
+def test_a_truncated_image_is_only_our_one_line_on_stderr(tmp_path, suffix):
+    import subprocess
+    import sys
+
+    import cv2
+
+    z = np.rint(_plane() * 1000).astype(np.uint16)
+    ext = ".png" if suffix == "mask" else suffix
+    cv2.imwrite(str(tmp_path / ("full" + ext)), z.astype(np.float32) if ext == ".tif" else z)
+    raw = (tmp_path / ("full" + ext)).read_bytes()
+    (tmp_path / ("cut" + ext)).write_bytes(raw[: len(raw) // 2])
+    args = ["full.png", "o", "--mask", "cut.png"] if suffix == "mask" else ["cut" + ext, "o"]
+    command = [sys.executable, "-m", "surfnorm.cli", "estimate", *args, *CAMERA]  # OpenCV writes to fd 2 itself
+    done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"error: cut{ext}: cannot decode as an image (empty, truncated or corrupt)"
+    ]
+    assert done.stdout == ""

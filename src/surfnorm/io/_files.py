@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import threading
 from pathlib import Path
 
 import cv2
@@ -44,10 +46,42 @@ def read_bytes(path: Path, name: str) -> bytes:
         raise DataFileError(f"{path}: cannot read {name} file ({exc.strerror or exc})") from exc
 
 
+_QUIET = threading.Lock()
+_quiet_calls = 0
+_saved_level = 0
+
+
+@contextlib.contextmanager
+def _opencv_quiet():
+    """OpenCV's log silent for the duration, restored after the last of overlapping calls.
+
+    OpenCV prints ``[ WARN ]``/``[ERROR]`` lines on stderr for a truncated PNG, TIFF or PGM, before surfnorm's
+    own one-line error.
+    """
+    global _quiet_calls, _saved_level
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging is None:  # pragma: no cover - an OpenCV without the logging module
+        yield
+        return
+    with _QUIET:
+        if _quiet_calls == 0:
+            _saved_level = logging.getLogLevel()
+            logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+        _quiet_calls += 1
+    try:
+        yield
+    finally:
+        with _QUIET:
+            _quiet_calls -= 1
+            if _quiet_calls == 0:
+                logging.setLogLevel(_saved_level)
+
+
 def decode_image(path: Path, raw: bytes, flags: int, kind: str = "an image") -> np.ndarray:
     """``cv2.imdecode`` of a file's bytes; a DataFileError naming the file where they are empty or not an image."""
     try:
-        img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags) if raw else None
+        with _opencv_quiet():
+            img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags) if raw else None
     except cv2.error as exc:
         raise DataFileError(f"{path}: cannot decode as {kind} (truncated or corrupt)") from exc
     if img is None:

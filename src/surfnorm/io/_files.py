@@ -144,6 +144,6 @@ def check_npy_header(path: Path, fh, available: int, what: str) -> None:
     need = dtype.itemsize * math.prod(shape)
     if need > held:
         raise DataFileError(
-            f"{path}: cannot read as NumPy {what}: its header declares shape {tuple(shape)} of {dtype} "
-            f"({_size_text(need)}), but the file holds {_size_text(max(held, 0))} of data (truncated or corrupt)"
+            f"{path}: cannot read as NumPy {what} (truncated or corrupt: its header declares shape {tuple(shape)} "
+            f"of {dtype}, {_size_text(need)}, but the file holds {_size_text(max(held, 0))} of data)"
         )

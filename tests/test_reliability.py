@@ -231,7 +231,10 @@ def test_a_npy_header_that_claims_more_than_the_file_holds_is_a_data_file_error(
         "mask": lambda: read_mask(lying_npy),
         "normals": lambda: read_normals(lying_npy),
     }[reader]
-    with pytest.raises(DataFileError, match=r"big\.np[yz].*\(100000, 100000\).*37\.3 GiB.*truncated or corrupt"):
+    with pytest.raises(
+        DataFileError,
+        match=r"big\.np[yz]: cannot read as NumPy .*\(truncated or corrupt: .*\(100000, 100000\).*37\.3 GiB",
+    ):
         read()
 
 
@@ -425,3 +428,93 @@ def test_a_truncated_image_is_only_our_one_line_on_stderr(tmp_path, suffix):
         f"error: cut{ext}: cannot decode as an image (empty, truncated or corrupt)"
     ]
     assert done.stdout == ""
+
+
+# ---------------------------------------------------------------------------- row 12: small contracts
+
+
+def test_scale_invariant_help_says_what_the_code_does():
+    import typer
+
+    group = typer.main.get_command(app)
+    for command in ("estimate", "convert"):
+        (option,) = [p for p in group.commands[command].params if p.name == "scale_invariant"]
+        assert "median" not in option.help and "relative to each pixel's own depth" in option.help, option.help
+
+
+def test_timedelta_depth_and_intrinsics_are_refused():
+    import surfnorm
+    from surfnorm import Intrinsics
+
+    depth = np.full((8, 8), 5, dtype="timedelta64[ms]")
+    with pytest.raises(surfnorm.InputError, match=r"depth: expected real-valued depth .*timedelta64"):
+        surfnorm.estimate(depth, K)
+    with pytest.raises(surfnorm.InputError, match="mask: expected a boolean array"):
+        surfnorm.estimate(np.ones((8, 8)), K, mask=depth)
+    with pytest.raises(surfnorm.InputError, match="K: expected a 3x3 matrix of real numbers"):
+        Intrinsics.from_matrix(np.asarray(K).astype("timedelta64[s]"))
+
+
+def test_timedelta_depth_files_are_refused(tmp_path):
+    from surfnorm.errors import DataFileError
+    from surfnorm.io import read_depth
+    from surfnorm.io.depth import read_mask
+
+    np.save(tmp_path / "t.npy", np.full((8, 8), 5, dtype="timedelta64[ms]"))
+    with pytest.raises(DataFileError, match=r"t\.npy: expected real-valued depth"):
+        read_depth(tmp_path / "t.npy")
+    with pytest.raises(DataFileError, match=r"t\.npy: expected a 2-D mask"):
+        read_mask(tmp_path / "t.npy")
+
+
+def test_numpy_integers_are_accepted_for_threads_as_for_window():
+    import surfnorm
+
+    z = np.stack([_surface()] * 2)
+    ref = surfnorm.estimate(z, K, method="plane_pca", window=5, threads=1)
+    assert np.array_equal(surfnorm.estimate(z, K, method="plane_pca", window=np.int64(5), threads=np.int64(2)), ref)
+    with pytest.raises(surfnorm.InputError, match="threads: expected a positive integer"):
+        surfnorm.estimate(z, K, threads=np.float64(2))
+
+
+@pytest.mark.parametrize(
+    "name, text",
+    [
+        ("k.yaml", "fx: 525\nfy: 525\ncx: 31.5\ncy: 23.5\nfx: 600\n"),
+        ("k.json", '{"fx": 525, "fy": 525, "cx": 31.5, "cy": 23.5, "fx": 600}'),
+    ],
+)
+def test_an_intrinsics_key_given_twice_is_an_error(tmp_path, name, text):
+    from surfnorm.errors import DataFileError
+    from surfnorm.io import read_intrinsics
+
+    (tmp_path / name).write_text(text)
+    with pytest.raises(DataFileError, match=r"expected each key once, got 'fx' twice"):
+        read_intrinsics(tmp_path / name)
+
+
+def test_utf8_bom_json_intrinsics_are_read(tmp_path):
+    from surfnorm.io import read_intrinsics
+
+    (tmp_path / "k.json").write_bytes(b"\xef\xbb\xbf" + b'{"fx": 525, "fy": 526, "cx": 31.5, "cy": 23.5}')
+    cam = read_intrinsics(tmp_path / "k.json")
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == (525.0, 526.0, 31.5, 23.5)
+
+
+def test_a_masked_output_array_is_refused():
+    import surfnorm
+
+    out = np.ma.masked_all((48, 64, 3), np.float32)
+    with pytest.raises(surfnorm.InputError, match="out: expected a plain NumPy array .* masked array"):
+        surfnorm.estimate(_surface(), K, method="d2nt_basic", out=out)
+
+
+def test_a_stack_of_narrow_frames_is_read_as_a_stack_as_one_narrow_frame_is_a_frame():
+    import surfnorm
+
+    frame = np.tile(np.linspace(1.0, 1.1, 3), (100, 1))  # 100 rows, 3 columns: one frame
+    one = surfnorm.estimate(frame, K, method="d2nt_basic")
+    both = surfnorm.estimate(np.stack([frame, frame]), K, method="d2nt_basic")  # (2, 100, 3): two such frames
+    assert both.shape == (2, 100, 3, 3) and np.array_equal(both[1], one)
+    with pytest.raises(surfnorm.InputError, match="looks like an image with 3 channel"):
+        surfnorm.estimate(np.ones((48, 64, 3)), K)  # a colour picture is still refused

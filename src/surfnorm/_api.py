@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 from ._bands import CORES, map_threads, on_threads, whole
@@ -101,9 +103,9 @@ def _valid(z, mask, bands=whole):
 
 def _workers(threads) -> int:
     workers = threads if threads is not None else CORES
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+    if not isinstance(workers, numbers.Integral) or isinstance(workers, (bool, np.bool_)) or workers < 1:
         raise InputError(f"threads: expected a positive integer, got {threads!r}")
-    return workers
+    return int(workers)  # (np.int64(2) as window= takes it)
 
 
 def estimate(

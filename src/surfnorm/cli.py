@@ -179,7 +179,9 @@ def estimate(
     ),
     mask: Optional[Path] = typer.Option(None, help="Mask image or .npy: non-zero where depth may be used."),
     scale_invariant: bool = typer.Option(
-        False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."
+        False,
+        "--scale-invariant",
+        help="Thresholds relative to each pixel's own depth: the same normals in any unit of depth.",
     ),
     disparity: bool = typer.Option(False, "--disparity", help="The input holds disparity (inverse depth up to scale)."),
     fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
@@ -326,7 +328,9 @@ def convert(
     fmt: str = typer.Option("npy", "--format", "-f", help=FORMAT_HELP),
     jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel processes."),
     scale_invariant: bool = typer.Option(
-        False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."
+        False,
+        "--scale-invariant",
+        help="Thresholds relative to each pixel's own depth: the same normals in any unit of depth.",
     ),
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Replace outputs that exist (default: skip them, so a re-run resumes)."

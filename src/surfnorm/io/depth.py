@@ -205,7 +205,7 @@ def read_depth(
         raise DataFileError(f"{path}: unknown depth file type {suffix!r}; expected one of {', '.join(DEPTH_SUFFIXES)}")
     if depth.ndim != 2:
         raise DataFileError(f"{path}: expected a 2-D depth image, got an array of shape {depth.shape}")
-    if depth.dtype == bool or not (np.issubdtype(depth.dtype, np.integer) or np.issubdtype(depth.dtype, np.floating)):
+    if depth.dtype.kind not in "fiu":  # (not bool, complex, timedelta64, strings or objects)
         raise DataFileError(f"{path}: expected real-valued depth (float or integer), got dtype {depth.dtype}")
     if kinect_disparity or byte_order is not None:
         depth = _raw_sensor_values(path, depth, suffix, kinect_disparity=kinect_disparity, byte_order=byte_order)
@@ -222,7 +222,7 @@ def read_mask(path) -> np.ndarray:
         arr = _read_numpy(path, suffix, "mask")
     else:
         arr = decode_image(path, read_bytes(path, "mask"), cv2.IMREAD_GRAYSCALE)
-    real = arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)
+    real = arr.dtype.kind in "bfiu"
     if arr.ndim != 2 or not real:  # not strings, complex numbers, objects or records
         raise DataFileError(
             f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype} "

@@ -518,3 +518,46 @@ def test_a_stack_of_narrow_frames_is_read_as_a_stack_as_one_narrow_frame_is_a_fr
     assert both.shape == (2, 100, 3, 3) and np.array_equal(both[1], one)
     with pytest.raises(surfnorm.InputError, match="looks like an image with 3 channel"):
         surfnorm.estimate(np.ones((48, 64, 3)), K)  # a colour picture is still refused
+
+
+# ---------------------------------------------------------------------------- the principles' other cases
+
+
+@pytest.mark.parametrize("name", ["a.bin", "a.bin.gz"])
+def test_a_bin_shape_larger_than_the_file_is_a_data_file_error_before_allocating(tmp_path, name):
+    import gzip
+
+    from surfnorm.errors import DataFileError
+    from surfnorm.io import read_depth
+
+    raw = np.ones((48, 64), np.float32).tobytes()
+    (tmp_path / name).write_bytes(gzip.compress(raw) if name.endswith(".gz") else raw)
+    with pytest.raises(
+        DataFileError, match=r"expected 40000000000 bytes of float32 depth \(100000x100000\), got 12288"
+    ):
+        read_depth(tmp_path / name, shape=(100000, 100000))
+    assert read_depth(tmp_path / name, shape=(48, 64)).shape == (48, 64)
+
+
+def test_refine_takes_depth_of_any_magnitude():
+    import surfnorm
+
+    z = _surface()
+    noisy = surfnorm.estimate(z, K, method="d2nt_basic")
+    noisy[10, 10] = [0.6, 0.0, -0.8]
+    ref = surfnorm.refine(noisy, z)
+    for s in (2.0**-200, 2.0**200):
+        assert np.array_equal(surfnorm.refine(noisy, z * s), ref), s
+
+
+def test_a_depth_scale_that_float32_cannot_hold_is_an_input_error(tmp_path):
+    import cv2
+
+    from surfnorm.errors import InputError
+    from surfnorm.io import read_depth
+
+    cv2.imwrite(str(tmp_path / "d.png"), np.rint(_plane() * 1000).astype(np.uint16))
+    for scale in (1e-40, 1e45):
+        with pytest.raises(InputError, match=r"depth_scale: expected a scale that keeps depth"):
+            read_depth(tmp_path / "d.png", depth_scale=scale)
+    assert np.allclose(read_depth(tmp_path / "d.png", depth_scale=1000), _plane(), atol=1e-3)

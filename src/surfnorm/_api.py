@@ -281,5 +281,10 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     user_mask = as_mask(mask, z.shape)
     if unmasked is not None:
         user_mask = unmasked if user_mask is None else user_mask & unmasked
+    from .units import range_exponent, scaled_frame
+
+    k = range_exponent(z, np.asarray(depth))  # depth of any magnitude (MNR compares smoothness: scale-free)
+    if k:
+        z = scaled_frame(depth, k)
     valid = _valid(z, user_mask)
     return mnr(z, valid, n, np.empty_like(n), dlf=dlf, fill=fill)

@@ -210,8 +210,27 @@ def read_depth(
     if kinect_disparity or byte_order is not None:
         depth = _raw_sensor_values(path, depth, suffix, kinect_disparity=kinect_disparity, byte_order=byte_order)
     if depth_scale is not None and depth_scale != 1:
-        return (depth.astype(np.float64) / depth_scale).astype(np.float32)
+        return _scaled(depth, depth_scale)
     return np.ascontiguousarray(depth, dtype=np.float32)
+
+
+def _scaled(depth: np.ndarray, depth_scale: float) -> np.ndarray:
+    """The depth divided by ``depth_scale``, float32; an InputError where float32 cannot hold the result.
+
+    A finite non-zero value that becomes 0, a subnormal (a few bits left) or inf would make its pixel invalid
+    or wrong without a word.
+    """
+    scaled = depth.astype(np.float64) / depth_scale
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        out = scaled.astype(np.float32)
+        lost = np.isfinite(scaled) & (scaled != 0) & ((np.abs(out) < np.finfo(np.float32).tiny) | ~np.isfinite(out))
+    if lost.any():
+        example = float(scaled[lost][0])
+        raise InputError(
+            f"depth_scale: expected a scale that keeps depth within float32's range (about 1.2e-38 to 3.4e38), "
+            f"got {depth_scale!r}, which gives depth such as {example:.3g}"
+        )
+    return out
 
 
 def read_mask(path) -> np.ndarray:

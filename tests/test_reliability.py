@@ -149,6 +149,8 @@ total = 0.0
 for method, kw in json.loads(sys.argv[1]):
     for depth in (z, z.astype(np.float32), np.stack([z, z])):
         total += float(np.nansum(surfnorm.estimate(depth, K, method=method, threads=2, **kw)))
+for depth in (z, z.astype(np.float32)):
+    total += float(np.nansum(surfnorm.refine(surfnorm.estimate(depth, K, method="cp2tv"), depth)))
 print(json.dumps({"compiled": compiled, "total": total}))
 """
 

@@ -80,7 +80,7 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(mod.np, "save", boom)
-    with pytest.raises(OSError, match="No space left"):
+    with pytest.raises(DataFileError, match=r"cannot write .*n\.npy \(No space left on device\)"):
         write_normals(tmp_path / "n.npy", random_normals())
     assert list(tmp_path.iterdir()) == []
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from typing import cast
 
 import numpy as np
@@ -32,11 +33,17 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
         return Intrinsics.from_matrix(K)
     if isinstance(K, Intrinsics):
         return [K] * n
-    arr = np.asarray(K) if not isinstance(K, (list, tuple)) or not K or not isinstance(K[0], Intrinsics) else None
-    if arr is None:
+    if isinstance(K, (list, tuple)) and any(isinstance(k, Intrinsics) for k in K):
+        # one per frame, each an Intrinsics or a 3x3 matrix, checked here (not in a worker thread)
         if len(K) != n:
             raise InputError(f"K: expected one intrinsics for all {n} frames or one per frame, got {len(K)}")
         return [Intrinsics.from_matrix(k, name=f"K[{i}]") for i, k in enumerate(K)]
+    try:
+        arr = np.asarray(K)
+    except (TypeError, ValueError) as exc:  # a ragged list
+        raise InputError(
+            f"K: expected a 3x3 matrix, ({n}, 3, 3) matrices or one Intrinsics per frame, got a ragged {type(K).__name__}"
+        ) from exc
     if arr.ndim == 3:
         if arr.shape[0] != n:
             raise InputError(f"K: expected shape (3, 3) or ({n}, 3, 3) for {n} frames, got shape {arr.shape}")
@@ -68,13 +75,12 @@ def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np
     """The paper-faithful mode's range rescale of one frame (surfnorm.units, "Range").
 
     Depth and tau are multiplied by a power of two where the frame's depth would leave float32's range in the
-    kernels; else unchanged.
+    kernels (judged on ``src``, the caller's values, where they reach beyond float32); else unchanged. Methods
+    whose normals depend on the unit (``equivariant`` False) only where float32 would lose the depth.
     """
-    if not method.equivariant:
-        return z, options
-    from .units import range_exponent, scaled_frame
+    from .units import SAFE_EXPONENT, UNIT_EXPONENT, range_exponent, scaled_frame
 
-    k = range_exponent(z)
+    k = range_exponent(z, src, SAFE_EXPONENT if method.equivariant else UNIT_EXPONENT)
     if k == 0:
         return z, options
     if "tau" in options:
@@ -98,9 +104,9 @@ def _valid(z, mask, bands=whole):
 
 def _workers(threads) -> int:
     workers = threads if threads is not None else CORES
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+    if not isinstance(workers, numbers.Integral) or isinstance(workers, (bool, np.bool_)) or workers < 1:
         raise InputError(f"threads: expected a positive integer, got {threads!r}")
-    return workers
+    return int(workers)  # (np.int64(2) as window= takes it)
 
 
 def estimate(
@@ -199,9 +205,10 @@ def estimate(
     if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
         from .units import REFERENCE_DEPTH, TIE_TOLERANCE, relative_depth
 
-        # Invalid pixels become 0 in the rescaled depth, and a value that over/underflows float32 when
-        # rescaled is not finite and positive, so the validity computed below from z covers both.
-        z = relative_depth(src, valid_pixels(z, user_mask), disparity=disparity)
+        # Validity from the caller's values (float64 depth of 1e-60 is 0 in float32). Invalid pixels become 0 in
+        # the rescaled depth, and a value that over/underflows float32 when rescaled is not finite and positive,
+        # so the validity computed below from z covers both.
+        z = relative_depth(src, valid_pixels(src, user_mask), disparity=disparity)
         tie_tol, relative = TIE_TOLERANCE, REFERENCE_DEPTH
     workers = _workers(threads)
 
@@ -286,6 +293,11 @@ def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) 
     user_mask = as_mask(mask, z.shape)
     if unmasked is not None:
         user_mask = unmasked if user_mask is None else user_mask & unmasked
+    from .units import range_exponent, scaled_frame
+
+    k = range_exponent(z, np.asarray(depth))  # depth of any magnitude (MNR compares smoothness: scale-free)
+    if k:
+        z = scaled_frame(depth, k)
     valid = _valid(z, user_mask)
     return mnr(z, valid, n, np.empty_like(n), dlf=dlf, fill=fill)
 

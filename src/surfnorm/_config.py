@@ -15,6 +15,7 @@ import tempfile
 
 import numba
 import numba.extending
+from numba.core import caching
 from numba.core.compiler import CompilerBase, DefaultPassBuilder
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -73,6 +74,48 @@ except Exception:  # another Numba's internals: its own behaviour stays
     pass
 
 
+class _SafeCache(caching.FunctionCache):
+    """Numba's disk cache of one kernel, where a damaged or concurrently written cache never fails a call.
+
+    Numba raises from its cache when an index file cannot be unpickled (truncated, overwritten by a crashed or
+    concurrent writer, or left by another Numba), and when saving fails (a full disk, a read-only folder, or
+    ``ReferenceError: underlying object has vanished``): the user's call then failed although the kernel had
+    compiled. Here a cache that cannot be loaded is a miss (the kernel compiles), and a save that fails removes
+    the index it could not read and tries once more, else leaves the cache as it is.
+    """
+
+    def load_overload(self, sig, target_context):
+        try:
+            return super().load_overload(sig, target_context)
+        except Exception:  # noqa: BLE001 - whatever a damaged cache raises: compile instead
+            return None
+
+    def save_overload(self, sig, data):
+        try:
+            super().save_overload(sig, data)
+        except Exception:  # noqa: BLE001 - a damaged index: start a new one (once); else keep what is there
+            try:
+                os.unlink(self._cache_file._index_path)
+                super().save_overload(sig, data)
+            except Exception:  # noqa: BLE001
+                pass
+
+
+def _safe_cache(dispatcher):
+    """``dispatcher`` with :class:`_SafeCache` in place of Numba's own disk cache (where it has one)."""
+    if type(getattr(dispatcher, "_cache", None)) is caching.FunctionCache:
+        dispatcher._cache = _SafeCache(dispatcher.py_func)
+    return dispatcher
+
+
+def _numba_njit(*args, **options):
+    """``numba.njit`` whose dispatchers use :class:`_SafeCache` (a decorator, or the dispatcher of ``args[0]``)."""
+    if args and callable(args[0]):
+        return _safe_cache(numba.njit(**options)(args[0]))
+    decorate = numba.njit(*args, **options)
+    return lambda func: _safe_cache(decorate(func))
+
+
 class _NoAliasCompiler(CompilerBase):
     """Numba's nopython pipeline with the ``noalias`` flag set: LLVM may assume that the arrays
     passed in do not overlap (one written through one argument is never read through another)."""
@@ -95,9 +138,7 @@ def njit(*args, noalias=False, **kwargs):
     options = {**NJIT, **kwargs}
     if noalias:
         options["pipeline_class"] = _NoAliasCompiler
-    if args and callable(args[0]):
-        return numba.njit(**options)(args[0])
-    return numba.njit(*args, **options)
+    return _numba_njit(*args, **options)
 
 
 def row(*args, **kwargs):
@@ -115,9 +156,7 @@ def row(*args, **kwargs):
     d2nt_v3 alone), which costs seconds on a fresh install's first call.
     """
     options = {**NJIT, "_nrt": False, **kwargs}
-    if args and callable(args[0]):
-        return numba.njit(**options)(args[0])
-    return numba.njit(*args, **options)
+    return _numba_njit(*args, **options)
 
 
 def pixel(func):
@@ -128,7 +167,7 @@ def pixel(func):
     kernels). ``inline="always"`` splices the helper into its caller at the
     Numba IR level, so kernels stay written as calls to readable helpers.
     """
-    return numba.njit(inline="always", **NJIT)(func)
+    return _numba_njit(func, inline="always", **NJIT)
 
 
 @numba.extending.intrinsic

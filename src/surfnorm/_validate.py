@@ -62,13 +62,15 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
         raise InputError(
             f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}; a boolean array is a mask, pass it as mask="
         )
-    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+    if arr.dtype.kind not in "fiu":  # (timedelta64 counts as an integer to np.issubdtype)
         raise InputError(f"{name}: expected real-valued depth (float or integer), got {_describe(arr)}")
     ndims = (2, 3) if batch else (2,)
     if arr.ndim not in ndims:
         want = "a 2-D array (H, W) or a stack (N, H, W)" if batch else "a 2-D array (H, W)"
         raise InputError(f"{name}: expected {want}, got {_describe(arr)}")
-    if arr.ndim == 3 and arr.shape[-1] <= 4 < arr.shape[-2]:
+    # (H, W, 3) looks like a colour image; unless its H would be too few rows for one, so that only a stack of
+    # N frames of H x W fits, as a (H, 3) frame is one frame of 3 columns
+    if arr.ndim == 3 and arr.shape[-1] <= 4 < arr.shape[-2] and arr.shape[0] >= MIN_SIZE:
         raise InputError(
             f"{name}: expected one depth channel, (H, W) or a stack (N, H, W), got shape {arr.shape}, "
             f"which looks like an image with {arr.shape[-1]} channel(s); pass depth[..., 0] if that channel is depth"
@@ -77,7 +79,8 @@ def as_depth(depth, *, name: str = "depth", batch: bool = True) -> np.ndarray:
         raise InputError(f"{name}: expected at least {MIN_SIZE}x{MIN_SIZE} pixels, got shape {arr.shape}")
     if arr.ndim == 3 and arr.shape[0] == 0:
         raise InputError(f"{name}: expected at least one frame in the stack, got shape {arr.shape}")
-    return np.ascontiguousarray(arr, dtype=np.float32)
+    with np.errstate(over="ignore", under="ignore"):  # beyond float32: rescaled from the caller's values later
+        return np.ascontiguousarray(arr, dtype=np.float32)
 
 
 def split_masked(value):
@@ -100,7 +103,7 @@ def as_mask(mask, shape: tuple, *, name: str = "mask") -> np.ndarray | None:
     if isinstance(mask, np.ma.MaskedArray):
         mask = np.ma.filled(mask, 0)
     arr = np.asarray(mask)
-    if not (arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+    if arr.dtype.kind not in "bfiu":
         raise InputError(f"{name}: expected a boolean array (True where depth is usable), got {_describe(arr)}")
     if arr.shape != tuple(shape):
         if arr.shape == tuple(shape[-2:]) and len(shape) == 3:
@@ -180,6 +183,11 @@ def as_output(out, shape: tuple, inputs=(), *, name: str = "out") -> np.ndarray:
     than copied; and the kernels assume that what they write never overlaps
     what they read.
     """
+    if isinstance(out, np.ma.MaskedArray):  # its mask would hide the normals written into its data
+        raise InputError(
+            f"{name}: expected a plain NumPy array to write the normals into, got a masked array; "
+            "pass its .data (np.ma.getdata(out)) or a plain array"
+        )
     if not isinstance(out, np.ndarray):
         raise InputError(
             f"{name}: expected a float32 NumPy array of shape {tuple(shape)} to write the normals into, "

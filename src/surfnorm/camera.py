@@ -124,11 +124,7 @@ class Intrinsics:
             arr = np.asarray(K)
         except Exception as exc:  # pragma: no cover - exotic objects
             raise InputError(f"{name}: expected a 3x3 intrinsic matrix, got {type(K).__name__}") from exc
-        if (
-            arr.dtype == object
-            or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating))
-            or arr.dtype == bool
-        ):
+        if arr.dtype.kind not in "fiu":  # (not objects, booleans, complex numbers or timedelta64)
             raise InputError(f"{name}: expected a 3x3 matrix of real numbers, got dtype {arr.dtype}")
         if arr.shape != (3, 3):
             raise InputError(f"{name}: expected a 3x3 intrinsic matrix, got shape {arr.shape}")

@@ -182,25 +182,41 @@ def estimate(
     ),
     mask: Optional[Path] = typer.Option(None, help="Mask image or .npy: non-zero where depth may be used."),
     scale_invariant: bool = typer.Option(
-        False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."
+        False,
+        "--scale-invariant",
+        help="Thresholds relative to each pixel's own depth: the same normals in any unit of depth.",
     ),
     disparity: bool = typer.Option(False, "--disparity", help="The input holds disparity (inverse depth up to scale)."),
     fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace output files that exist (never the files read: depth, mask, intrinsics)."
+    ),
     verbose: bool = typer.Option(
         False, "--verbose", "-v", help="Also print what the default method ran on this frame, and why."
     ),
 ):
-    """Estimate the normals of one depth image."""
+    """Estimate the normals of one depth image.
+
+    An output file that exists is an error (exit status 2) unless --overwrite; an output that is one of the
+    files read (the depth, the mask, the intrinsics) is an error always.
+    """
     from . import estimate as estimate_
+    from .io._files import check_outputs
     from .io.depth import read_depth, read_mask
     from .io.normals import FORMAT_SUFFIX, write_normals
+    from .io.threef2n import params_for
     from .methods import parse_method
 
     written = []
     try:
         formats = [_check_format(fmt)] if fmt is not None else ["npy", "png8"]
+        if output.is_dir():
+            fail(f"output: expected a file prefix, got the directory {output}")
+        paths = [output.with_name(output.name + FORMAT_SUFFIX[f]) for f in formats]
+        reads = [depth, mask, intrinsics, params_for(depth) if intrinsics is None else None]
+        check_outputs(paths, reads, overwrite=overwrite)
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
@@ -219,10 +235,8 @@ def estimate(
             console.print(str(auto_decision(z, cam, mask=user_mask, disparity=disparity)), highlight=False)
         elif verbose:
             console.print(f"ran {method}, as named", highlight=False)
-        if output.is_dir():
-            fail(f"output: expected a file prefix, got the directory {output}")
-        for f in formats:
-            written.append(write_normals(output.with_name(output.name + FORMAT_SUFFIX[f]), normals, fmt=f))
+        for path, f in zip(paths, formats):
+            written.append(write_normals(path, normals, fmt=f))
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
     console.print(f"wrote {' and '.join(map(str, written))}", highlight=False)
@@ -378,7 +392,9 @@ def convert(
     fmt: str = typer.Option("npy", "--format", "-f", help=FORMAT_HELP),
     jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel processes."),
     scale_invariant: bool = typer.Option(
-        False, "--scale-invariant", help="DAG thresholds relative to the median depth (unit-free)."
+        False,
+        "--scale-invariant",
+        help="Thresholds relative to each pixel's own depth: the same normals in any unit of depth.",
     ),
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Replace outputs that exist (default: skip them, so a re-run resumes)."

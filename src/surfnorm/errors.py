@@ -22,7 +22,7 @@ class InputError(SurfnormError, ValueError):
 
 
 class DataFileError(SurfnormError, ValueError):
-    """A file could not be read as what it was supposed to be (corrupt, truncated, wrong format)."""
+    """A file could not be read as what it was supposed to be (corrupt, truncated, wrong format), or written."""
 
 
 class MissingDependencyError(SurfnormError, ImportError):

@@ -483,7 +483,9 @@ WINDOW_OPTIONS = {
     "window": Option(
         3,
         check_window,
-        "side of the square pixel neighbourhood whose points are fitted: larger smooths noise and rounds edges",
+        "side of the square pixel neighbourhood whose points are fitted: larger smooths noise and rounds edges; "
+        "one wider than the frame is clipped to 2 max(H, W) - 1, which holds every pixel of the frame from any "
+        "pixel (the same normals)",
         "an odd integer >= 3",
     ),
 }

@@ -58,9 +58,15 @@ paper-faithful mode (in the scale-invariant mode PlaneSVD is relative per
 window, see above, and SDA-SNE's B stays far above the energies of depth
 near 100). Which power of two is chosen therefore does not
 matter, and a hole that moves the median across a power of two changes
-nothing. Input below about 1e-38 (float32 subnormals) has lost its digits
-before any rescale unless it comes as float64, which is rescaled before it
-is rounded to float32.
+nothing. PlaneSVD and SDA-SNE are rescaled too, in the paper-faithful mode, where
+the sampled median lies outside [2^-100, 2^100] (about 8e-31 to 1.3e30): there
+float32 would lose the depth (subnormals, then 0, or inf) and they would fill
+every pixel or compute from a few bits, so they give what they give on the
+same depth in a unit near 100 instead; inside that range they compute on the
+depth as given. The magnitude is judged on the values as passed: float64 depth
+of 1e-60 or 1e60 (beyond float32) is rescaled before it is rounded to
+float32, and so is its validity map (in every mode). Float32 input below
+about 1e-38 (subnormals) has lost its digits before any rescale.
 
 Ties
 ----
@@ -164,6 +170,10 @@ TIE_TOLERANCE = 1.5e-6
 #: The paper-faithful mode rescales a frame only if its sampled median depth lies outside [2^-20, 2^20].
 SAFE_EXPONENT = 20
 
+#: ... and a frame for a method whose normals depend on the unit of depth (PlaneSVD, SDA-SNE) only if outside
+#: [2^-100, 2^100], where float32 would lose it (see "Range").
+UNIT_EXPONENT = 100
+
 _SAMPLES = 1024
 
 
@@ -172,16 +182,22 @@ def power_of_two_exponent(m: float) -> int:
     return 7 - math.frexp(m)[1]
 
 
-def range_exponent(z: np.ndarray) -> int:
+def range_exponent(z: np.ndarray, src: np.ndarray | None = None, safe: int = SAFE_EXPONENT) -> int:
     """0, or the k of :func:`power_of_two_exponent` when a strided sample of the valid (finite, positive)
-    values of the frame ``z`` (float32, C-contiguous) has a median outside [2^-20, 2^20]. Cheap: at most
-    about 1024 values are read, and the median is taken only when some of them lie outside."""
+    values of the frame ``z`` (float32, C-contiguous) has a median outside [2^-safe, 2^safe]. Cheap: at most
+    about 1024 values are read, and the median is taken only when some of them lie outside.
+
+    ``src``: the caller's values of the same frame, which are judged instead where their dtype reaches
+    beyond float32 (float64: depth of 1e-60 is 0 in ``z``, 1e60 inf)."""
     flat = z.reshape(-1)
     step = max(1, flat.size // _SAMPLES)
-    lo, hi = 2.0**-SAFE_EXPONENT, 2.0**SAFE_EXPONENT
-    if _inside(flat, step, lo, hi):  # the usual case, in one pass
+    lo, hi = 2.0**-safe, 2.0**safe
+    if src is not None and src.dtype.kind == "f" and src.dtype.itemsize > 4:
+        sample = np.asarray(src.flat[::step], dtype=np.float64)  # (a copy of the sample only)
+    elif _inside(flat, step, lo, hi):  # the usual case, in one pass
         return 0
-    sample = flat[::step]
+    else:
+        sample = flat[::step]
     with np.errstate(invalid="ignore"):
         sample = sample[(sample > 0) & (sample < np.inf)]
     if sample.size == 0:

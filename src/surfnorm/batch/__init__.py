@@ -14,9 +14,11 @@ on a Dask cluster):
 
 A run killed at any moment leaves complete outputs and, at worst, hidden
 temporary files (``.<name>.<random>.tmp<suffix>``) that the next run over the
-same outputs removes before it starts; outputs that exist are skipped, so
+same outputs removes before it starts (only those that no live run holds: a
+writer keeps its temporary file locked); outputs that exist are skipped, so
 running the same command again finishes the job. Two runs writing into the
-same output folder at the same time are not supported.
+same output folder at the same time leave each other's files in flight alone
+(a file both convert is written twice, with the same bytes).
 """
 
 from __future__ import annotations

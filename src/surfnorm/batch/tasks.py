@@ -119,9 +119,16 @@ def _output_stem(path: Path) -> str:
 
 
 def _is_depth_file(path: Path) -> bool:
+    """A depth file's name (not hidden), and a file or a symbolic link.
+
+    A dangling link or a loop becomes a task that fails by name ("cannot read depth file (No such file or
+    directory)"), not an input silently dropped.
+    """
     from ..io.depth import DEPTH_SUFFIXES, depth_suffix
 
-    return path.is_file() and depth_suffix(path) in DEPTH_SUFFIXES and not path.name.startswith(".")
+    if path.name.startswith(".") or depth_suffix(path) not in DEPTH_SUFFIXES:
+        return False
+    return path.is_symlink() or path.is_file()
 
 
 def _walk(root: Path) -> list[Path]:
@@ -179,6 +186,14 @@ def _sources(inputs) -> list[tuple[Path, Path]]:
     return out
 
 
+def _resolved(path: Path) -> Path:
+    """``path.resolve()``, or its absolute path where links loop (a loop fails by name when its task runs)."""
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):
+        return path.absolute()
+
+
 def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
     """Pair every input depth file with its output file, in a deterministic order.
 
@@ -216,7 +231,7 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
                 "its outputs would be read as inputs by the next run"
             )
         # outputs of an earlier run inside the input folder (e.g. convert data data/normals) are not inputs
-        sources = [(f, r) for f, r in sources if out_root not in f.resolve().parents]
+        sources = [(f, r) for f, r in sources if out_root not in _resolved(f).parents]
     if not sources:
         raise InputError(
             f"inputs: expected at least one depth file, found none in {os.fspath(inputs) if isinstance(inputs, (str, os.PathLike)) else 'the list'}"
@@ -234,7 +249,7 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
                 f"inputs: {seen[out]} and {file} would both be written to {out}; "
                 "convert them into different output folders"
             )
-        if out.resolve() == file.resolve():
+        if _resolved(out) == _resolved(file):
             raise InputError(f"output_dir: writing {out} would replace its input; choose another output folder")
         seen[out] = file
         tasks.append(ConvertTask(file, out))
@@ -320,12 +335,29 @@ def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
 
 # ---------------------------------------------------------------------------- many files
 
-#: The name atomic_write gives its temporary file: ".<name>.<random>.tmp<suffix>".
+#: The name atomic_write gives its temporary file: ".<name>.<random>.tmp<suffix>" (<name> shortened, ending
+#: with "~", where the whole would be too long for the filesystem).
 _TEMPORARY = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp(\.[A-Za-z0-9]+)?$")
 
 
+def _temporary_of(name: str, outputs: set[str]) -> bool:
+    """Whether ``name`` (the <name> part of a temporary file) is that of one of ``outputs``, whole or shortened."""
+    from ..io._atomic import TRUNCATED
+
+    if name in outputs:
+        return True
+    stem = name[: -len(TRUNCATED)]
+    return name.endswith(TRUNCATED) and any(o.startswith(stem) for o in outputs)
+
+
 def remove_stale_temporaries(tasks: Iterable[ConvertTask]) -> int:
-    """Remove the temporary files an interrupted run left beside the planned outputs; returns how many."""
+    """Remove the temporary files an interrupted run left beside the planned outputs; returns how many.
+
+    Only those that no live writer holds: another run writing into the same folder keeps its files in flight
+    locked (see :func:`surfnorm.io._atomic.remove_if_stale`), and they are left alone.
+    """
+    from ..io._atomic import remove_if_stale
+
     removed = 0
     by_dir: dict[Path, set[str]] = {}
     for t in tasks:
@@ -335,7 +367,6 @@ def remove_stale_temporaries(tasks: Iterable[ConvertTask]) -> int:
             continue
         for entry in folder.iterdir():
             match = _TEMPORARY.match(entry.name)
-            if match and match["name"] in names and entry.is_file():
-                entry.unlink(missing_ok=True)
+            if match and _temporary_of(match["name"], names) and entry.is_file() and remove_if_stale(entry):
                 removed += 1
     return removed

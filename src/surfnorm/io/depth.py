@@ -53,7 +53,7 @@ import numpy as np
 
 from .._validate import check_bool, check_choice, check_positive
 from ..errors import DataFileError, InputError, MissingDependencyError
-from ._files import as_path, check_shape, decode_image, read_bytes
+from ._files import as_path, check_npy_header, check_shape, decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
 
 __all__ = [
@@ -87,23 +87,32 @@ def depth_suffix(path) -> str:
 
 def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
     """The array of a .npy file, or of a .npz archive (the array called ``name``, or its only array)."""
+    what = f"{suffix} {name}"
     try:
         with open(path, "rb") as fh:
+            if suffix == ".npy":
+                check_npy_header(path, fh, os.fstat(fh.fileno()).st_size, what)
+                fh.seek(0)
             data = np.load(fh, allow_pickle=False)
             if suffix == ".npz":
                 with data:
                     keys = list(data.keys())
-                    if name in keys:
-                        return np.asarray(data[name])
-                    if len(keys) != 1:
+                    if name not in keys and len(keys) != 1:
                         raise DataFileError(
                             f"{path}: expected an array named {name!r} or a single array in the .npz archive, "
                             f"got {len(keys)} arrays ({', '.join(keys) or 'none'})"
                         )
-                    return np.asarray(data[keys[0]])
+                    key = name if name in keys else keys[0]
+                    member = data.zip.getinfo(key + ".npy") if key + ".npy" in data.zip.namelist() else None
+                    if member is not None:
+                        with data.zip.open(member) as stream:
+                            check_npy_header(path, stream, member.file_size, what)
+                    return np.asarray(data[key])
             return np.asarray(data)
     except DataFileError:
         raise
+    except MemoryError as exc:
+        raise DataFileError(f"{path}: cannot read as NumPy {what}: it does not fit in memory") from exc
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read {name} file ({exc.strerror or exc})") from exc
     except (ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
@@ -196,13 +205,32 @@ def read_depth(
         raise DataFileError(f"{path}: unknown depth file type {suffix!r}; expected one of {', '.join(DEPTH_SUFFIXES)}")
     if depth.ndim != 2:
         raise DataFileError(f"{path}: expected a 2-D depth image, got an array of shape {depth.shape}")
-    if depth.dtype == bool or not (np.issubdtype(depth.dtype, np.integer) or np.issubdtype(depth.dtype, np.floating)):
+    if depth.dtype.kind not in "fiu":  # (not bool, complex, timedelta64, strings or objects)
         raise DataFileError(f"{path}: expected real-valued depth (float or integer), got dtype {depth.dtype}")
     if kinect_disparity or byte_order is not None:
         depth = _raw_sensor_values(path, depth, suffix, kinect_disparity=kinect_disparity, byte_order=byte_order)
     if depth_scale is not None and depth_scale != 1:
-        return (depth.astype(np.float64) / depth_scale).astype(np.float32)
+        return _scaled(depth, depth_scale)
     return np.ascontiguousarray(depth, dtype=np.float32)
+
+
+def _scaled(depth: np.ndarray, depth_scale: float) -> np.ndarray:
+    """The depth divided by ``depth_scale``, float32; an InputError where float32 cannot hold the result.
+
+    A finite non-zero value that becomes 0, a subnormal (a few bits left) or inf would make its pixel invalid
+    or wrong without a word.
+    """
+    scaled = depth.astype(np.float64) / depth_scale
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        out = scaled.astype(np.float32)
+        lost = np.isfinite(scaled) & (scaled != 0) & ((np.abs(out) < np.finfo(np.float32).tiny) | ~np.isfinite(out))
+    if lost.any():
+        example = float(scaled[lost][0])
+        raise InputError(
+            f"depth_scale: expected a scale that keeps depth within float32's range (about 1.2e-38 to 3.4e38), "
+            f"got {depth_scale!r}, which gives depth such as {example:.3g}"
+        )
+    return out
 
 
 def read_mask(path) -> np.ndarray:
@@ -213,7 +241,7 @@ def read_mask(path) -> np.ndarray:
         arr = _read_numpy(path, suffix, "mask")
     else:
         arr = decode_image(path, read_bytes(path, "mask"), cv2.IMREAD_GRAYSCALE)
-    real = arr.dtype == bool or np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)
+    real = arr.dtype.kind in "bfiu"
     if arr.ndim != 2 or not real:  # not strings, complex numbers, objects or records
         raise DataFileError(
             f"{path}: expected a 2-D mask, got an array of shape {arr.shape} and dtype {arr.dtype} "

@@ -179,7 +179,7 @@ def _read_text(path: Path) -> str:
     if len(raw) > MAX_FILE_BYTES:
         raise DataFileError(f"{path}: expected an intrinsics file of at most {MAX_FILE_BYTES} bytes, got a larger file")
     try:
-        return raw.decode("utf-8")
+        return raw.decode("utf-8-sig")  # (a byte-order mark, as some Windows editors write, is not text)
     except UnicodeDecodeError as exc:
         raise DataFileError(f"{path}: expected a text intrinsics file, got binary data") from exc
 
@@ -305,7 +305,36 @@ def _safe_yaml_loader(path: Path):
             finally:
                 self.depth -= 1
 
+        def construct_mapping(self, node, deep=False):
+            # A key given twice is an error, not the last one silently (PyYAML takes the last; JSON the same)
+            if isinstance(node, yaml.MappingNode):
+                seen = set()
+                for key_node, _ in node.value:
+                    if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                        continue
+                    key = key_node.value
+                    if key in seen:
+                        raise DataFileError(
+                            f"{path}: line {key_node.start_mark.line + 1}: expected each key once, got {key!r} twice"
+                        )
+                    seen.add(key)
+            return super().construct_mapping(node, deep=deep)
+
     return Loader
+
+
+def _unique_keys(path: Path):
+    """``object_pairs_hook`` of ``json.loads``: a dict, or a DataFileError for a key given twice."""
+
+    def hook(pairs):
+        data = {}
+        for key, value in pairs:
+            if key in data:
+                raise DataFileError(f"{path}: expected each key once, got {key!r} twice")
+            data[key] = value
+        return data
+
+    return hook
 
 
 def _read_yaml(path: Path, text: str) -> Intrinsics:
@@ -378,7 +407,7 @@ def read_intrinsics(path) -> Intrinsics:
     suffix = path.suffix.lower()
     if suffix == ".json":
         try:
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_keys(path))
         except json.JSONDecodeError as exc:
             raise DataFileError(f"{path}: cannot parse as JSON ({exc.msg} at line {exc.lineno})") from exc
         except RecursionError as exc:  # the size cap bounds the work done before it

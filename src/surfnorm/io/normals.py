@@ -29,7 +29,7 @@ import numpy as np
 from .._validate import check_choice, check_fill
 from ..errors import DataFileError, InputError
 from ._atomic import atomic_write
-from ._files import decode_image, read_bytes
+from ._files import check_npy_header, decode_image, read_bytes
 from .pictures import COLOURINGS, normal_to_rgb8
 
 __all__ = ["NORMAL_FORMATS", "FORMAT_SUFFIX", "write_normals", "read_normals", "encode_png16", "decode_png"]
@@ -75,10 +75,18 @@ def decode_png(img: np.ndarray, *, colouring: str = "3f2n", fill: float = 0.0) -
     return out.astype(np.float32)
 
 
+class _Chunks:
+    """A file that NumPy writes through ``write`` (a real file it would write with ``ndarray.tofile``)."""
+
+    def __init__(self, fh):
+        self.write = fh.write
+
+
 def write_normals(path, normals, *, fmt: str = "npy", colouring: str = "3f2n") -> Path:
     """Write a normal map atomically as ``fmt`` (see the module docstring); returns the path.
 
-    ``colouring`` applies to ``png8`` only. The bytes depend only on the normals.
+    ``colouring`` applies to ``png8`` only. The bytes depend only on the normals. A file that cannot be
+    written (no such folder, a full disk) is a DataFileError naming ``path`` and the system's reason.
     """
     check_choice("fmt", fmt, NORMAL_FORMATS)
     check_choice("colouring", colouring, COLOURINGS)
@@ -88,7 +96,9 @@ def write_normals(path, normals, *, fmt: str = "npy", colouring: str = "3f2n") -
 
         def write(tmp: Path):
             with open(tmp, "wb") as fh:
-                np.save(fh, n, allow_pickle=False)
+                # Through fh.write in chunks (not ndarray.tofile, whose error on a full disk is "921600 requested
+                # and 262112 written", without the system's reason): the same bytes.
+                np.save(_Chunks(fh), n, allow_pickle=False)
     else:
         rgb = encode_png16(n) if fmt == "png16" else normal_to_rgb8(n, colouring=colouring)
         bgr = np.ascontiguousarray(rgb[:, :, ::-1])
@@ -117,8 +127,11 @@ def read_normals(path, *, colouring: str = "3f2n", fill: float = 0.0) -> np.ndar
     if suffix == ".npy":
         import io
 
+        check_npy_header(path, io.BytesIO(raw), len(raw), "normal map")
         try:
             n = np.load(io.BytesIO(raw), allow_pickle=False)
+        except MemoryError as exc:
+            raise DataFileError(f"{path}: cannot read as a NumPy normal map: it does not fit in memory") from exc
         except (ValueError, EOFError, OSError) as exc:
             raise DataFileError(f"{path}: cannot read as a NumPy normal map (truncated or corrupt: {exc})") from exc
         if n.ndim != 3 or n.shape[-1] != 3 or not np.issubdtype(n.dtype, np.floating):

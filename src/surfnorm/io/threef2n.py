@@ -89,6 +89,22 @@ def params_for(depth_path) -> Path | None:
     return None
 
 
+def _read_at_most(fh, n: int, chunk: int = 1 << 24) -> bytes:
+    """Up to ``n`` bytes of ``fh``, in chunks.
+
+    ``read(n)`` would allocate ``n`` bytes first, however short the stream (a ``shape`` of 100000 x 100000 is
+    40 GB).
+    """
+    parts, total = [], 0
+    while total < n:
+        part = fh.read(min(chunk, n - total))
+        if not part:
+            break
+        parts.append(part)
+        total += len(part)
+    return b"".join(parts)
+
+
 def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
     """A 3F2N ``.bin`` (or ``.bin.gz``) depth file: raw float32, row-major."""
     path = Path(path)
@@ -98,7 +114,7 @@ def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
             # decompress at most one byte more than a frame holds: a small file that unpacks to
             # gigabytes ("gzip bomb") is refused once it passes the frame size, never held whole
             with gzip.open(path, "rb") as fh:
-                raw = fh.read(expected + 1)
+                raw = _read_at_most(fh, expected + 1)
             if len(raw) > expected:
                 raise DataFileError(
                     f"{path}: expected {expected} bytes of float32 depth ({shape[0]}x{shape[1]}) "
@@ -106,8 +122,9 @@ def read_depth_bin(path, shape=(HEIGHT, WIDTH)) -> np.ndarray:
                 )
         else:
             with open(path, "rb") as fh:
-                raw = fh.read(expected + 1)
                 size = os.fstat(fh.fileno()).st_size
+                # (a shape larger than the file is refused before a buffer of its size is allocated)
+                raw = fh.read(expected + 1) if size == expected else b""
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:  # BadGzipFile is an OSError: test it first
         raise DataFileError(f"{path}: truncated or corrupt gzip stream ({exc})") from exc
     except OSError as exc:

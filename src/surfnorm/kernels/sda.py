@@ -555,8 +555,10 @@ def _sda_sweep(
     """Stages j0 .. j1 - 1 of one frame (see above) as a wavefront over image rows. The stages: 0 load, 1 the
     Laplacians, 2 the initial gradients (into set ``x``), then passes ``first_pass`` .. ``first_pass + n_passes - 1``
     (pass i reads set x for odd i and writes set y, the other way round for even i; a set is the tuple g_u, g_v, e_u,
-    e_v, s_u, s_v), then, where ``base``, the normals from the last pass's set (``normals``: :func:`_cp2tv_rows` or
-    :func:`_tf2n_rows`, a function argument, so that only the one used is compiled).
+    e_v, s_u, s_v), then, where ``base``, the normals from the last pass's set (``normals``: 1 CP2TV, 2 3F2N's
+    median, 0 none). An integer, not the row function itself: a function argument's type is that function object,
+    which differs in every process, so the compiled sweep never loaded from Numba's disk cache (it compiled for
+    seconds in each new process and added a cache file each time).
 
     ``edge`` False: band lo .. hi - 1 (without the rows next to an inner edge that need another band's rows);
     True: the rows around the inner band edge ``lo``. ``moved[k]`` counts the rows in which pass first_pass + k
@@ -601,23 +603,10 @@ def _sda_sweep(
                 old, new = (x, y) if i % 2 == 1 else (y, x)
                 if _sda_step(s, ok, 1.0 / (i + 1), tol, a_u, a_v, con, *old, *new, r, r + 1):
                     moved[k - 3] += 1
-            else:
-                normals(z, valid, s, *final[:4], f_x, f_y, c_x, c_y, reflect, fill, out, r, r + 1)
-
-
-@njit
-def _cp2tv_rows(z, valid, s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
-    _gradients_to_normals_kernel(s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, fill, out, v0, v1)
-
-
-@njit
-def _tf2n_rows(z, valid, s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
-    _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1)
-
-
-@njit
-def _no_rows(z, valid, s, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
-    pass  # a sweep without normals (sda_gradients)
+            elif normals == 1:
+                _gradients_to_normals_kernel(s, *final[:4], f_x, f_y, c_x, c_y, fill, out, r, r + 1)
+            elif normals == 2:
+                _tf2n_base_kernel(z, valid, *final[:4], f_x, f_y, c_x, c_y, reflect, fill, out, r, r + 1)
 
 
 _NO_OUT = np.empty((1, 1, 3), np.float32)  # ``out`` of a sweep without normals (never written)
@@ -644,7 +633,7 @@ def _run_sda(z, valid, iterations, border, tie_tol=0.0, bands=whole, inverse=Fal
     s, ok, l_u, l_v, a_u, a_v, con = arrays[:7]
     sets = (tuple(arrays[7:13]), tuple(arrays[13:19]))
     base, f, fill, out = normals if normals is not None else (0, (0.0, 0.0, 0.0, 0.0), np.float32(0), _NO_OUT)
-    rows = (_no_rows, _cp2tv_rows, _tf2n_rows)[base]
+    rows = base  # which normals (0: none, a sweep of sda_gradients)
     common = (z, valid, inverse, border == "reflect", _kernel_tol(tie_tol), s, ok, l_u, l_v, a_u, a_v, con, *sets)
     cap = MAX_ITERATIONS if iterations is None else iterations
 

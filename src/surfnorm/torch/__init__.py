@@ -129,6 +129,10 @@ _register("auto", _adaptive.auto)
 #: data-dependent choices (noise test, radius) must see the same numbers.
 _FLOAT64_CAMERA = (_adaptive.adaptive_fit, _adaptive.auto)
 
+#: Kernels whose products of depth leave the floating-point range at extreme magnitudes (1e-60, 1e60): their
+#: depth is brought into range first (:func:`_unit_range`), as PlaneSVD's and SDA-SNE's always is.
+_PLANE_FITS = (_plane_fit.plane_svd, _plane_fit.plane_pca, _plane_fit.vector_svd)
+
 #: Registered methods that run only in :func:`surfnorm.estimate` (none left).
 NUMPY_ONLY = ()
 
@@ -158,7 +162,26 @@ def _resolve(name, options: dict):
             f"in the torch backend, got {name!r}"
         )
     method, refined, clean = numpy_resolve(name, options)
-    return _KERNELS[base], method.mnr, refined, clean
+    return _KERNELS[base], method.mnr, refined, clean, method.equivariant
+
+
+def _unit_range(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Depth, each frame multiplied by a power of two (``surfnorm.units``, "Range").
+
+    1 unless the median of a strided sample (about 1024 values) of the frame's valid depth lies outside
+    [2^-100, 2^100], where the plane fits' products leave the floating-point range; otherwise the power that
+    brings it into [64, 128), as :func:`surfnorm.estimate` takes for PlaneSVD and SDA-SNE (whose normals depend
+    on the unit). Exact, and on the device without a sync (``torch.compile`` traces it as one graph).
+    """
+    from ..units import UNIT_EXPONENT
+
+    flat = torch.where(valid, z, torch.full_like(z, math.nan)).flatten(1)
+    sample = flat[:, :: max(1, flat.shape[1] // 1024)].detach().double()
+    med = torch.nanmedian(sample, dim=1).values  # NaN where a frame has no valid pixel
+    outside = (med > 0) & ((med < 2.0**-UNIT_EXPONENT) | (med > 2.0**UNIT_EXPONENT))
+    k = torch.where(outside, 7 - torch.frexp(med).exponent, torch.zeros_like(med, dtype=torch.int32))
+    scale = torch.ldexp(torch.ones_like(med), k).view(-1, *([1] * (z.dim() - 1)))
+    return z * scale if z.dtype == torch.float64 else (z.double() * scale).to(z.dtype)
 
 
 def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torch.Tensor:
@@ -204,7 +227,7 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     >>> n.shape, n[0, :, 24, 32].tolist()
     (torch.Size([2, 3, 48, 64]), [0.0, 0.0, -1.0])
     """
-    run, ends_with_mnr, refined, clean = _resolve(method, options)
+    run, ends_with_mnr, refined, clean, equivariant = _resolve(method, options)
     z, plain = as_depth(depth)
     user_mask = as_mask(mask, z, plain)
     work, out_dtype = compute_dtype(z)
@@ -215,6 +238,8 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     valid = (z > 0) & (z < math.inf)  # finite and positive (NaN fails both)
     if user_mask is not None:
         valid = valid & user_mask
+    if not equivariant or run in _PLANE_FITS:  # (the others compute at any magnitude)
+        z = _unit_range(z, valid)
     # invalid depth -> 1: never read by the estimators, and no NaN even in discarded branches (B x H x W)
     g = _ops.Grid(torch.where(valid, z, torch.ones_like(z)), valid)
     mnr_dlf = clean.pop("mnr_dlf", None)

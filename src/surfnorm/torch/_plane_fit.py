@@ -188,6 +188,7 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
 
 def _fit(kind: str, g: Grid, cam, window: int, fill: float):
     P = point_cloud(g, cam)
+    window = min(window, 2 * max(g.valid.shape[-2:]) - 1)  # wider holds no more pixels (as the NumPy kernel)
     m, (s_x, s_y, s_z), R, spans = window_moments(P, g.valid, window)
     active = g.valid & (m >= 3) & spans  # p and at least two other points, not all on one image line
     m_safe = torch.where(active, m, torch.ones_like(m))

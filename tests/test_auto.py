@@ -239,6 +239,7 @@ def test_cli_estimate_verbose_prints_the_decision(tmp_path):
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "auto ran adaptive_fit: noise reading" in result.output
+    args[2] = str(tmp_path / "o2")  # another output: an existing one is refused
     named = CliRunner().invoke(app, args[:-1] + ["-m", "d2nt_v3", "--verbose"])
     assert named.exit_code == 0 and "ran d2nt_v3, as named" in named.output
 

@@ -398,7 +398,8 @@ def test_a_write_that_the_system_refuses_is_one_line_with_its_reason(tmp_path, f
 
     v, u = np.mgrid[0:480, 0:640]
     np.save(tmp_path / "d.npy", (1.0 + 0.001 * u + 0.01 * np.sin(v / 7.0)).astype(np.float32))
-    args = ["estimate", "d.npy", "o", "-f", fmt, "-m", "d2nt_basic", *CAMERA]
+    camera = ["--fx", "500", "--fy", "500", "--cx", "319.5", "--cy", "239.5"]  # the 640x480 frame's own
+    args = ["estimate", "d.npy", "o", "-f", fmt, "-m", "d2nt_basic", *camera]
     done = subprocess.run([sys.executable, "-c", _FULL_DISK, *args], cwd=tmp_path, capture_output=True, text=True)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()

@@ -74,6 +74,7 @@ TERRACED_HIGH = 0.30
 SMOOTH_SHARE = 0.10
 _SMOOTH_GAUSS = 0.12566
 _FOURTH_RMS = math.sqrt(70.0 / 6.0)
+_SMOOTH_SAMPLES = 4096
 #: The quadrant windows (dv, du) / r, in the NumPy kernel's order.
 _SHIFTS = ((1, 1), (1, -1), (-1, 1), (-1, -1))
 
@@ -280,12 +281,17 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     counted = (n_changed >= MIN_SAMPLES) & (n_jumps > 0)
     terraced = torch.where(counted, n_jumps.to(_F64) / n_changed.clamp(min=1).to(_F64), torch.zeros_like(lo))
     heights = torch.where(counted, _median(jumps, is_jump), torch.zeros_like(lo))
-    # the smooth noise (NoiseProfile.smooth, adaptive_fit._quiet): the geometric mean of |x_2| and
-    # |x_4 - 4 x_2| / its white-noise RMS, each at rank floor(SMOOTH_SHARE (n - 1)), over _SMOOTH_GAUSS
-    rank = torch.floor((n - 1).clamp(min=0).to(_F64) * SMOOTH_SHARE).long().view(B, 1)
+    # the smooth noise (NoiseProfile.smooth, adaptive_fit._quiet): every s-th sample (s = ceil(n / _SMOOTH_SAMPLES)),
+    # the geometric mean of |x_2| and |x_4 - 4 x_2| / its white-noise RMS, each at rank floor(SMOOTH_SHARE (m - 1))
+    # of the m read, over _SMOOTH_GAUSS
+    s = torch.div(n + _SMOOTH_SAMPLES - 1, _SMOOTH_SAMPLES, rounding_mode="floor").clamp(min=1).view(B, 1)
+    m = torch.div(n.view(B, 1) + s - 1, s, rounding_mode="floor")
+    order = torch.cumsum(taken.long(), dim=1) - 1  # each sample's place among the frame's samples
+    read = taken & (order % s == 0)
+    rank = torch.floor((m - 1).clamp(min=0).to(_F64) * SMOOTH_SHARE).long()
 
     def quiet(x):
-        return torch.sort(torch.where(taken, x, torch.full_like(x, math.inf)), dim=1).values.gather(1, rank).view(B)
+        return torch.sort(torch.where(read, x, torch.full_like(x, math.inf)), dim=1).values.gather(1, rank).view(B)
 
     fourth = torch.abs(xs[2] - 4.0 * xs[1]) / _FOURTH_RMS
     smooth = torch.where(enough, _sqrt(quiet(xs[1].abs()) * quiet(fourth)) / _SMOOTH_GAUSS, torch.zeros_like(lo))

@@ -173,6 +173,19 @@ def test_no_warning_for_the_shipped_frames_with_their_own_intrinsics():
             surfnorm.estimate(depth[:64, :64], Intrinsics(K.fx, K.fy, 31.5, 31.5), method="d2nt_basic")
 
 
+def test_no_warning_for_the_3f2n_frames_with_their_own_intrinsics():
+    """The dataset's renders have principal points up to 37 % of the height off centre on one axis."""
+    from surfnorm.io.threef2n import find_frames, read_frame
+
+    from .conftest import SAMPLE
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name in find_frames(SAMPLE):
+            frame = read_frame(SAMPLE, name)
+            frame.K.check_frame(frame.depth.shape)
+
+
 @pytest.mark.skipif(not SENSOR_SAMPLE.is_dir(), reason="the sensor sample is not beside the repository")
 def test_no_warning_for_any_frame_of_the_sensor_sample():
     frames = sorted(p for p in SENSOR_SAMPLE.iterdir() if (p / "K.json").is_file())

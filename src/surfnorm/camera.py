@@ -25,12 +25,13 @@ FOCAL_RANGE = (1e-3, 1e8)
 #: to within a small fraction of a pixel (its spacing at 1e6 is 0.06).
 PRINCIPAL_POINT_LIMIT = 1e6
 
-#: A principal point further than this share of the frame's width (height) from its centre, on the same side on
-#: both axes, reads as intrinsics of another resolution (:class:`IntrinsicsWarning`). The 640x480 centre
-#: (319.5, 239.5) on a 1280x720 frame is 0.25 and 0.17 of it towards the top-left corner; real cameras' principal
-#: points lie within a few per cent of the centre, and the 3F2N frames', off-centre by up to 0.37, lie towards
-#: different sides on the two axes.
+#: A principal point further than this share of the frame's width (height) from its centre on one axis, and more
+#: than ``OFF_CENTRE_BOTH`` on the other, on the same side, reads as intrinsics of another resolution
+#: (:class:`IntrinsicsWarning`): the 640x480 centre (319.5, 239.5) on a 1280x720 frame is 0.25 and 0.17 of it
+#: towards the top-left corner. Real cameras' principal points lie within a few per cent of the centre; the 3F2N
+#: frames' lie off-centre by up to 0.37 on one axis and 0.00-0.02 on the other (or towards different sides).
 OFF_CENTRE = 0.2
+OFF_CENTRE_BOTH = 0.05
 
 
 class IntrinsicsWarning(UserWarning):
@@ -223,7 +224,8 @@ class Intrinsics:
 
         Three signs, each named in the message: an image size other than the frame's (when the intrinsics carry
         one); a principal point outside the frame; a principal point more than :data:`OFF_CENTRE` of the frame's
-        size from its centre, towards one corner on both axes (as the centre of a frame of another resolution is).
+        size from its centre on one axis and more than :data:`OFF_CENTRE_BOTH` on the other, towards one corner (as
+        the centre of a frame of another resolution is).
 
         Examples
         --------
@@ -243,7 +245,7 @@ class Intrinsics:
             why = f"the principal point ({self.cx:g}, {self.cy:g}) lies outside the {W}x{H} frame"
         else:
             ox, oy = (self.cx - (W - 1) / 2) / W, (self.cy - (H - 1) / 2) / H  # offsets from the centre, shares
-            if ox * oy > 0 and max(abs(ox), abs(oy)) > OFF_CENTRE:
+            if ox * oy > 0 and max(abs(ox), abs(oy)) > OFF_CENTRE and min(abs(ox), abs(oy)) > OFF_CENTRE_BOTH:
                 why = (
                     f"the principal point ({self.cx:g}, {self.cy:g}) lies {abs(ox):.0%} of the width and "
                     f"{abs(oy):.0%} of the height from the centre of the {W}x{H} frame, towards one corner; "

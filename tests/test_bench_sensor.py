@@ -272,3 +272,11 @@ def test_speed_vs_linemod_without_opencv_says_so_and_exits_2(monkeypatch, capsys
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
     assert err.startswith("speed_vs_linemod: OpenCV's RgbdNormals is needed") and "cv2 has no RgbdNormals" in err
+
+
+def test_entries_parse_options_as_the_command_line_does():
+    """The benchmark's ``name:opt=val`` is surfnorm.methods.parse_method, the parser of ``estimate -m``."""
+    entries, _ = make_entries(["plane_pca:window=5:fill=nan"])
+    assert entries[0].label == "plane_pca window=5 fill=nan"
+    with pytest.raises(InputError, match=r"^method: expected NAME or NAME:option=value.*'plane_pca:window'"):
+        make_entries(["plane_pca:window"])

@@ -35,7 +35,7 @@ import numpy as np
 from .. import metrics
 from ..camera import Intrinsics
 from ..errors import InputError
-from ..methods import DEFAULT_METHOD
+from ..methods import DEFAULT_METHOD, parse_method
 
 __all__ = [
     "Entry",
@@ -76,25 +76,10 @@ class Entry:
         return self.finish(self.call(depth, cam, valid))
 
 
-def _value(text: str):
-    for conv in (int, float):
-        try:
-            return conv(text)
-        except ValueError:
-            pass
-    return {"true": True, "false": False}.get(text.lower(), text)
-
-
 def parse_name(name: str) -> tuple[str, dict]:
-    """``"plane_pca:window=11"`` -> ("plane_pca", {"window": 11})."""
-    method, *opts = name.strip().split(":")
-    options = {}
-    for opt in opts:
-        key, eq, value = opt.partition("=")
-        if not eq or not key:
-            raise InputError(f"methods: expected NAME or NAME:option=value[:option=value], got {name!r}")
-        options[key.strip()] = _value(value.strip())
-    return method, options
+    """``"plane_pca:window=11"`` -> ("plane_pca", {"window": 11}): :func:`surfnorm.methods.parse_method`, the
+    parser of ``surfnorm estimate -m``."""
+    return parse_method(name)
 
 
 def label_of(method: str, options: dict) -> str:

@@ -48,6 +48,8 @@ def reference_planes(depth: np.ndarray, fx: float, fy: float, cx: float, cy: flo
     H, W = depth.shape
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)
     z = depth.astype(np.float64)
+    # written out, not surfnorm.points (whose rounding differs in the last bit): RANSAC turns a last-bit change
+    # into other planes on some frames, and these are the expressions the stored reference planes were made with
     points = np.stack([(u - cx) * z / fx, (v - cy) * z / fy, z], axis=-1)
     valid = depth > 0
     threshold = max(0.004, 0.012 * float(np.median(depth[valid])))

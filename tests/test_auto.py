@@ -251,8 +251,8 @@ TUM = SAMPLE.parent / "tum-rgbd"
 
 @pytest.mark.parametrize("name", ["tum_fr2_desk_slb1", "tum_fr3_o3d"])
 def test_real_raw_kinect_frames_get_adaptive_fit_and_its_accuracy(name):
-    """The frames the floor alone read as clean (TUM RGB-D raw depth, terraces): auto now runs adaptive_fit, whose
-    plane error is a fraction of d2nt_v3's (what auto ran before on them)."""
+    """Real raw depth on terraces: auto runs adaptive_fit because of its steps, whose plane error is a fraction of
+    d2nt_v3's. On tum_fr3 the floor alone reads 0 and auto had run d2nt_v3; tum_fr2's floor reads 0.27."""
     import json
 
     from surfnorm.io.depth import read_depth

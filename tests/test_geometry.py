@@ -102,9 +102,17 @@ class TestFrames:
         pose[:3, :3], pose[:3, 3] = R, [5.0, -2.0, 1.0]  # the translation does not move directions
         np.testing.assert_allclose(surfnorm.to_world(n, pose), w, atol=0)
 
-    @pytest.mark.parametrize("R", [np.eye(3) * 2, np.diag([1.0, 1.0, -1.0]), np.eye(2), np.full((3, 3), np.nan)])
-    def test_to_world_refuses_what_is_not_a_rotation(self, R):
-        with pytest.raises(InputError, match="R: expected"):
+    @pytest.mark.parametrize(
+        "R, message",
+        [
+            (np.eye(3) * 2, r"R: expected a rotation \(orthonormal, determinant \+1\), got"),
+            (np.diag([1.0, 1.0, -1.0]), r"R: expected a rotation \(orthonormal, determinant \+1\), got"),
+            (np.eye(2), r"R: expected a finite 3x3 rotation \(or a 4x4 pose\), got shape \(2, 2\)"),
+            (np.full((3, 3), np.nan), r"R: expected a finite 3x3 rotation \(or a 4x4 pose\), got"),
+        ],
+    )
+    def test_to_world_refuses_what_is_not_a_rotation(self, R, message):
+        with pytest.raises(InputError, match=message):
             surfnorm.to_world(np.zeros((2, 3)), R)
 
     def test_bad_vectors(self):

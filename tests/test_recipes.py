@@ -59,7 +59,7 @@ def test_write_sample_round_trips_in_millimetres(tmp_path):
     back = read_depth(png, depth_scale=1000)
     assert np.abs(back - depth).max() <= 0.0005 + 1e-7
     assert read_intrinsics(js) == K and read_intrinsics(js).width == 1280
-    with pytest.raises(InputError, match="path"):
+    with pytest.raises(InputError, match=r"^path: expected a file name ending in .png, got '.*frame.npy'$"):
         write_sample("3f2n-easy", tmp_path / "frame.npy")
     for bad in (0, -1000.0, "1000", float("nan")):
         with pytest.raises(InputError, match="depth_scale: expected a positive finite number"):
@@ -228,3 +228,10 @@ def test_the_torch_backend_warns_alike_for_intrinsics_it_can_read():
         surfnorm.torch.estimate(
             depth, torch.tensor([[60.0, 0, 100.5], [0, 60.0, 23.5], [0, 0, 1]]), method="d2nt_basic"
         )
+
+
+def test_an_image_size_needs_both_width_and_height():
+    with pytest.raises(
+        InputError, match=r"^intrinsics.width, height: expected both or neither, got width=640, height=None$"
+    ):
+        Intrinsics(500.0, 500.0, 319.5, 239.5, 640, None)

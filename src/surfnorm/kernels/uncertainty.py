@@ -89,29 +89,32 @@ def _angle(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v):
 
 
 @njit(nogil=True)
-def _sigma_kernel(
-    z,
-    valid,
-    normals,
-    fill,
-    fits,
-    stride,
-    cam,
-    rho_z0,
-    rho_inv_step,
-    rho_t,
-    gain,
-    misfit_gain,
-    disagreement,
-    floor,
-    no_fit,
-    out,
-):
-    H, W = z.shape
+def _fit_terms(z, fits, stride, f, rho_z0, rho_inv_step, rho_t, gain, misfit_gain, terms):
+    """Per fitted pixel: (var_g, the variance of its plane's value at the window's centre, the window's centre
+    offset u, v) into ``terms`` (Hf, Wf, 4); var_g NaN where it has no fit (see :func:`_terms`)."""
     Hf, Wf = fits.shape[0], fits.shape[1]
-    fx, fy, cx, cy = cam
-    f = math.sqrt(fx * fy)
     n_t = rho_t.shape[0]
+    for i in range(Hf):
+        for j in range(Wf):
+            s2 = fits[i, j, 0]
+            if not s2 == s2:
+                terms[i, j, 0] = np.nan
+                continue
+            zf = z[i * stride, j * stride]
+            t = min(max(int((zf - rho_z0) * rho_inv_step), 0), n_t - 1)
+            noise = rho_t[t] / (zf * f)
+            g, a, _, _ = _terms(s2, fits[i, j, 1], fits[i, j, 2], 0.0, 0.0, noise * noise, gain, misfit_gain)
+            terms[i, j, 0] = g
+            terms[i, j, 1] = a
+            terms[i, j, 2] = fits[i, j, 3]
+            terms[i, j, 3] = fits[i, j, 4]
+
+
+@njit(nogil=True)
+def _sigma_kernel(z, valid, normals, fill, fits, terms, stride, cam, disagreement, floor, no_fit, out):
+    H, W = z.shape
+    Hf, Wf = terms.shape[0], terms.shape[1]
+    fx, fy, cx, cy = cam
     for v in range(H):
         for u in range(W):
             n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
@@ -122,29 +125,22 @@ def _sigma_kernel(
             # the fitted pixels whose planes this pixel may have taken: itself, or the nearest ones
             s_g = s_a = s_u = s_v = 0.0
             k = 0
-            for reach in (stride - 1, stride):
+            for reach in range(stride - 1, stride + 1):
                 lo_v = max((v - reach + stride - 1) // stride, 0)
                 hi_v = min((v + reach) // stride, Hf - 1)
                 lo_u = max((u - reach + stride - 1) // stride, 0)
                 hi_u = min((u + reach) // stride, Wf - 1)
                 for i in range(lo_v, hi_v + 1):
                     for j in range(lo_u, hi_u + 1):
-                        s2 = fits[i, j, 0]
-                        if not s2 == s2:
+                        g = terms[i, j, 0]
+                        if not g == g:
                             continue
-                        vf, uf = i * stride, j * stride
-                        zf = z[vf, uf]
-                        t = min(max(int((zf - rho_z0) * rho_inv_step), 0), n_t - 1)
-                        noise = rho_t[t] / (zf * f)
-                        o_u = (u - uf) - fits[i, j, 3]
-                        o_v = (v - vf) - fits[i, j, 4]
-                        g, a, c_u, c_v = _terms(
-                            s2, fits[i, j, 1], fits[i, j, 2], o_u, o_v, noise * noise, gain, misfit_gain
-                        )
+                        o_u = (u - j * stride) - terms[i, j, 2]
+                        o_v = (v - i * stride) - terms[i, j, 3]
                         s_g += g
-                        s_a += a
-                        s_u += c_u
-                        s_v += c_v
+                        s_a += terms[i, j, 1] + (o_u * o_u + o_v * o_v) * g
+                        s_u += o_u * g
+                        s_v += o_v * g
                         k += 1
                 if k > 0 or stride == 1:
                     break
@@ -161,39 +157,64 @@ def _sigma_kernel(
                 if m_norm > 0.0:
                     c = -(n0 * m0 + n1 * m1 + n2 * m2) / m_norm
                     off = math.degrees(math.acos(min(max(c, -1.0), 1.0)))
-                    sigma = min(math.sqrt(sigma * sigma + disagreement * off * off), MAX_DEG)
+                    sigma = math.sqrt(sigma * sigma + disagreement * off * off)
             out[v, u] = min(math.sqrt(sigma * sigma + floor * floor), MAX_DEG)
 
 
 def sigma_from_fits(
-    z, valid, cam, normals, fits, stride, profile, *, gain, misfit_gain, disagreement=0.0, fill=0.0, out=None
+    z,
+    valid,
+    cam,
+    normals,
+    fits,
+    stride,
+    profile,
+    *,
+    gain,
+    misfit_gain,
+    disagreement=0.0,
+    floor=None,
+    fill=0.0,
+    out=None,
 ) -> np.ndarray:
     """Each normal's sigma (degrees; NaN where it is ``fill`` or not finite) from the fits its planes came from.
 
     ``fits``: (H / stride, W / stride, 5) as ``info`` of the adaptive fit's kernel (residual per dof, points,
     radius, window offset), NaN where a fitted pixel has no fit; ``profile``: the frame's noise profile (for the
-    residual's floor); ``gain``: the variance factor (``FIT_GAIN`` or ``D2NT_GAIN``).
+    residual's floor); ``gain``: the variance factor (``FIT_GAIN`` or ``D2NT_GAIN``); ``misfit_gain``,
+    ``disagreement`` (a weight of the angle to the pixel's own plane in channels 5-7 of ``fits``, where given),
+    ``floor`` (default ``FLOOR_DEG``): see the module's constants.
     """
     from .adaptive_fit import radius_table
 
     z0, inv_step, _, rho_t = radius_table(profile.depths, profile.rho)
     if out is None:
         out = np.empty(z.shape, np.float32)
+    fx, fy, cx, cy = float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)
+    terms = np.empty(fits.shape[:2] + (4,))
+    _fit_terms(
+        z,
+        fits,
+        int(stride),
+        math.sqrt(fx * fy),
+        float(z0),
+        float(inv_step),
+        rho_t,
+        float(gain),
+        float(misfit_gain),
+        terms,
+    )
     _sigma_kernel(
         z,
         valid,
         normals,
         np.float32(fill),
         fits,
+        terms,
         int(stride),
-        (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)),
-        float(z0),
-        float(inv_step),
-        rho_t,
-        float(gain),
-        float(misfit_gain),
+        (fx, fy, cx, cy),
         float(disagreement),
-        float(FLOOR_DEG),
+        float(FLOOR_DEG if floor is None else floor),
         float(NO_FIT_DEG),
         out,
     )

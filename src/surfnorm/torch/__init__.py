@@ -184,7 +184,7 @@ def _unit_range(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     return z * scale if z.dtype == torch.float64 else (z.double() * scale).to(z.dtype)
 
 
-def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torch.Tensor:
+def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, uncertainty: bool = False, **options) -> torch.Tensor:
     """Estimate surface normals from a batch of depth images.
 
     Parameters
@@ -201,6 +201,9 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
         :func:`surfnorm.methods`), optionally followed by ``+mnr``.
     mask : Tensor of bool, shape (B, 1, H, W) or (H, W), optional
         False where depth must not be used; an (H, W) mask applies to every frame.
+    uncertainty : bool
+        Not available on this backend: True raises InputError (each normal's
+        sigma comes from :func:`surfnorm.estimate` with ``uncertainty=True``).
     **options
         The method's options, as in :func:`surfnorm.estimate` (``dlf``,
         ``tau``, ``truncate``, ``border``, ``window``, ``iterations``,
@@ -227,6 +230,11 @@ def estimate(depth, K, *, method: str = "d2nt_v3", mask=None, **options) -> torc
     >>> n.shape, n[0, :, 24, 32].tolist()
     (torch.Size([2, 3, 48, 64]), [0.0, 0.0, -1.0])
     """
+    if uncertainty is not False:
+        raise InputError(
+            "uncertainty: the torch backend gives no sigma; use surfnorm.estimate(depth, K, uncertainty=True) "
+            f"(NumPy; methods auto, adaptive_fit, d2nt_v3), got uncertainty={uncertainty!r}"
+        )
     run, ends_with_mnr, refined, clean, equivariant = _resolve(method, options)
     z, plain = as_depth(depth)
     user_mask = as_mask(mask, z, plain)

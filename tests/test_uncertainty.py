@@ -1,0 +1,226 @@
+"""estimate(..., uncertainty=True): each normal's predicted RMS angular error (surfnorm.kernels.uncertainty).
+
+The analytic check is written independently of the kernel: the covariance of a least-squares plane's parameters
+from its design matrix, pushed through the normal's formula by finite differences, checked itself against the
+spread of the normals of many noisy fits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import surfnorm
+from surfnorm.errors import InputError
+from surfnorm.kernels import uncertainty as U
+from surfnorm.kernels.adaptive_fit import NoiseProfile
+from tests.surfaces import camera
+
+FX = FY = 500.0
+CX, CY = 40.0, 30.0
+
+
+def _normal(g_u, g_v, a, u, v):
+    """The unit normal facing the camera of the inverse-depth plane w = a + g_u (u' - u) + g_v (v' - v) at (u, v)."""
+    m = -np.array([FX * g_u, FY * g_v, a - g_u * (u - CX) - g_v * (v - CY)])
+    return m / np.linalg.norm(m)
+
+
+def _design(r, u, v):
+    """Rows (1, u' - u, v' - v) of the full (2r+1)^2 window centred on (u, v)."""
+    d = np.arange(-r, r + 1, dtype=float)
+    du, dv = np.meshgrid(d, d)
+    return np.stack([np.ones(du.size), du.ravel(), dv.ravel()], 1)
+
+
+def _analytic_sigma_deg(plane, r, sigma_w, u, v):
+    """RMS angle (degrees) of the fitted normal: cov = sigma_w^2 (X^T X)^-1 of (a, g_u, g_v), through the normal
+    by central differences: sqrt(trace(J cov J^T)) with J the normal's Jacobian (its change across itself)."""
+    X = _design(r, u, v)
+    cov = sigma_w**2 * np.linalg.inv(X.T @ X)
+    a, g_u, g_v = plane
+    p0 = np.array([a, g_u, g_v])
+    J = np.empty((3, 3))
+    for k in range(3):
+        h = np.zeros(3)
+        h[k] = 1e-6 * max(abs(p0[k]), 1e-9)
+        plus = _normal(p0[1] + h[1], p0[2] + h[2], p0[0] + h[0], u, v)
+        minus = _normal(p0[1] - h[1], p0[2] - h[2], p0[0] - h[0], u, v)
+        J[:, k] = (plus - minus) / (2 * h[k])
+    return math.degrees(math.sqrt(np.trace(J @ cov @ J.T)))
+
+
+PLANE = (0.5, 2e-4, -1.5e-4)  # w at the pixel, g_u, g_v: a tilted plane about 2 m away
+PIXEL = (55.0, 20.0)
+
+
+def test_the_analytic_formula_matches_the_spread_of_noisy_fits():
+    rng = np.random.default_rng(0)
+    r, sigma_w = 3, 4e-4
+    u, v = PIXEL
+    X = _design(r, u, v)
+    truth = _normal(PLANE[1], PLANE[2], PLANE[0], u, v)
+    w = X @ np.array(PLANE)
+    angles = []
+    for _ in range(4000):
+        p = np.linalg.lstsq(X, w + rng.normal(0, sigma_w, w.size), rcond=None)[0]
+        n = _normal(p[1], p[2], p[0], u, v)
+        angles.append(math.degrees(math.acos(min(1.0, float(n @ truth)))))
+    rms = math.sqrt(np.mean(np.square(angles)))
+    assert rms == pytest.approx(_analytic_sigma_deg(PLANE, r, sigma_w, u, v), rel=0.05)
+
+
+def _one_fit_sigma(r, sigma_w, offset=(0.0, 0.0)):
+    """sigma_from_fits on a single fitted pixel (stride 1) holding a fit of the full window of radius r whose
+    residual is sigma_w^2, without gains, floor or misfit."""
+    u, v = PIXEL
+    H, W = 40, 80
+    z = np.full((H, W), 2.0, np.float32)
+    valid = np.zeros((H, W), bool)
+    valid[int(v), int(u)] = True
+    normals = np.zeros((H, W, 3), np.float32)
+    normals[int(v), int(u)] = _normal(PLANE[1], PLANE[2], PLANE[0], u, v)
+    z[int(v), int(u)] = 1.0 / PLANE[0]
+    fits = np.full((H, W, 5), np.nan, np.float32)
+    fits[int(v), int(u)] = (sigma_w**2, (2 * r + 1) ** 2, r, offset[0], offset[1])
+    profile = NoiseProfile(np.array([2.0]), np.zeros(1), 0.0)
+    cam = surfnorm.Intrinsics(FX, FY, CX, CY)
+    out = U.sigma_from_fits(z, valid, cam, normals, fits, 1, profile, gain=1.0, misfit_gain=0.0, floor=0.0)
+    return float(out[int(v), int(u)])
+
+
+@pytest.mark.parametrize("r", [1, 2, 4, 8])
+@pytest.mark.parametrize("sigma_w", [1e-4, 1e-3])
+def test_sigma_of_an_exact_plane_with_known_noise_is_the_analytic_one(r, sigma_w):
+    u, v = PIXEL
+    assert _one_fit_sigma(r, sigma_w) == pytest.approx(_analytic_sigma_deg(PLANE, r, sigma_w, u, v), rel=0.10)
+
+
+def test_a_quadrant_window_is_less_certain_at_its_corner():
+    assert _one_fit_sigma(4, 1e-3, (4.0, 4.0)) > _one_fit_sigma(4, 1e-3)
+
+
+def _noisy_plane(noise, seed=0, shape=(120, 160)):
+    K = camera(shape[1], shape[0])
+    H, W = shape
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    x, y = (u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1]
+    n = np.array([0.2, -0.3, -1.0])
+    n /= np.linalg.norm(n)
+    z = -2.0 / (n[0] * x + n[1] * y + n[2])
+    w = 1.0 / z + np.random.default_rng(seed).normal(0, noise, z.shape) / z
+    return (1.0 / w).astype(np.float32), K
+
+
+def _core(sigma):
+    """sigma without ``FLOOR_DEG`` (added in quadrature to every sigma)."""
+    return np.sqrt(np.maximum(np.square(sigma.astype(np.float64)) - U.FLOOR_DEG**2, 0.0))
+
+
+def test_sigma_grows_with_noise_and_shrinks_with_support():
+    quiet, K = _noisy_plane(1e-3)
+    loud, _ = _noisy_plane(1e-2)
+    s_quiet = surfnorm.estimate(quiet, K, method="adaptive_fit", window=7, max_window=7, uncertainty=True)[1]
+    s_loud = surfnorm.estimate(loud, K, method="adaptive_fit", window=7, max_window=7, uncertainty=True)[1]
+    assert np.nanmedian(_core(s_loud)) > 5 * np.nanmedian(_core(s_quiet))
+    s_wide = surfnorm.estimate(loud, K, method="adaptive_fit", window=21, max_window=21, uncertainty=True)[1]
+    assert np.nanmedian(_core(s_wide)) < np.nanmedian(_core(s_loud)) / 5
+    assert np.all(s_wide >= U.FLOOR_DEG) and np.all(s_loud >= U.FLOOR_DEG)
+
+
+def _with_holes(z):
+    z = z.copy()
+    z[20:30, 40:60] = 0
+    z[::7, ::11] = np.nan
+    return z
+
+
+@pytest.mark.parametrize("method", ["auto", "adaptive_fit", "d2nt_v3"])
+@pytest.mark.parametrize("fill", [0.0, np.nan])
+@pytest.mark.parametrize("noise", [0.0, 1e-2])
+def test_sigma_is_nan_exactly_where_the_normal_is_fill(method, fill, noise):
+    z, K = _noisy_plane(noise) if noise else _noisy_plane(1e-9)
+    if not noise:
+        z = _noisy_plane(0.0)[0]
+    z = _with_holes(z)
+    z[60:, 100:] *= 1.5  # a step
+    n, sigma = surfnorm.estimate(z, K, method=method, fill=fill, uncertainty=True)
+    is_fill = np.isnan(n).all(-1) if np.isnan(fill) else (n == fill).all(-1)
+    assert sigma.dtype == np.float32 and sigma.shape == z.shape
+    np.testing.assert_array_equal(np.isnan(sigma), is_fill)
+    assert np.all(sigma[~is_fill] >= 0)
+
+
+@pytest.mark.parametrize("method", ["auto", "adaptive_fit", "d2nt_v3"])
+def test_normals_are_the_same_bits_with_and_without_sigma(method):
+    z, K = _noisy_plane(5e-3)
+    z = _with_holes(z)
+    plain = surfnorm.estimate(z, K, method=method)
+    n, sigma = surfnorm.estimate(z, K, method=method, uncertainty=True)
+    np.testing.assert_array_equal(plain, n)
+    n1, sigma1 = surfnorm.estimate(z, K, method=method, uncertainty=True, threads=1)
+    np.testing.assert_array_equal(n, n1)
+    np.testing.assert_array_equal(sigma, sigma1)
+
+
+def test_a_stack_gives_each_frames_sigma():
+    a, K = _noisy_plane(5e-3, seed=1)
+    b, _ = _noisy_plane(0.0)
+    n, sigma = surfnorm.estimate(np.stack([a, b]), K, uncertainty=True)
+    assert sigma.shape == (2,) + a.shape
+    for i, z in enumerate((a, b)):
+        n_i, s_i = surfnorm.estimate(z, K, uncertainty=True, threads=1)
+        np.testing.assert_array_equal(n[i], n_i)
+        np.testing.assert_array_equal(sigma[i], s_i)
+
+
+@pytest.mark.parametrize("method", ["plane_svd", "d2nt_basic", "d2nt_v3+mnr"])
+def test_other_methods_refuse_uncertainty_and_name_those_that_give_it(method):
+    z, K = _noisy_plane(0.0)
+    with pytest.raises(InputError) as info:
+        surfnorm.estimate(z, K, method=method, uncertainty=True)
+    assert str(info.value) == (
+        f"uncertainty: True is available for the methods auto, adaptive_fit, d2nt_v3, got method={method!r}"
+    )
+
+
+def test_uncertainty_must_be_a_bool():
+    z, K = _noisy_plane(0.0)
+    with pytest.raises(InputError, match="^uncertainty: expected"):
+        surfnorm.estimate(z, K, uncertainty="yes")
+
+
+def test_torch_refuses_uncertainty_with_a_clear_error():
+    torch = pytest.importorskip("torch")
+    import surfnorm.torch as st
+
+    z, K = _noisy_plane(0.0)
+    with pytest.raises(InputError, match=r"^uncertainty: the torch backend gives no sigma; use surfnorm.estimate"):
+        st.estimate(torch.from_numpy(z), torch.from_numpy(K), uncertainty=True)
+
+
+def test_sigma_ranks_the_errors_on_a_noisy_step():
+    """Pixels next to the step and the noisier half must read less certain than the quiet plane's."""
+    z, K = _noisy_plane(2e-3)
+    loud, _ = _noisy_plane(2e-2, seed=3)
+    z[:, 80:] = loud[:, 80:]
+    n, sigma = surfnorm.estimate(z, K, method="adaptive_fit", uncertainty=True)
+    assert np.nanmedian(_core(sigma[:, 90:150])) > 3 * np.nanmedian(_core(sigma[:, 10:70]))
+
+
+def test_bench_helpers_against_naive_ones():
+    from surfnorm.bench.uncertainty import deciles, spearman
+
+    rng = np.random.default_rng(0)
+    s = rng.uniform(1, 10, 1000)
+    e = s * rng.uniform(0.5, 1.5, 1000)
+    d = deciles(e, s)
+    order = np.argsort(s)
+    first = order[:100]
+    assert d[0]["sigma"] == pytest.approx(s[first].mean())
+    assert d[0]["rms_error"] == pytest.approx(math.sqrt(np.mean(e[first] ** 2)))
+    ranks = lambda x: np.argsort(np.argsort(x)).astype(float)  # noqa: E731 (no ties here)
+    assert spearman(s, e) == pytest.approx(np.corrcoef(ranks(s), ranks(e))[0, 1])
+    assert spearman([1, 1, 2, 3], [1, 2, 3, 4]) == pytest.approx(np.corrcoef([0.5, 0.5, 2, 3], [0, 1, 2, 3])[0, 1])

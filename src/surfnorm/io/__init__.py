@@ -1,5 +1,4 @@
-"""Files: depth and normal images, intrinsics, pictures of normals, point clouds (PLY), the sample frames, the 3F2N
-dataset layout."""
+"""Files: depth and normal images, intrinsics, pictures of normals, point clouds, samples, the 3F2N layout."""
 
 from .depth import disparity_to_depth, kinect_disparity_to_depth, read_depth, read_mask
 from .intrinsics import read_intrinsics, resolve_intrinsics

@@ -32,7 +32,15 @@ from ._atomic import atomic_write
 from ._files import check_npy_header, decode_image, read_bytes
 from .pictures import COLOURINGS, normal_to_rgb8
 
-__all__ = ["NORMAL_FORMATS", "OUTPUT_FORMATS", "FORMAT_SUFFIX", "write_normals", "read_normals", "encode_png16", "decode_png"]
+__all__ = [
+    "NORMAL_FORMATS",
+    "OUTPUT_FORMATS",
+    "FORMAT_SUFFIX",
+    "write_normals",
+    "read_normals",
+    "encode_png16",
+    "decode_png",
+]
 
 NORMAL_FORMATS = ("npy", "png16", "png8")
 #: What a batch (surfnorm.convert) and the command line write: a normal map, or a PLY point cloud (surfnorm.io.ply).

@@ -213,7 +213,7 @@ def _check_colors(colors, shape: tuple) -> np.ndarray:
         if bad.any():
             v, u, ch = np.argwhere(bad)[0]
             raise InputError(
-                f"colors: expected float values in [0, 1], got {c[v, u, ch]!r} at pixel (row {v}, column {u}) "
+                f"colors: expected float values in [0, 1], got {c[v, u, ch].item()!r} at pixel (row {v}, column {u}) "
                 f"and {int(bad.sum())} such value(s) in all"
             )
     return c
@@ -264,7 +264,7 @@ def cloud_arrays(depth, K, normals, *, colors=None, sigma=None) -> CloudArrays:
         v, u = np.argwhere(has)[np.flatnonzero(~np.isfinite(P32).all(axis=-1))[0]]
         raise InputError(
             f"depth: expected points within float32's range (the type of the PLY's coordinates), got "
-            f"{P[v, u].tolist()} at pixel (row {v}, column {u})"
+            f"({', '.join(f'{c:.6g}' for c in P[v, u])}) at pixel (row {v}, column {u})"
         )
     return CloudArrays(
         points=P[has],

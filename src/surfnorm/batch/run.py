@@ -49,11 +49,6 @@ def _settings(
 
     resolve(method, dict(options))  # a wrong method or option fails once, here, not once per file
     check_choice("fmt", fmt, OUTPUT_FORMATS)
-    if fmt == "ply" and options.get("disparity"):
-        raise InputError(
-            "fmt: 'ply' back-projects depth to points, but disparity=True says the files hold disparity; "
-            "convert disparity to depth first, or write normal maps (npy, png16, png8)"
-        )
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
     kinect_disparity = check_bool("kinect_disparity", kinect_disparity)

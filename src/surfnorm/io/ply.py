@@ -50,7 +50,7 @@ def _header(dtype: np.dtype, count: int, comments: list[str]) -> bytes:
     lines = ["ply", "format binary_little_endian 1.0"]
     lines += [f"comment {c}" for c in comments]
     lines.append(f"element vertex {count}")
-    lines += [f"property {ply_type[dtype.fields[name][0].str]} {name}" for name in dtype.names or ()]
+    lines += [f"property {ply_type[dtype[name].str]} {name}" for name in dtype.names or ()]
     lines.append("end_header")
     return ("\n".join(lines) + "\n").encode("ascii")
 
@@ -94,15 +94,17 @@ def write_ply(path, depth, K, normals, *, colors=None, sigma=None) -> Path:
 
     Examples
     --------
+    >>> import pathlib, tempfile
     >>> import numpy as np, surfnorm
     >>> from surfnorm.io import write_ply
     >>> depth = np.full((4, 5), 2.0)
     >>> depth[0, 0] = 0  # no depth: no point
     >>> K = [[100.0, 0, 2.0], [0, 100.0, 1.5], [0, 0, 1]]
-    >>> path = write_ply("wall.ply", depth, K, surfnorm.estimate(depth, K))
-    >>> path.read_bytes().split(b"end_header")[0].decode().splitlines()[2:5]
-    ['comment written by surfnorm', 'comment camera frame: x right, y down, z forward; normals face the camera', 'element vertex 19']
-    >>> path.unlink()
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = write_ply(pathlib.Path(folder) / "wall.ply", depth, K, surfnorm.estimate(depth, K))
+    ...     header = path.read_bytes().split(b"end_header")[0].decode().splitlines()
+    >>> header[4:8]
+    ['element vertex 19', 'property float x', 'property float y', 'property float z']
     """
     path = as_path(path)
     arrays = cloud_arrays(depth, K, normals, colors=colors, sigma=sigma)

@@ -264,7 +264,7 @@ def cloud_arrays(depth, K, normals, *, colors=None, sigma=None) -> CloudArrays:
         v, u = np.argwhere(has)[np.flatnonzero(~np.isfinite(P32).all(axis=-1))[0]]
         raise InputError(
             f"depth: expected points within float32's range (the type of the PLY's coordinates), got "
-            f"({', '.join(f'{c:.6g}' for c in P[v, u])}) at pixel (row {v}, column {u})"
+            f"({', '.join(f'{x:.6g}' for x in P[v, u])}) at pixel (row {v}, column {u})"
         )
     return CloudArrays(
         points=P[has],

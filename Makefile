@@ -1,6 +1,6 @@
 # Two commands for a newcomer on a fresh machine:
 #   make demo   set up .venv and run every estimator on the sample frames shipped in the package
-#   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, the authors' d2nt) and run all tests:
+#   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, Open3D, the authors' d2nt) and run all tests:
 #               make lint, make docs, the docstrings' and the documentation's examples, then pytest
 #   make lint   ruff (lint, docstrings, formatting) and mypy (the modules that are not Numba kernels)
 #   make docs   the documentation site, warnings as errors -> site/index.html
@@ -15,6 +15,9 @@ TEST_STAMP := $(VENV)/.test-installed-$(shell cat pyproject.toml | cksum | cut -
 # PyTorch for the tests of surfnorm.torch: the CPU build (on this machine pip finds its wheel file)
 TORCH_VERSION := 2.13.0
 TORCH_STAMP := $(VENV)/.torch-installed-$(TORCH_VERSION)
+# Open3D for the tests of the PLY point clouds (tests/test_ply.py reads every file back with it) and surfnorm.to_open3d
+OPEN3D_VERSION := 0.20.0
+OPEN3D_STAMP := $(VENV)/.open3d-installed-$(OPEN3D_VERSION)
 # The authors' d2nt package: the peer that the speed benchmark and the tests compare with
 D2NT_STAMP := $(VENV)/.d2nt-installed-0.1.3
 
@@ -39,10 +42,18 @@ $(TORCH_STAMP): $(STAMP)
 		echo "make test: could not install torch==$(TORCH_VERSION), needed by tests/test_torch.py" >&2; exit 1; }
 	touch $@
 
+# A separate step, so that a failure says that it was Open3D (Linux: it also needs the system library libusb-1.0-0).
+$(OPEN3D_STAMP): $(STAMP)
+	@echo "Installing Open3D $(OPEN3D_VERSION) for the tests of the PLY point clouds and surfnorm.to_open3d"
+	@$(PY) -m pip install -q "open3d==$(OPEN3D_VERSION)" && $(PY) -c "import open3d" || { \
+		echo "make test: could not install or import open3d==$(OPEN3D_VERSION), needed by tests/test_ply.py" \
+		"(on Linux it needs libusb-1.0-0: apt-get install libusb-1.0-0)" >&2; exit 1; }
+	touch $@
+
 demo: $(STAMP)
 	$(VENV)/bin/surfnorm demo demo-output
 
-test: $(TEST_STAMP) $(TORCH_STAMP) $(D2NT_STAMP)
+test: $(TEST_STAMP) $(TORCH_STAMP) $(OPEN3D_STAMP) $(D2NT_STAMP)
 	@$(MAKE) --no-print-directory lint docs doctest
 	$(PY) -m pytest -q
 
@@ -56,7 +67,7 @@ docs: $(TEST_STAMP)
 	$(PY) -m mkdocs build --strict --quiet --site-dir site
 
 # The examples in the public docstrings and in the documentation's pages, run as they are written.
-doctest: $(TEST_STAMP) $(TORCH_STAMP)
+doctest: $(TEST_STAMP) $(TORCH_STAMP) $(OPEN3D_STAMP)
 	$(PY) -m pytest -q --doctest-modules --doctest-glob='*.md' src/surfnorm docs
 
 # d2nt 0.1.3 declares opencv-python; --no-deps keeps our opencv-python-headless, which provides the same cv2.

@@ -122,7 +122,7 @@ def test_plan_errors(tmp_path):
         plan_tasks(tmp_path / "nope", tmp_path / "out")
     with pytest.raises(InputError, match=r"inputs: expected paths in the list, got int 3"):
         plan_tasks([3], tmp_path / "out")
-    with pytest.raises(InputError, match=r"fmt: expected one of 'npy', 'png16', 'png8', got 'exr'"):
+    with pytest.raises(InputError, match=r"fmt: expected one of 'npy', 'png16', 'png8', 'ply', got 'exr'"):
         plan_tasks(tmp_path, tmp_path / "out", "exr")
 
 

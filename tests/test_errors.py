@@ -296,7 +296,7 @@ CAM = ["--fx", 60, "--fy", 60, "--cx", 31.5, "--cy", 23.5]
         (["good.png", "out", "--intrinsics", "missing.json"], r"missing.json: cannot read intrinsics file"),
         (["good.png", "out", "--depth-scale", 0] + CAM, r"depth_scale: expected a positive finite number, got 0.0"),
         (["good.png", "out", "--method", "nope"] + CAM, r"method: expected one of .*got 'nope'"),
-        (["good.png", "out", "--format", "jpg"] + CAM, r"--format: expected one of npy, png16, png8, got 'jpg'"),
+        (["good.png", "out", "--format", "jpg"] + CAM, r"--format: expected one of npy, png16, png8, ply, got 'jpg'"),
         (["good.png", "out", "--mask", "truncated.png"] + CAM, r"truncated.png: cannot decode as an image"),
         (
             ["good.png", "out", "--mask", "colour.png"] + CAM,
@@ -324,7 +324,7 @@ def test_cli_convert_usage_errors_exit_2(files, monkeypatch):
         (["nothing*.png", "out"] + CAM, r"inputs: expected at least one depth file, found none in nothing\*.png"),
         (["good.png", "out", "--jobs", 0] + CAM, r"--jobs: expected a positive integer, got 0"),
         (["good.png", "out"], r"intrinsics: expected --intrinsics FILE or --fx --fy --cx --cy"),
-        (["good.png", "out", "--format", "tiff"] + CAM, r"--format: expected one of npy, png16, png8"),
+        (["good.png", "out", "--format", "tiff"] + CAM, r"--format: expected one of npy, png16, png8, ply, got 'tiff'"),
     ]
     for args, pattern in cases:
         result = run_cli("convert", *args)

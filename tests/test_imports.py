@@ -114,7 +114,7 @@ def test_kernels_never_import_the_registry_or_the_front_door():
             assert not bad, f"{name} imports {sorted(bad)}"
 
 
-@pytest.mark.parametrize("heavy", ["numba", "torch", "dask", "distributed", "cv2"])
+@pytest.mark.parametrize("heavy", ["numba", "torch", "dask", "distributed", "cv2", "open3d"])
 def test_import_surfnorm_loads_no_heavy_dependency(heavy):
     code = f"import sys, surfnorm; surfnorm.methods(); assert {heavy!r} not in sys.modules, 'imported'"
     subprocess.run([sys.executable, "-c", code], check=True, env={"PYTHONPATH": str(SRC)})

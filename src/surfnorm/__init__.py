@@ -10,8 +10,9 @@ estimators the paper compares against, behind one front door::
     surfnorm.convert("scans/", "normals/", intrinsics="camera_info.yaml", depth_scale=1000, jobs=4)
     surfnorm.points(depth, K)                                 # (H, W, 3) back-projected points, same frame
     surfnorm.to_opengl(normals)                               # y up, z backward (renderers, Blender)
+    surfnorm.to_open3d(depth, K, normals)                     # open3d.geometry.PointCloud (the open3d extra)
 
-Importing surfnorm compiles nothing and imports neither torch nor dask.
+Importing surfnorm compiles nothing and imports neither torch, dask nor open3d.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from ._api import auto_decision, estimate, refine
 from .batch import convert
 from .camera import Intrinsics, IntrinsicsWarning
 from .errors import DataFileError, InputError, MissingDependencyError, SurfnormError
-from .geometry import from_opengl, points, to_opengl, to_world
+from .geometry import from_opengl, points, to_open3d, to_opengl, to_world
 from .methods import methods
 
 __version__ = "0.1.0"
@@ -50,6 +51,7 @@ __all__ = [
     "to_opengl",
     "from_opengl",
     "to_world",
+    "to_open3d",
     "Intrinsics",
     "IntrinsicsWarning",
     "SurfnormError",

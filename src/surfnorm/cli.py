@@ -131,7 +131,10 @@ METHOD_HELP = (
 INTRINSICS_HELP = (
     "Camera intrinsics file: JSON/YAML (fx, fy, cx, cy or K), ROS camera_info YAML, OpenCV YAML, 3F2N params.txt."
 )
-FORMAT_HELP = "Output format: npy (float32), png16 (lossless, 3F2N encoding) or png8 (picture)."
+FORMAT_HELP = (
+    "Output format: npy (float32), png16 (lossless, 3F2N encoding), png8 (picture) or ply (point cloud of the "
+    "pixels with a normal: points, normals)."
+)
 KINECT_HELP = "The file holds Kinect v1 raw 11-bit disparity (NYU Depth v2 raw frames): convert to metres, a / (b - d), NYU toolbox constants."
 BYTE_ORDER_HELP = (
     "Byte order of 16-bit .pgm samples: big (netpbm, default) or little (libfreenect dumps, NYU Depth v2 raw d-*.pgm)."
@@ -156,10 +159,10 @@ def _intrinsics(intrinsics: Optional[Path], fx, fy, cx, cy, depth_path: Optional
 
 
 def _check_format(fmt: str) -> str:
-    from .io.normals import NORMAL_FORMATS
+    from .io.normals import OUTPUT_FORMATS
 
-    if fmt not in NORMAL_FORMATS:
-        fail(f"--format: expected one of {', '.join(NORMAL_FORMATS)}, got {fmt!r}")
+    if fmt not in OUTPUT_FORMATS:
+        fail(f"--format: expected one of {', '.join(OUTPUT_FORMATS)}, got {fmt!r}")
     return fmt
 
 
@@ -169,7 +172,9 @@ def estimate(
         ..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png or .pgm, float .tif or .exr)."
     ),
     output: Path = typer.Argument(
-        ..., help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture)."
+        ...,
+        help="Output prefix: writes PREFIX.npy (float32 normals) and PREFIX.png (picture); "
+        "or a name ending in .ply: a PLY point cloud of the pixels with a normal (points, normals).",
     ),
     method: str = typer.Option(DEFAULT_METHOD, "--method", "-m", help=METHOD_HELP),
     intrinsics: Optional[Path] = typer.Option(None, "--intrinsics", "--params", "-k", help=INTRINSICS_HELP),
@@ -187,17 +192,29 @@ def estimate(
         help="Thresholds relative to each pixel's own depth: the same normals in any unit of depth.",
     ),
     disparity: bool = typer.Option(False, "--disparity", help="The input holds disparity (inverse depth up to scale)."),
-    fmt: Optional[str] = typer.Option(None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8."),
+    fmt: Optional[str] = typer.Option(
+        None, "--format", "-f", help=FORMAT_HELP + " Default: npy and png8; ply for an OUTPUT ending in .ply."
+    ),
+    color: Optional[Path] = typer.Option(
+        None,
+        "--color",
+        help="Colour image (PNG, JPEG) registered to the depth, of its size: adds red, green, blue to a PLY output.",
+    ),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
     overwrite: bool = typer.Option(
-        False, "--overwrite", help="Replace output files that exist (never the files read: depth, mask, intrinsics)."
+        False,
+        "--overwrite",
+        help="Replace output files that exist (never the files read: depth, mask, intrinsics, colour image).",
     ),
     verbose: bool = typer.Option(
         False, "--verbose", "-v", help="Also print what the default method ran on this frame, and why."
     ),
 ):
     """Estimate the normals of one depth image.
+
+    An OUTPUT ending in .ply (or --format ply) writes a PLY point cloud of the pixels that have a normal: their
+    points (camera frame, depth's unit) and normals, with --color their colours.
 
     An output file that exists is an error (exit status 2) unless --overwrite; an output that is one of the
     files read (the depth, the mask, the intrinsics) is an error always.
@@ -206,20 +223,37 @@ def estimate(
     from .io._files import check_outputs
     from .io.depth import read_depth, read_mask
     from .io.normals import FORMAT_SUFFIX, write_normals
+    from .io.ply import PLY_SUFFIX, read_colors, write_ply
     from .io.threef2n import params_for
     from .methods import parse_method
 
     written = []
     try:
-        formats = [_check_format(fmt)] if fmt is not None else ["npy", "png8"]
+        named_ply = output.suffix.lower() == PLY_SUFFIX
+        if named_ply and fmt not in (None, "ply"):
+            fail(f"--format: {output} names a PLY point cloud, got --format {fmt}; drop --format, or give a prefix")
+        formats = [_check_format(fmt)] if fmt is not None else ["ply"] if named_ply else ["npy", "png8"]
         if output.is_dir():
             fail(f"output: expected a file prefix, got the directory {output}")
-        paths = [output.with_name(output.name + FORMAT_SUFFIX[f]) for f in formats]
-        reads = [depth, mask, intrinsics, params_for(depth) if intrinsics is None else None]
+        if formats == ["ply"]:
+            paths = [output if named_ply else output.with_name(output.name + PLY_SUFFIX)]
+            if disparity:
+                fail("--disparity: a PLY output back-projects depth to points; expected depth, not disparity")
+        else:
+            paths = [output.with_name(output.name + FORMAT_SUFFIX[f]) for f in formats]
+            if color is not None:
+                fail(f"--color: adds colours to a PLY point cloud; expected an OUTPUT ending in .ply, got {output}")
+        reads = [depth, mask, intrinsics, color, params_for(depth) if intrinsics is None else None]
         check_outputs(paths, reads, overwrite=overwrite)
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
+        rgb = read_colors(color) if color is not None else None
+        if rgb is not None and rgb.shape[:2] != z.shape:
+            fail(
+                f"--color: {color} is {rgb.shape[1]}x{rgb.shape[0]} pixels and the depth {z.shape[1]}x{z.shape[0]}; "
+                "expected a colour image registered to the depth frame, of its size"
+            )
         name, options = parse_method(method)
         with warnings.catch_warnings(record=True) as caught:  # each warning as one line, not Python's two
             normals = estimate_(
@@ -236,7 +270,10 @@ def estimate(
         elif verbose:
             console.print(f"ran {method}, as named", highlight=False)
         for path, f in zip(paths, formats):
-            written.append(write_normals(path, normals, fmt=f))
+            if f == "ply":
+                written.append(write_ply(path, z, cam, normals, colors=rgb))
+            else:
+                written.append(write_normals(path, normals, fmt=f))
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
     console.print(f"wrote {' and '.join(map(str, written))}", highlight=False)

@@ -6,17 +6,22 @@ synthetic sets) use x right, y up, z backward (towards the viewer): :func:`to_op
 :func:`from_opengl` convert, exactly (a sign change of y and z). :func:`to_world` rotates camera-frame normals
 into a world frame given the camera's rotation (camera-to-world, as in the extrinsics ``[R | t]`` of a pose);
 normals are directions, so the translation does not apply to them.
+
+:func:`to_open3d` gives the pixels that have a normal as an Open3D point cloud, the same points (to float32) and
+normals that :func:`surfnorm.io.write_ply` writes to a PLY file; :func:`cloud_arrays` is the selection both use.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
 from ._validate import as_mask, split_masked, valid_pixels
 from .camera import Intrinsics
-from .errors import InputError
+from .errors import InputError, MissingDependencyError
 
-__all__ = ["points", "to_opengl", "from_opengl", "to_world"]
+__all__ = ["points", "to_opengl", "from_opengl", "to_world", "to_open3d", "cloud_arrays", "CloudArrays"]
 
 #: The matrix that takes OpenCV camera coordinates to OpenGL ones (and back: it is its own inverse).
 OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0])
@@ -154,3 +159,173 @@ def to_world(normals, R) -> np.ndarray:
         raise InputError(f"R: expected a rotation (orthonormal, determinant +1), got {rot.round(6).tolist()}")
     out = arr @ rot.T.astype(arr.dtype)
     return out
+
+
+class CloudArrays(NamedTuple):
+    """The pixels of a frame that have a point and a normal, in row-major pixel order (see :func:`cloud_arrays`)."""
+
+    points: np.ndarray  # M×3 float64, the camera frame
+    normals: np.ndarray  # M×3 float32
+    colors: np.ndarray | None  # M×3: uint8 as given, or float64 in [0, 1] as given
+    sigma: np.ndarray | None  # M float32, NaN where unknown
+    pixels: np.ndarray  # M×2 int64 (v, u): the row and column of each point
+
+
+def _check_depth(depth) -> tuple:
+    data, _ = split_masked(depth)
+    z = np.asarray(data)
+    if z.ndim == 3:
+        raise InputError(
+            f"depth: expected one frame, a 2-D array (H, W), got a stack of shape {z.shape}; "
+            "write each frame on its own (depth[i])"
+        )
+    if z.ndim != 2 or z.dtype.kind not in "fiu":
+        raise InputError(
+            f"depth: expected a 2-D array (H, W) of real depth values, got shape {z.shape} and dtype {z.dtype}"
+        )
+    return z.shape
+
+
+def _check_normals(normals, shape: tuple) -> np.ndarray:
+    n = np.asarray(normals)
+    want = (*shape, 3)
+    if n.dtype.kind != "f" or n.shape != want:
+        stack = "; one frame, not a stack: pass normals[i]" if n.ndim == 4 else ""
+        raise InputError(
+            f"normals: expected a float array of shape {want} (depth's (H, W) and 3), "
+            f"got shape {n.shape} and dtype {n.dtype}{stack}"
+        )
+    with np.errstate(over="ignore"):
+        return np.asarray(n, dtype=np.float32)
+
+
+def _check_colors(colors, shape: tuple) -> np.ndarray:
+    c = np.asarray(colors)
+    want = (*shape, 3)
+    if c.shape != want or not (c.dtype == np.uint8 or c.dtype.kind == "f"):
+        raise InputError(
+            f"colors: expected RGB of shape {want} (depth's (H, W) and 3), uint8 0-255 or float 0-1, "
+            f"got shape {c.shape} and dtype {c.dtype}"
+        )
+    if c.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            bad = ~((c >= 0) & (c <= 1))  # NaN fails both
+        if bad.any():
+            v, u, ch = np.argwhere(bad)[0]
+            raise InputError(
+                f"colors: expected float values in [0, 1], got {c[v, u, ch].item()!r} at pixel (row {v}, column {u}) "
+                f"and {int(bad.sum())} such value(s) in all"
+            )
+    return c
+
+
+def _check_sigma(sigma, shape: tuple) -> np.ndarray:
+    s = np.asarray(sigma)
+    if s.shape != tuple(shape) or s.dtype.kind not in "fiu":
+        raise InputError(
+            f"sigma: expected real values of shape {tuple(shape)} (depth's (H, W)), degrees, "
+            f"got shape {s.shape} and dtype {s.dtype}"
+        )
+    with np.errstate(over="ignore"):
+        s = np.asarray(s, dtype=np.float32)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isnan(s) & ~((s >= 0) & np.isfinite(s))
+    if bad.any():
+        v, u = np.argwhere(bad)[0]
+        raise InputError(
+            f"sigma: expected finite values >= 0 (degrees; NaN where there is none), got {np.asarray(sigma)[v, u].item()!r} "
+            f"at pixel (row {v}, column {u}) and {int(bad.sum())} such value(s) in all"
+        )
+    return s
+
+
+def cloud_arrays(depth, K, normals, *, colors=None, sigma=None) -> CloudArrays:
+    """The pixels of one frame that have a point and a normal, with their points, normals, colours and sigma.
+
+    A pixel is taken when its depth is valid (finite and > 0, not masked out where ``depth`` is a NumPy masked
+    array) and its normal is finite and non-zero in float32 (surfnorm fills pixels without a normal with 0, or NaN
+    with ``fill=nan``). Its point is that of :func:`points` (0-based pixel centres, x right, y down, z forward).
+    A pixel with a normal whose sigma is NaN is taken, with sigma NaN: the same pixels are taken with or without
+    ``sigma``. Pixels come in row-major order. Every argument is checked first (:class:`~surfnorm.InputError`
+    naming it): ``depth`` (H, W), ``normals`` (H, W, 3) float, ``colors`` (H, W, 3) uint8 or float in [0, 1],
+    ``sigma`` (H, W) real, >= 0 or NaN.
+    """
+    shape = _check_depth(depth)
+    cam = Intrinsics.from_matrix(K)
+    n = _check_normals(normals, shape)
+    c = None if colors is None else _check_colors(colors, shape)
+    s = None if sigma is None else _check_sigma(sigma, shape)
+    P = points(depth, cam, fill=np.nan)  # H×W×3 float64, NaN where depth is invalid
+    with np.errstate(invalid="ignore", over="ignore"):
+        has = np.isfinite(P).all(axis=-1) & np.isfinite(n).all(axis=-1) & (n != 0).any(axis=-1)
+    with np.errstate(over="ignore"):
+        P32 = P[has].astype(np.float32)
+    if not np.isfinite(P32).all():
+        v, u = np.argwhere(has)[np.flatnonzero(~np.isfinite(P32).all(axis=-1))[0]]
+        raise InputError(
+            f"depth: expected points within float32's range (the type of the PLY's coordinates), got "
+            f"({', '.join(f'{x:.6g}' for x in P[v, u])}) at pixel (row {v}, column {u})"
+        )
+    return CloudArrays(
+        points=P[has],
+        normals=n[has],
+        colors=None if c is None else c[has],
+        sigma=None if s is None else s[has],
+        pixels=np.argwhere(has),
+    )
+
+
+def to_open3d(depth, K, normals, colors=None):
+    """The pixels of a frame that have a normal, as an Open3D point cloud with points, normals and colours.
+
+    The same pixels, in the same row-major order, as :func:`surfnorm.io.write_ply` writes: those whose depth is
+    valid (finite, > 0) and whose normal is finite and non-zero. Points are :func:`points` of the pixels (camera
+    frame: x right, y down, z forward, 0-based pixel centres) in float64, not rounded to the PLY's float32.
+    Needs Open3D (``pip install "surfnorm[open3d]"``), imported on the first call only.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W)
+        Depth of one frame; its unit is the points' unit.
+    K : array_like of shape (3, 3), or Intrinsics
+        The frame's intrinsics, as :func:`surfnorm.estimate` takes them.
+    normals : ndarray of shape (H, W, 3)
+        What :func:`surfnorm.estimate` returned for ``depth`` (0 or NaN where a pixel has no normal).
+    colors : ndarray of shape (H, W, 3), optional
+        RGB, uint8 (0-255) or float in [0, 1]; Open3D stores float in [0, 1] (uint8 / 255; floats as given).
+
+    Returns
+    -------
+    open3d.geometry.PointCloud
+
+    Raises
+    ------
+    InputError (a ValueError)
+        A bad argument; the message names it, what was expected and what was received.
+    MissingDependencyError (an ImportError)
+        Open3D is not installed.
+
+    Examples
+    --------
+    >>> import numpy as np, surfnorm
+    >>> depth = np.full((4, 5), 2.0)
+    >>> depth[0, 0] = 0  # no depth: no point
+    >>> K = [[100.0, 0, 2.0], [0, 100.0, 1.5], [0, 0, 1]]
+    >>> cloud = surfnorm.to_open3d(depth, K, surfnorm.estimate(depth, K))
+    >>> len(cloud.points), cloud.has_normals(), np.asarray(cloud.points)[0].tolist()
+    (19, True, [-0.02, -0.03, 2.0])
+    """
+    try:
+        import open3d as o3d
+    except ImportError as exc:
+        raise MissingDependencyError(
+            'to_open3d needs Open3D, which is not installed: pip install "surfnorm[open3d]" (or pip install open3d)'
+        ) from exc
+    arrays = cloud_arrays(depth, K, normals, colors=colors)
+    cloud = o3d.geometry.PointCloud()
+    cloud.points = o3d.utility.Vector3dVector(np.ascontiguousarray(arrays.points, dtype=np.float64))
+    cloud.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(arrays.normals, dtype=np.float64))
+    if arrays.colors is not None:
+        rgb = arrays.colors / 255.0 if arrays.colors.dtype == np.uint8 else arrays.colors
+        cloud.colors = o3d.utility.Vector3dVector(np.ascontiguousarray(rgb, dtype=np.float64))
+    return cloud

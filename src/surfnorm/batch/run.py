@@ -44,11 +44,11 @@ def _settings(
     from .._validate import check_bool, check_choice, check_positive
     from ..io.depth import PGM_BYTE_ORDERS
     from ..io.intrinsics import resolve_intrinsics
-    from ..io.normals import NORMAL_FORMATS
+    from ..io.normals import OUTPUT_FORMATS
     from ..methods import resolve
 
     resolve(method, dict(options))  # a wrong method or option fails once, here, not once per file
-    check_choice("fmt", fmt, NORMAL_FORMATS)
+    check_choice("fmt", fmt, OUTPUT_FORMATS)
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
     kinect_disparity = check_bool("kinect_disparity", kinect_disparity)
@@ -173,8 +173,9 @@ def convert(
         Created if missing.
     method, scale_invariant, **options
         As in :func:`surfnorm.estimate` (e.g. ``dlf="alpha"``, ``fill=nan``).
-    fmt : {"npy", "png16", "png8"}
-        Output format, see :mod:`surfnorm.io.normals`.
+    fmt : {"npy", "png16", "png8", "ply"}
+        Output format: a normal map (see :mod:`surfnorm.io.normals`), or ``"ply"``, a PLY point cloud of the
+        pixels that have a normal (:func:`surfnorm.io.write_ply`).
     depth_scale : float, optional
         Divide the stored depth by this (1000 for millimetre PNG, 5000 for TUM).
     intrinsics : Intrinsics, 3x3 matrix, dict or path of an intrinsics file, optional

@@ -206,9 +206,9 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
         files (outputs side by side in ``output_dir``). A listed file that does
         not exist becomes a task too, and fails by name when run.
     output_dir : str or Path
-        Folder of the outputs, ``<relative folder>/<stem>.npy`` or ``.png``
+        Folder of the outputs, ``<relative folder>/<stem>.npy``, ``.png`` or ``.ply``
         (``000001.bin.gz`` -> ``000001.npy``).
-    fmt : {"npy", "png16", "png8"}
+    fmt : {"npy", "png16", "png8", "ply"}
 
     Raises
     ------
@@ -217,9 +217,9 @@ def plan_tasks(inputs, output_dir, fmt: str = "npy") -> list[ConvertTask]:
         would write the same output, or an output that would replace its input.
     """
     from .._validate import check_choice
-    from ..io.normals import FORMAT_SUFFIX, NORMAL_FORMATS
+    from ..io.normals import FORMAT_SUFFIX, OUTPUT_FORMATS
 
-    check_choice("fmt", fmt, NORMAL_FORMATS)
+    check_choice("fmt", fmt, OUTPUT_FORMATS)
     output_dir = Path(output_dir)
     out_root = output_dir.resolve()
     sources = _sources(inputs)
@@ -276,6 +276,7 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
     from .._api import estimate
     from ..io.depth import depth_suffix, read_depth
     from ..io.normals import write_normals
+    from ..io.ply import write_ply
     from ..io.threef2n import params_for, read_params
 
     cam = settings.intrinsics
@@ -299,7 +300,10 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
         **settings.options,
     )
     task.output.parent.mkdir(parents=True, exist_ok=True)
-    write_normals(task.output, normals, fmt=settings.fmt)
+    if settings.fmt == "ply":
+        write_ply(task.output, depth, cam, normals)  # the points of the pixels that have a normal
+    else:
+        write_normals(task.output, normals, fmt=settings.fmt)
     with np.errstate(invalid="ignore"):
         any_valid = bool((np.isfinite(depth) & (depth > 0)).any())
     return "" if any_valid else "no valid depth: every pixel holds the fill value"

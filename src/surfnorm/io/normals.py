@@ -32,10 +32,20 @@ from ._atomic import atomic_write
 from ._files import check_npy_header, decode_image, read_bytes
 from .pictures import COLOURINGS, normal_to_rgb8
 
-__all__ = ["NORMAL_FORMATS", "FORMAT_SUFFIX", "write_normals", "read_normals", "encode_png16", "decode_png"]
+__all__ = [
+    "NORMAL_FORMATS",
+    "OUTPUT_FORMATS",
+    "FORMAT_SUFFIX",
+    "write_normals",
+    "read_normals",
+    "encode_png16",
+    "decode_png",
+]
 
 NORMAL_FORMATS = ("npy", "png16", "png8")
-FORMAT_SUFFIX = {"npy": ".npy", "png16": ".png", "png8": ".png"}
+#: What a batch (surfnorm.convert) and the command line write: a normal map, or a PLY point cloud (surfnorm.io.ply).
+OUTPUT_FORMATS = NORMAL_FORMATS + ("ply",)
+FORMAT_SUFFIX = {"npy": ".npy", "png16": ".png", "png8": ".png", "ply": ".ply"}
 #: A decoded vector whose length differs from 1 by more than this is a missing normal.
 MISSING_TOLERANCE = 0.1
 _PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 3]  # fixed, so equal normals give equal bytes

@@ -224,3 +224,31 @@ def test_bench_helpers_against_naive_ones():
     ranks = lambda x: np.argsort(np.argsort(x)).astype(float)  # noqa: E731 (no ties here)
     assert spearman(s, e) == pytest.approx(np.corrcoef(ranks(s), ranks(e))[0, 1])
     assert spearman([1, 1, 2, 3], [1, 2, 3, 4]) == pytest.approx(np.corrcoef([0.5, 0.5, 2, 3], [0, 1, 2, 3])[0, 1])
+
+
+def test_cli_writes_sigma_into_the_ply_and_beside_the_npy(tmp_path):
+    from typer.testing import CliRunner
+
+    from surfnorm.cli import app
+
+    z, K = _noisy_plane(5e-3)
+    z = _with_holes(z)
+    np.save(tmp_path / "d.npy", z)
+    k = ["--fx", str(K[0, 0]), "--fy", str(K[1, 1]), "--cx", str(K[0, 2]), "--cy", str(K[1, 2])]
+    run = CliRunner().invoke
+    res = run(app, ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "n"), "--uncertainty", *k])
+    assert res.exit_code == 0, res.output
+    n_ref, s_ref = surfnorm.estimate(z, K, uncertainty=True)
+    np.testing.assert_array_equal(np.load(tmp_path / "n.npy"), n_ref)
+    np.testing.assert_array_equal(np.load(tmp_path / "n.sigma.npy"), s_ref)
+    res = run(app, ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "n.ply"), "--uncertainty", *k])
+    assert res.exit_code == 0, res.output
+    body = (tmp_path / "n.ply").read_bytes()
+    header, data = body.split(b"end_header\n", 1)
+    assert b"property float quality" in header
+    rows = np.frombuffer(data, np.dtype([(c, "<f4") for c in ("x", "y", "z", "nx", "ny", "nz", "quality")]))
+    has = ~np.isnan(s_ref)
+    np.testing.assert_array_equal(rows["quality"], s_ref[has])
+    res = run(app, ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "m"), "--uncertainty", "-m", "plane_svd", *k])
+    assert res.exit_code == 2 and res.output.count("\n") == 1
+    assert "uncertainty: True is available for the methods auto, adaptive_fit, d2nt_v3" in res.output

@@ -210,6 +210,12 @@ def estimate(
     verbose: bool = typer.Option(
         False, "--verbose", "-v", help="Also print what the default method ran on this frame, and why."
     ),
+    uncertainty: bool = typer.Option(
+        False,
+        "--uncertainty",
+        help="Also each normal's predicted RMS angular error in degrees (methods auto, adaptive_fit, d2nt_v3): the "
+        "PLY's quality property, or OUTPUT.sigma.npy (float32, NaN where no normal) beside the other formats.",
+    ),
 ):
     """Estimate the normals of one depth image.
 
@@ -243,8 +249,9 @@ def estimate(
             paths = [output.with_name(output.name + FORMAT_SUFFIX[f]) for f in formats]
             if color is not None:
                 fail(f"--color: adds colours to a PLY point cloud; expected an OUTPUT ending in .ply, got {output}")
+        sigma_path = output.with_name(output.name + ".sigma.npy") if uncertainty and formats != ["ply"] else None
         reads = [depth, mask, intrinsics, color, params_for(depth) if intrinsics is None else None]
-        check_outputs(paths, reads, overwrite=overwrite)
+        check_outputs(paths + ([sigma_path] if sigma_path is not None else []), reads, overwrite=overwrite)
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
         z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
         user_mask = read_mask(mask) if mask is not None else None
@@ -256,9 +263,17 @@ def estimate(
             )
         name, options = parse_method(method)
         with warnings.catch_warnings(record=True) as caught:  # each warning as one line, not Python's two
-            normals = estimate_(
-                z, cam, method=name, mask=user_mask, scale_invariant=scale_invariant, disparity=disparity, **options
+            result = estimate_(
+                z,
+                cam,
+                method=name,
+                mask=user_mask,
+                scale_invariant=scale_invariant,
+                disparity=disparity,
+                uncertainty=uncertainty,
+                **options,
             )
+        normals, sigma = result if uncertainty else (result, None)
         for w in caught:
             err_console.print(
                 f"[yellow]warning:[/] {escape(one_line(str(w.message)))}", highlight=False, soft_wrap=True
@@ -271,9 +286,19 @@ def estimate(
             console.print(f"ran {method}, as named", highlight=False)
         for path, f in zip(paths, formats):
             if f == "ply":
-                written.append(write_ply(path, z, cam, normals, colors=rgb))
+                written.append(write_ply(path, z, cam, normals, colors=rgb, sigma=sigma))
             else:
                 written.append(write_normals(path, normals, fmt=f))
+        if sigma_path is not None:
+            import numpy as np
+
+            from .io._atomic import atomic_write
+
+            def save(tmp, sigma=sigma):
+                with open(tmp, "wb") as fh:
+                    np.save(fh, sigma)
+
+            written.append(atomic_write(sigma_path, save))
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
     console.print(f"wrote {' and '.join(map(str, written))}", highlight=False)

@@ -71,6 +71,63 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relativ
     return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol, bands=bands)
 
 
+#: The methods whose normals ``estimate(..., uncertainty=True)`` gives a sigma (see surfnorm.kernels.uncertainty).
+UNCERTAIN = ("auto", "adaptive_fit", "d2nt_v3")
+
+
+def _run_uncertain(method, options, z, valid, cam, out, sigma_out, tie_tol=0.0, relative=0.0, bands=whole):
+    """:func:`_run` of a method of ``UNCERTAIN``, and each normal's sigma into ``sigma_out``."""
+    import math
+
+    from .kernels import uncertainty as U
+    from .kernels.adaptive_fit import noise_profile
+
+    record: dict = {}
+    if method.name != "d2nt_v3":
+        options = dict(options, record=record)
+    normals = _run(method, False, options, z, valid, cam, out, tie_tol, relative, bands)
+    fill = options.get("fill", 0.0)
+    t = 1.0 if method.name == "adaptive_fit" else record.get("weight", 0.0)
+    sigma_fit = sigma_d2nt = None
+    if t > 0.0:
+        sigma_fit = U.sigma_from_fits(
+            z,
+            valid,
+            cam,
+            normals,
+            record["fits"],
+            record["stride"],
+            record["profile"],
+            gain=U.FIT_GAIN,
+            misfit_gain=U.MISFIT_GAIN,
+            fill=fill,
+        )
+    if t < 1.0:
+        profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
+        fits = U.neighbourhood_fits(z, valid)
+        sigma_d2nt = U.sigma_from_fits(
+            z,
+            valid,
+            cam,
+            normals,
+            fits,
+            1,
+            profile,
+            gain=U.D2NT_GAIN,
+            misfit_gain=U.D2NT_MISFIT_GAIN,
+            disagreement=U.D2NT_DISAGREEMENT,
+            fill=fill,
+        )
+    if sigma_fit is None:
+        sigma_out[...] = sigma_d2nt
+    elif sigma_d2nt is None:
+        sigma_out[...] = sigma_fit
+    else:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
+        both = np.sqrt((1.0 - t) * np.square(sigma_d2nt) + t * np.square(sigma_fit))
+        sigma_out[...] = np.where(np.isnan(sigma_fit), sigma_d2nt, np.where(np.isnan(sigma_d2nt), sigma_fit, both))
+    return normals
+
+
 def _in_range(method, options: dict, src: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, dict]:
     """The paper-faithful mode's range rescale of one frame (surfnorm.units, "Range").
 
@@ -119,8 +176,9 @@ def estimate(
     scale_invariant: bool = False,
     disparity: bool = False,
     out: np.ndarray | None = None,
+    uncertainty: bool = False,
     **options,
-) -> np.ndarray:
+):
     """Estimate surface normals from a depth image (or a stack of them).
 
     Parameters
@@ -160,6 +218,12 @@ def estimate(
         A new output is memory that the system hands over and zeroes when it
         is first written: about 0.5 ms per 480x640 frame on our 2-core test
         machine, and it does not get faster with more threads.
+    uncertainty : bool
+        True: also return each normal's predicted RMS angular error in degrees
+        (``sigma``), from the estimator's own fit: its residual, its support
+        and the frame's noise (see :mod:`surfnorm.kernels.uncertainty`). For
+        ``auto`` (whatever it runs on the frame), ``adaptive_fit`` and
+        ``d2nt_v3``; other methods raise InputError.
     **options
         The method's options (see ``surfnorm.methods()[name].options``), e.g.
         ``dlf``, ``tau``, ``truncate``, ``mnr_dlf``, ``fill``.
@@ -171,6 +235,10 @@ def estimate(
         the camera (n_z < 0 on a fronto-parallel wall). Pixels without a valid
         normal hold ``fill`` (default 0.0) in all three components. The array
         is ``out`` when one was given.
+    sigma : ndarray of float32, shape (H, W) or (N, H, W)
+        Only with ``uncertainty=True`` (the result is then ``(normals, sigma)``):
+        each normal's predicted RMS angular error in degrees, NaN exactly where
+        the normal is ``fill``.
 
     Raises
     ------
@@ -193,6 +261,10 @@ def estimate(
     ((48, 64, 3), [0.0, 0.0, -1.0])
     """
     method_obj, refined, clean = resolve(method, options)
+    if check_bool("uncertainty", uncertainty) and (refined or method_obj.name not in UNCERTAIN):
+        raise InputError(
+            f"uncertainty: True is available for the methods {', '.join(UNCERTAIN)}, got method={method!r}"
+        )
     depth, unmasked = split_masked(depth)
     z = as_depth(depth)
     user_mask = as_mask(mask, z.shape)
@@ -225,6 +297,10 @@ def estimate(
         cam.check_frame(z.shape, stacklevel=2)
         bands = on_threads(workers)
         z_0, valid_0, options_0 = frame(None, bands)
+        if uncertainty:
+            sigma = np.empty(z.shape, np.float32)
+            normals = _run_uncertain(method_obj, options_0, z_0, valid_0, cam, out, sigma, tie_tol, relative, bands)
+            return normals, sigma
         return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative, bands)
     cams = cast(list, _intrinsics_list(K, z.shape[0]))  # a list for a stack
     one_camera = all(c is cams[0] for c in cams)
@@ -232,19 +308,23 @@ def estimate(
         cam_i.check_frame(z.shape, name="K" if one_camera else f"K[{i}]", stacklevel=2)
     if out is None:
         out = np.empty(z.shape + (3,), dtype=np.float32)
+    sigmas = np.empty(z.shape, np.float32) if uncertainty else None
 
     def one(i):
         # Everything per frame (validity, kernel) runs here, so frames proceed in parallel:
         # the kernels release the GIL (nogil=True).
         z_i, valid_i, options_i = frame(i)
-        _run(method_obj, refined, options_i, z_i, valid_i, cams[i], out[i], tie_tol, relative)
+        if sigmas is not None:
+            _run_uncertain(method_obj, options_i, z_i, valid_i, cams[i], out[i], sigmas[i], tie_tol, relative)
+        else:
+            _run(method_obj, refined, options_i, z_i, valid_i, cams[i], out[i], tie_tol, relative)
 
     if workers == 1 or z.shape[0] == 1:
         for i in range(z.shape[0]):
             one(i)
     else:
         map_threads(one, z.shape[0], min(workers, z.shape[0]))
-    return out
+    return out if sigmas is None else (out, sigmas)
 
 
 def refine(normals, depth, *, mask=None, dlf: str = "alpha", fill: float = 0.0) -> np.ndarray:

@@ -541,7 +541,9 @@ def bench(
 ):
     """Regenerate the paper's Tables II-IV and Figs. 1, 3, 4 (with today's peers) on data in the 3F2N layout.
 
-    With --sensor DIR: the plane metric (or e_A against gt.npy) and time of every method and peer on real sensor frames.
+    With --sensor DIR: the plane metric (or e_A against gt.npy) and time of every method and peer on real sensor frames,
+    and the default's uncertainty (sigma): its calibration on the simulated sensors over the 3F2N frames of DATASET
+    (default: those shipped in the package) and its sparsification on the real frames.
     """
     import os
     import time
@@ -613,8 +615,6 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
 
     from .bench.sensor import sensor_bench
 
-    if dataset is not None:
-        fail(f"dataset: --sensor DIR takes the place of a 3F2N dataset, got both {dataset} and --sensor {folder}")
     names = None if methods_ is None else [v.strip() for x in methods_ for v in x.split(",") if v.strip()]
     libs = None if peers is None else [v.strip() for x in peers for v in x.split(",") if v.strip()]
     if libs is not None and "none" in libs:
@@ -637,6 +637,7 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
                 peer_libraries=libs,
                 repeats=repeats,
                 progress=lambda stage, done, total: progress.update(task, completed=done, total=total),
+                calibration_root=dataset,
             )
     except (SurfnormError, OSError) as exc:
         fail(str(exc))
@@ -648,9 +649,8 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
         )
     text = paths["report"].read_text()
     console.print(text[text.index("## Angle") : text.index("## Coverage")].strip(), highlight=False, soft_wrap=True)
-    console.print(
-        f"wrote {paths['report']}, {paths['results']} and {paths['figure']} in {time.perf_counter() - t0:.0f} s"
-    )
+    figures = " and ".join(str(paths[k]) for k in ("figure", "uncertainty") if k in paths)
+    console.print(f"wrote {paths['report']}, {paths['results']} and {figures} in {time.perf_counter() - t0:.0f} s")
 
 
 def _table3_text(report_path: Path) -> str:

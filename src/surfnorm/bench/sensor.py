@@ -603,6 +603,11 @@ def write_folder_report(result: dict, out_dir) -> dict[str, Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     text = folder_markdown(result)
+    sigma = result.get("uncertainty")
+    if sigma is not None:
+        from .uncertainty import figure, markdown
+
+        text = text.rstrip("\n") + "\n\n" + markdown(sigma["calibration"], sigma["sparsification"])
 
     def finite(obj):
         if isinstance(obj, float):
@@ -619,6 +624,11 @@ def write_folder_report(result: dict, out_dir) -> dict[str, Path]:
             out_dir / "results.json", lambda tmp: tmp.write_text(json.dumps(finite(result), indent=1))
         ),
         "figure": folder_figure(out_dir / "sensor.png", result),
+        **(
+            {"uncertainty": figure(out_dir / "uncertainty.png", sigma["calibration"], sigma["sparsification"])}
+            if sigma is not None
+            else {}
+        ),
     }
 
 
@@ -630,9 +640,14 @@ def sensor_bench(
     peer_libraries: list[str] | None = None,
     repeats: int = 5,
     progress=None,
+    uncertainty: bool = True,
+    calibration_root=None,
 ) -> tuple[dict, dict[str, Path]]:
     """``surfnorm bench --sensor ROOT --out OUT``: one thread everywhere (and the default method also on every
-    core), every entry, the report. Returns (result, paths)."""
+    core), every entry, the report. With ``uncertainty``, also the default's sigma: its calibration on the
+    simulated sensors over the 3F2N frames under ``calibration_root`` (default: those shipped in the package)
+    and its sparsification on the frames under ``root`` (:mod:`surfnorm.bench.uncertainty`), in the report
+    and in uncertainty.png. Returns (result, paths)."""
     import platform
 
     from .peers import peer_versions, single_thread
@@ -642,6 +657,13 @@ def sensor_bench(
     entries, absent = make_entries(names, peer_libraries=peer_libraries)
     result = run_folder(root, entries, repeats=repeats, progress=progress)
     result["absent"] = absent
+    if uncertainty:
+        from .uncertainty import calibration, sparsification
+
+        result["uncertainty"] = {
+            "calibration": calibration(calibration_root),
+            "sparsification": sparsification(root),
+        }
     result["meta"] = {
         "threads": threads,
         "versions": peer_versions(),

@@ -1443,6 +1443,7 @@ def _adaptive_fit_kernel(
     v0,
     v1,
     stride,
+    info,
 ):
     """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`), in a ``ring`` that holds the
     integral rows up to ``made`` and ``cols`` the column sums after it (:func:`prime`); ``pos``:
@@ -1456,6 +1457,12 @@ def _adaptive_fit_kernel(
     above the ones it reads, then makes the integral rows it reads (no fits: :func:`prime`): the same
     additions in the same order as one sweep, so the same bits; the price is that pass over rows
     0 .. v0 + 2 ``r_max``, mostly column sums (vectorised).
+
+    ``info``: (0, 0, 5) for nothing, or (fitted rows, fitted columns, 5) float32, where fitted pixel (v, stride i)
+    gets the fit its plane came from (row v // stride, column i): its residual per degree of freedom, its number
+    of points, its radius, and the offset (columns, rows) of its window's centre from the pixel (0, 0 for the
+    centred window, +-r for a quadrant); left as it is where a pixel has no fit. Only written (it changes no
+    normal): :mod:`surfnorm.kernels.uncertainty` reads it.
     """
     H, W = z.shape
     L = ring.shape[0]
@@ -1494,6 +1501,9 @@ def _adaptive_fit_kernel(
     r_try_f = np.empty(n_fit)
     need = np.empty(n_fit)
     tried = np.empty(n_fit, np.bool_)
+    shift_u = np.zeros(n_fit)
+    shift_v = np.zeros(n_fit)
+    record = info.shape[0] > 0
     present = np.zeros(r_max + 2, np.bool_)
     widened = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)
@@ -1635,6 +1645,9 @@ def _adaptive_fit_kernel(
             r_row, r_next = r_next, r_row
         # The edge test: a pixel whose fit fails the noise test takes the best of the four
         # quadrant windows (smallest residual per dof).
+        if record:
+            shift_u[:] = 0.0
+            shift_v[:] = 0.0
         for i in range(n_fit):
             if not valid_row[i]:
                 continue
@@ -1677,10 +1690,27 @@ def _adaptive_fit_kernel(
                     g_v[i] = gv_k
                     a[i] = a_p
                     dof[i] = dof_k
+                    if record:
+                        rss[i] = rss_k
+                        shift_u[i] = du
+                        shift_v[i] = dv
+        if record:
+            k = v // stride
+            for i in range(n_fit):
+                if valid_row[i] and dof[i] > 0.0:
+                    info[k, i, 0] = rss[i] / dof[i]
+                    info[k, i, 1] = dof[i] + 3.0
+                    info[k, i, 2] = r_row[i]
+                    info[k, i, 3] = shift_u[i]
+                    info[k, i, 4] = shift_v[i]
         _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:
             _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)
+
+
+#: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded.
+_NO_INFO = np.empty((0, 0, 5), np.float32)
 
 
 def adaptive_fit(
@@ -1698,6 +1728,7 @@ def adaptive_fit(
     use=None,
     stride=None,
     bands=whole,
+    record: dict | None = None,
 ) -> np.ndarray | None:
     """Adaptive plane fit of inverse depth; fills ``out`` (H, W, 3) float32 and returns it.
 
@@ -1739,12 +1770,21 @@ def adaptive_fit(
     bands : callable
         How rows are split over threads (see :mod:`surfnorm._bands`); each band has its own ring of
         integral rows.
+    record : dict, optional
+        Filled with what :mod:`surfnorm.kernels.uncertainty` needs: ``"profile"`` (the noise profile),
+        ``"stride"`` and ``"fits"`` (each fitted pixel's fit: see ``info`` of :func:`_adaptive_fit_kernel`).
+        None (default): nothing recorded, nothing spent on it.
     """
     f = math.sqrt(cam.fx * cam.fy)
     r_max = (max_window - 1) // 2
     grow, widen = growth_table(r_max), widen_table(r_max)
     stride = choose_stride(valid) if stride is None else stride
     H = z.shape[0]
+    if record is None:
+        info = _NO_INFO
+    else:
+        info = np.full(((H + stride - 1) // stride, (z.shape[1] + stride - 1) // stride, 5), np.nan, np.float32)
+        record.update(stride=stride, fits=info)
 
     # bands waiting for the noise take parts of its measuring (Offers.help) until it is done
     offers = None if bands is whole else Offers()
@@ -1760,6 +1800,8 @@ def adaptive_fit(
         finally:
             if offers is not None:
                 offers.close()
+        if record is not None:
+            record["profile"] = p
         if use is not None and not use(p):
             return None
         return radius_table(p.depths, p.rho, alpha=alpha, window=window, max_window=max_window)
@@ -1829,6 +1871,7 @@ def adaptive_fit(
                 v0,
                 v1,
                 stride,
+                info,
             )
             return True
         finally:

@@ -227,6 +227,7 @@ def auto(
     fill: float = 0.0,
     tie_tol: float = 0.0,
     relative: float = 0.0,
+    record: dict | None = None,
     **bands,
 ) -> np.ndarray:
     """``d2nt_v3`` (its defaults, and ``tau``) on clean depth, ``adaptive_fit`` on sensor depth, and their
@@ -236,7 +237,7 @@ def auto(
     of extreme depth (:mod:`surfnorm.units`) scales it with the depth.
     ``tie_tol`` and ``relative`` are the scale-invariant mode's, passed on to ``d2nt_v3``
     (``adaptive_fit`` does not depend on the unit of depth); the row ``bands`` of one frame on several
-    threads go to both.
+    threads go to both. ``record``: as ``adaptive_fit``'s, and ``"weight"``, adaptive_fit's in the blend.
     """
     from .d2nt_v3 import d2nt_v3
 
@@ -248,14 +249,18 @@ def auto(
         measured.append(p)
         return adaptive_weight(p) == 1.0
 
-    sensor = adaptive_fit(z, valid, cam, out, fill=fill, use=sensor_depth, **bands)
+    sensor = adaptive_fit(z, valid, cam, out, fill=fill, use=sensor_depth, record=record, **bands)
     if sensor is not None:
+        if record is not None:
+            record["weight"] = 1.0
         return sensor
     profile = measured[0]
     t = adaptive_weight(profile)
+    if record is not None:
+        record["weight"] = t
     d2nt_options = dict(dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", tie_tol=tie_tol, relative=relative, **bands)
     if t == 0.0:
         return d2nt_v3(z, valid, cam, out, fill=fill, **d2nt_options)
     a = d2nt_v3(z, valid, cam, np.empty_like(out), fill=np.nan, **d2nt_options)
-    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile, **bands)
+    b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile, record=record, **bands)
     return blend(a, b, t, fill, out)

@@ -46,6 +46,9 @@ The target normals (a target point without a normal is dropped):
   squares with weight w: the inverse of the residual's variance, from the depth noise s_z(z) = 1.2 mm + 1.9 mm
   (z - 0.4 m)^2 (a structured-light sensor's axial noise, Nguyen et al. 2012) and the normal's error over a lever of
   l = half a voxel (the typical in-plane distance between a source point and its nearest target point);
+- controls for those two: ``surfnorm, random 70 %`` (a seeded random 70 % of the points, the filter's count
+  without its choice) and ``surfnorm, depth-weighted`` / ``Open3D KNN 30, depth-weighted`` (the same weights with
+  sigma = 0: only the depth noise), which tell what sigma itself adds;
 - ``Open3D KNN 30``: ``estimate_normals(KDTreeSearchParamKNN(30))`` on the whole cloud, oriented towards the camera;
 - ``Open3D hybrid``: ``estimate_normals(KDTreeSearchParamHybrid(2 * voxel, 30))`` on the thinned cloud (Open3D's
   tutorial pipeline), oriented towards the camera;
@@ -79,7 +82,10 @@ VARIANTS = (
     "surfnorm",
     "surfnorm, sigma <= p70",
     "surfnorm, sigma-weighted",
+    "surfnorm, random 70 %",
+    "surfnorm, depth-weighted",
     "Open3D KNN 30",
+    "Open3D KNN 30, depth-weighted",
     "Open3D hybrid",
     "OpenCV LINEMOD",
 )
@@ -292,6 +298,10 @@ def target_variants(depth: np.ndarray, K: dict, voxel: float):
         return pts[ok], n[ok]
 
     out["surfnorm"] = per_pixel(surfnorm.estimate(depth, Km))
+    p, n = out["surfnorm"]
+    keep = np.random.default_rng(0).random(len(p)) < KEEP_PERCENTILE / 100
+    out["surfnorm, random 70 %"] = (p[keep], n[keep])
+    out["surfnorm, depth-weighted"] = (p, n * np.sqrt(sigma_weights(np.zeros(len(p)), p[:, 2], voxel / 2))[:, None])
 
     got, why = surfnorm_uncertainty(depth, Km)
     if got is None:
@@ -312,6 +322,9 @@ def target_variants(depth: np.ndarray, K: dict, voxel: float):
     n_full = np.zeros((depth.size, 3))
     n_full[np.flatnonzero(valid.ravel())] = np.asarray(full.normals)
     out["Open3D KNN 30"] = per_pixel(n_full.reshape(depth.shape + (3,)))
+    p, n = out["Open3D KNN 30"]
+    w = sigma_weights(np.zeros(len(p)), p[:, 2], voxel / 2)
+    out["Open3D KNN 30, depth-weighted"] = (p, n * np.sqrt(w)[:, None])
 
     thin = cloud(pts)
     thin.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
@@ -560,7 +573,7 @@ def figure(report: dict, path: Path) -> None:
     labels = [f"{r['pair'][0]}-{r['pair'][1]}" for r in report["pairs"]]
     x = np.arange(len(labels))
     width = 0.8 / max(1, len(names))
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True)
     for k, name in enumerate(names):
         t = [r["variants"][name]["t_err_m"] * 1e3 for r in report["pairs"]]
         a = [r["variants"][name]["r_err_deg"] for r in report["pairs"]]
@@ -570,7 +583,7 @@ def figure(report: dict, path: Path) -> None:
     axes[1].set_ylabel("rotation error (deg)")
     axes[1].set_xticks(x, labels)
     axes[1].set_xlabel("pair (target-source frame)")
-    axes[0].legend(fontsize=8, ncol=3)
+    axes[0].legend(fontsize=7, ncol=3)
     axes[0].set_title("Point-to-plane ICP against the ground truth, by the target's normals")
     fig.tight_layout()
     fig.savefig(path, dpi=90)

@@ -175,7 +175,8 @@ class TestSensorBench:
         )
         assert res.exit_code == 0, res.output
         assert "| d2nt_basic |" in res.output
-        assert {p.name for p in out.iterdir()} == {"report.md", "results.json", "sensor.png"}
+        assert {p.name for p in out.iterdir()} == {"report.md", "results.json", "sensor.png", "uncertainty.png"}
+        assert "## Uncertainty" in (out / "report.md").read_text()
 
 
 class TestBadFolders:

@@ -662,7 +662,7 @@ def sensor_bench(
 
         result["uncertainty"] = {
             "calibration": calibration(calibration_root),
-            "sparsification": sparsification(root),
+            "sparsification": sparsification([read_sensor_frame(f) for f in find_sensor_frames(root)]),
         }
     result["meta"] = {
         "threads": threads,

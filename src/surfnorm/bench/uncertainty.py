@@ -111,15 +111,13 @@ def plane_pixel_errors(normals: np.ndarray, frame) -> tuple[np.ndarray, np.ndarr
     return np.concatenate(errs), np.concatenate(idx)
 
 
-def sparsification(root, *, method: str = "auto") -> dict:
-    """Per real frame under ``root``: the sparsification curve (mean error of the most confident ``SHARES``),
+def sparsification(frames, *, method: str = "auto") -> dict:
+    """Per real frame of ``frames`` (:class:`surfnorm.bench.sensor.SensorFrame`): the sparsification curve (mean error of the most confident ``SHARES``),
     the oracle's, their ratio to the mean over all at 50 %, and Spearman's rank correlation of sigma and error."""
     from .._api import estimate
-    from .sensor import find_sensor_frames, read_sensor_frame
 
-    frames = {}
-    for folder in find_sensor_frames(root):
-        fr = read_sensor_frame(folder)
+    result = {}
+    for fr in frames:
         n, sigma = estimate(fr.depth, fr.K, method=method, uncertainty=True)
         e, idx = plane_pixel_errors(n, fr)
         g = sigma.reshape(-1)[idx].astype(np.float64)
@@ -128,7 +126,7 @@ def sparsification(root, *, method: str = "auto") -> dict:
         curve = [float(by_sigma[: max(1, round(s * e.size))].mean()) for s in SHARES]
         oracle = [float(by_error[: max(1, round(s * e.size))].mean()) for s in SHARES]
         half = SHARES.index(0.5)
-        frames[fr.name] = {
+        result[fr.name] = {
             "curve": curve,
             "oracle": oracle,
             "half": curve[half] / curve[-1],
@@ -136,7 +134,7 @@ def sparsification(root, *, method: str = "auto") -> dict:
             "spearman": spearman(g, e),
             "pixels": int(e.size),
         }
-    return {"method": method, "shares": list(SHARES), "frames": frames}
+    return {"method": method, "shares": list(SHARES), "frames": result}
 
 
 def markdown(cal: dict | None, spars: dict | None) -> str:

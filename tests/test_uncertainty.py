@@ -15,7 +15,6 @@ import pytest
 import surfnorm
 from surfnorm.errors import InputError
 from surfnorm.kernels import uncertainty as U
-from surfnorm.kernels.adaptive_fit import NoiseProfile
 from tests.surfaces import camera
 
 FX = FY = 500.0
@@ -73,22 +72,12 @@ def test_the_analytic_formula_matches_the_spread_of_noisy_fits():
 
 
 def _one_fit_sigma(r, sigma_w, offset=(0.0, 0.0)):
-    """sigma_from_fits on a single fitted pixel (stride 1) holding a fit of the full window of radius r whose
-    residual is sigma_w^2, without gains, floor or misfit."""
+    """The kernel's sigma (degrees) of the pixel's normal from a fit of the full window of radius r (centre
+    ``offset`` from the pixel) whose residual is sigma_w^2, without gains, floor or misfit."""
     u, v = PIXEL
-    H, W = 40, 80
-    z = np.full((H, W), 2.0, np.float32)
-    valid = np.zeros((H, W), bool)
-    valid[int(v), int(u)] = True
-    normals = np.zeros((H, W, 3), np.float32)
-    normals[int(v), int(u)] = _normal(PLANE[1], PLANE[2], PLANE[0], u, v)
-    z[int(v), int(u)] = 1.0 / PLANE[0]
-    fits = np.full((H, W, 5), np.nan, np.float32)
-    fits[int(v), int(u)] = (sigma_w**2, (2 * r + 1) ** 2, r, offset[0], offset[1])
-    profile = NoiseProfile(np.array([2.0]), np.zeros(1), 0.0)
-    cam = surfnorm.Intrinsics(FX, FY, CX, CY)
-    out = U.sigma_from_fits(z, valid, cam, normals, fits, 1, profile, gain=1.0, misfit_gain=0.0, floor=0.0)
-    return float(out[int(v), int(u)])
+    n = _normal(PLANE[1], PLANE[2], PLANE[0], u, v)
+    terms = U.fit_variance(sigma_w**2, (2 * r + 1) ** 2, r, -offset[0], -offset[1], 0.0, 1.0, 0.0)
+    return math.degrees(math.sqrt(U.angle_variance(*n, 1.0 / PLANE[0], u, v, FX, FY, CX, CY, *terms)))
 
 
 @pytest.mark.parametrize("r", [1, 2, 4, 8])

@@ -80,7 +80,7 @@ def _run_uncertain(method, options, z, valid, cam, out, sigma_out, tie_tol=0.0, 
     import math
 
     from .kernels import uncertainty as U
-    from .kernels.adaptive_fit import noise_profile
+    from .kernels.adaptive_fit import noise_profile, radius_table
 
     record: dict = {}
     if method.name != "d2nt_v3":
@@ -88,43 +88,25 @@ def _run_uncertain(method, options, z, valid, cam, out, sigma_out, tie_tol=0.0, 
     normals = _run(method, False, options, z, valid, cam, out, tie_tol, relative, bands)
     fill = options.get("fill", 0.0)
     t = 1.0 if method.name == "adaptive_fit" else record.get("weight", 0.0)
-    sigma_fit = sigma_d2nt = None
     if t > 0.0:
-        sigma_fit = U.sigma_from_fits(
-            z,
+        fitted = U.sigma_from_fits(
             valid,
-            cam,
             normals,
-            record["fits"],
+            record["variance"],
             record["stride"],
-            record["profile"],
-            gain=U.FIT_GAIN,
-            misfit_gain=U.MISFIT_GAIN,
             fill=fill,
+            out=sigma_out if t == 1.0 else None,
+            bands=bands,
         )
     if t < 1.0:
         profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
-        fits = U.neighbourhood_fits(z, valid)
-        sigma_d2nt = U.sigma_from_fits(
-            z,
-            valid,
-            cam,
-            normals,
-            fits,
-            1,
-            profile,
-            gain=U.D2NT_GAIN,
-            misfit_gain=U.D2NT_MISFIT_GAIN,
-            disagreement=U.D2NT_DISAGREEMENT,
-            fill=fill,
+        z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
+        d2nt = U.d2nt_sigma(
+            z, valid, cam, normals, (z0, inv_step, rho), fill=fill, out=sigma_out if t == 0.0 else None, bands=bands
         )
-    if sigma_fit is None:
-        sigma_out[...] = sigma_d2nt
-    elif sigma_d2nt is None:
-        sigma_out[...] = sigma_fit
-    else:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
-        both = np.sqrt((1.0 - t) * np.square(sigma_d2nt) + t * np.square(sigma_fit))
-        sigma_out[...] = np.where(np.isnan(sigma_fit), sigma_d2nt, np.where(np.isnan(sigma_d2nt), sigma_fit, both))
+    if 0.0 < t < 1.0:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
+        both = np.sqrt((1.0 - t) * np.square(d2nt) + t * np.square(fitted))
+        sigma_out[...] = np.where(np.isnan(fitted), d2nt, np.where(np.isnan(d2nt), fitted, both))
     return normals
 
 

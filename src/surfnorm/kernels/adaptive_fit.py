@@ -86,6 +86,7 @@ from .._aot import ahead_of_time
 from .._bands import Offers, Part, whole
 from .._config import njit, pixel, select
 from ._spare import Spares
+from .uncertainty import FIT_GAIN, MISFIT_GAIN, angle_variance, fit_variance
 
 __all__ = [
     "adaptive_fit",
@@ -1444,6 +1445,7 @@ def _adaptive_fit_kernel(
     v1,
     stride,
     info,
+    gains,
 ):
     """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`), in a ``ring`` that holds the
     integral rows up to ``made`` and ``cols`` the column sums after it (:func:`prime`); ``pos``:
@@ -1458,11 +1460,10 @@ def _adaptive_fit_kernel(
     additions in the same order as one sweep, so the same bits; the price is that pass over rows
     0 .. v0 + 2 ``r_max``, mostly column sums (vectorised).
 
-    ``info``: (0, 0, 5) for nothing, or (fitted rows, fitted columns, 5) float32, where fitted pixel (v, stride i)
-    gets the fit its plane came from (row v // stride, column i): its residual per degree of freedom, its number
-    of points, its radius, and the offset (columns, rows) of its window's centre from the pixel (0, 0 for the
-    centred window, +-r for a quadrant); left as it is where a pixel has no fit. Only written (it changes no
-    normal): :mod:`surfnorm.kernels.uncertainty` reads it.
+    ``info``: (0, 0) for nothing, or (fitted rows, fitted columns) float64, where fitted pixel (v, stride i) gets its
+    normal's angular variance (radians^2, :mod:`surfnorm.kernels.uncertainty`) from the fit its plane came from
+    (its residual, points, radius and window offset; the noise at its depth; ``gains``: the noise's and the
+    misfit's variance factors), NaN where it has no fit. Only written (it changes no normal).
     """
     H, W = z.shape
     L = ring.shape[0]
@@ -1533,6 +1534,8 @@ def _adaptive_fit_kernel(
             valid_row[i] = valid[v, stride * i]
             any_valid |= valid_row[i]
         if not any_valid:  # no fits (a LiDAR frame's upper rows): valid_row alone gives the fill and no planes
+            if record:
+                info[v // stride, :] = np.nan
             _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
             continue
         # Each pixel's radius from its depth; then window sums radius by radius, growing the
@@ -1697,20 +1700,32 @@ def _adaptive_fit_kernel(
         if record:
             k = v // stride
             for i in range(n_fit):
+                info[k, i] = np.nan
                 if valid_row[i] and dof[i] > 0.0:
-                    info[k, i, 0] = rss[i] / dof[i]
-                    info[k, i, 1] = dof[i] + 3.0
-                    info[k, i, 2] = r_row[i]
-                    info[k, i, 3] = shift_u[i]
-                    info[k, i, 4] = shift_v[i]
+                    zp = z_row[i]
+                    noise = rho_table[t_row[i]] / (zp * f)
+                    var_g, var_a, c_u, c_v = fit_variance(
+                        rss[i] / dof[i],
+                        dof[i] + 3.0,
+                        r_row[i],
+                        -shift_u[i],
+                        -shift_v[i],
+                        noise * noise,
+                        gains[0],
+                        gains[1],
+                    )
+                    u = stride * i
+                    nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
+                    info[k, i] = angle_variance(nx, ny, nz, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v)
         _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:
             _emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)
 
 
-#: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded.
-_NO_INFO = np.empty((0, 0, 5), np.float32)
+#: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded, and its ``gains`` then.
+_NO_INFO = np.empty((0, 0))
+_NO_GAINS = np.zeros(2)
 
 
 def adaptive_fit(
@@ -1772,7 +1787,8 @@ def adaptive_fit(
         integral rows.
     record : dict, optional
         Filled with what :mod:`surfnorm.kernels.uncertainty` needs: ``"profile"`` (the noise profile),
-        ``"stride"`` and ``"fits"`` (each fitted pixel's fit: see ``info`` of :func:`_adaptive_fit_kernel`).
+        ``"stride"`` and ``"variance"`` (each fitted pixel's angular variance: see ``info`` of
+        :func:`_adaptive_fit_kernel`), with the gains ``FIT_GAIN`` and ``MISFIT_GAIN`` of that module.
         None (default): nothing recorded, nothing spent on it.
     """
     f = math.sqrt(cam.fx * cam.fy)
@@ -1781,10 +1797,11 @@ def adaptive_fit(
     stride = choose_stride(valid) if stride is None else stride
     H = z.shape[0]
     if record is None:
-        info = _NO_INFO
-    else:
-        info = np.full(((H + stride - 1) // stride, (z.shape[1] + stride - 1) // stride, 5), np.nan, np.float32)
-        record.update(stride=stride, fits=info)
+        info, gains = _NO_INFO, _NO_GAINS
+    else:  # every fitted row is written by a band
+        info = np.empty(((H + stride - 1) // stride, (z.shape[1] + stride - 1) // stride))
+        gains = np.array([FIT_GAIN, MISFIT_GAIN])
+        record.update(stride=stride, variance=info)
 
     # bands waiting for the noise take parts of its measuring (Offers.help) until it is done
     offers = None if bands is whole else Offers()
@@ -1872,6 +1889,7 @@ def adaptive_fit(
                 v1,
                 stride,
                 info,
+                gains,
             )
             return True
         finally:

@@ -36,9 +36,10 @@ import math
 
 import numpy as np
 
+from .._bands import whole
 from .._config import njit, pixel
 
-__all__ = ["sigma_from_fits", "neighbourhood_fits", "FIT_GAIN", "D2NT_GAIN", "NO_FIT_DEG"]
+__all__ = ["sigma_from_fits", "d2nt_sigma", "fit_variance", "angle_variance", "FIT_GAIN", "D2NT_GAIN", "NO_FIT_DEG"]
 
 #: Variance factor of the adaptive fit's slopes over the independent-noise formula (1).
 FIT_GAIN = 4.0
@@ -60,7 +61,7 @@ MAX_DEG = 60.0
 
 
 @pixel
-def _terms(s2, n, r, o_u, o_v, noise2, gain, misfit_gain):
+def fit_variance(s2, n, r, o_u, o_v, noise2, gain, misfit_gain):
     """(var_g, var_a, cov(a, g_u), cov(a, g_v)) of a fit (residual per dof s2, n points, radius r) carried to a
     pixel offset (o_u, o_v) from its window's centre: the noise (the residual, at least ``noise2``, times
     ``gain``) averaged over the n points, and the misfit (the residual beyond ``noise2``, times ``misfit_gain``),
@@ -73,230 +74,243 @@ def _terms(s2, n, r, o_u, o_v, noise2, gain, misfit_gain):
 
 
 @pixel
-def _angle(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v):
-    """Eq. (2) in degrees at pixel (u, v) with unit normal (n0, n1, n2) and depth ``zp``."""
+def angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v):
+    """Eq. (2): the normal's angular variance (radians^2) at pixel (u, v) with unit normal (n0, n1, n2) and
+    depth ``zp``; inf where the normal does not face the camera."""
     du = u - cx
     dv = v - cy
     facing = -(n0 * du / fx + n1 * dv / fy + n2)
     if not facing > 1e-6:
-        return 90.0
-    m = 1.0 / (zp * facing)
+        return np.inf
+    zf = zp * facing  # 1 / |m|
     trace = var_g * (fx * fx + du * du + fy * fy + dv * dv) + var_a - 2.0 * (c_u * du + c_v * dv)
     p_u = n0 * fx - n2 * du  # n . J_gu
     p_v = n1 * fy - n2 * dv  # n . J_gv
     along = var_g * (p_u * p_u + p_v * p_v) + var_a * n2 * n2 + 2.0 * n2 * (c_u * p_u + c_v * p_v)
-    return min(math.degrees(math.sqrt(max(trace - along, 0.0)) / m), MAX_DEG)
-
-
-@njit(nogil=True)
-def _fit_terms(z, fits, stride, f, rho_z0, rho_inv_step, rho_t, gain, misfit_gain, terms):
-    """Per fitted pixel: (var_g, the variance of its plane's value at the window's centre, the window's centre
-    offset u, v) into ``terms`` (Hf, Wf, 4); var_g NaN where it has no fit (see :func:`_terms`)."""
-    Hf, Wf = fits.shape[0], fits.shape[1]
-    n_t = rho_t.shape[0]
-    for i in range(Hf):
-        for j in range(Wf):
-            s2 = fits[i, j, 0]
-            if not s2 == s2:
-                terms[i, j, 0] = np.nan
-                continue
-            zf = z[i * stride, j * stride]
-            t = min(max(int((zf - rho_z0) * rho_inv_step), 0), n_t - 1)
-            noise = rho_t[t] / (zf * f)
-            g, a, _, _ = _terms(s2, fits[i, j, 1], fits[i, j, 2], 0.0, 0.0, noise * noise, gain, misfit_gain)
-            terms[i, j, 0] = g
-            terms[i, j, 1] = a
-            terms[i, j, 2] = fits[i, j, 3]
-            terms[i, j, 3] = fits[i, j, 4]
-
-
-@njit(nogil=True)
-def _sigma_kernel(z, valid, normals, fill, fits, terms, stride, cam, disagreement, floor, no_fit, out):
-    H, W = z.shape
-    Hf, Wf = terms.shape[0], terms.shape[1]
-    fx, fy, cx, cy = cam
-    for v in range(H):
-        for u in range(W):
-            n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
-            is_fill = n0 == fill and n1 == fill and n2 == fill
-            if not valid[v, u] or is_fill or not (math.isfinite(n0) and math.isfinite(n1) and math.isfinite(n2)):
-                out[v, u] = np.nan
-                continue
-            # the fitted pixels whose planes this pixel may have taken: itself, or the nearest ones
-            s_g = s_a = s_u = s_v = 0.0
-            k = 0
-            for reach in range(stride - 1, stride + 1):
-                lo_v = max((v - reach + stride - 1) // stride, 0)
-                hi_v = min((v + reach) // stride, Hf - 1)
-                lo_u = max((u - reach + stride - 1) // stride, 0)
-                hi_u = min((u + reach) // stride, Wf - 1)
-                for i in range(lo_v, hi_v + 1):
-                    for j in range(lo_u, hi_u + 1):
-                        g = terms[i, j, 0]
-                        if not g == g:
-                            continue
-                        o_u = (u - j * stride) - terms[i, j, 2]
-                        o_v = (v - i * stride) - terms[i, j, 3]
-                        s_g += g
-                        s_a += terms[i, j, 1] + (o_u * o_u + o_v * o_v) * g
-                        s_u += o_u * g
-                        s_v += o_v * g
-                        k += 1
-                if k > 0 or stride == 1:
-                    break
-            if k == 0:
-                out[v, u] = no_fit
-                continue
-            inv = 1.0 / k
-            sigma = _angle(n0, n1, n2, z[v, u], u, v, fx, fy, cx, cy, s_g * inv, s_a * inv, s_u * inv, s_v * inv)
-            if fits.shape[2] > 5 and fits[v, u, 0] == fits[v, u, 0]:
-                # a normal not taken from this plane (d2nt_v3): how far it is from it counts as error too
-                g_u, g_v, a = fits[v, u, 5], fits[v, u, 6], fits[v, u, 7]
-                m0, m1, m2 = fx * g_u, fy * g_v, a - g_u * (u - cx) - g_v * (v - cy)
-                m_norm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-                if m_norm > 0.0:
-                    c = -(n0 * m0 + n1 * m1 + n2 * m2) / m_norm
-                    off = math.degrees(math.acos(min(max(c, -1.0), 1.0)))
-                    sigma = math.sqrt(sigma * sigma + disagreement * off * off)
-            out[v, u] = min(math.sqrt(sigma * sigma + floor * floor), MAX_DEG)
-
-
-def sigma_from_fits(
-    z,
-    valid,
-    cam,
-    normals,
-    fits,
-    stride,
-    profile,
-    *,
-    gain,
-    misfit_gain,
-    disagreement=0.0,
-    floor=None,
-    fill=0.0,
-    out=None,
-) -> np.ndarray:
-    """Each normal's sigma (degrees; NaN where it is ``fill`` or not finite) from the fits its planes came from.
-
-    ``fits``: (H / stride, W / stride, 5) as ``info`` of the adaptive fit's kernel (residual per dof, points,
-    radius, window offset), NaN where a fitted pixel has no fit; ``profile``: the frame's noise profile (for the
-    residual's floor); ``gain``: the variance factor (``FIT_GAIN`` or ``D2NT_GAIN``); ``misfit_gain``,
-    ``disagreement`` (a weight of the angle to the pixel's own plane in channels 5-7 of ``fits``, where given),
-    ``floor`` (default ``FLOOR_DEG``): see the module's constants.
-    """
-    from .adaptive_fit import radius_table
-
-    z0, inv_step, _, rho_t = radius_table(profile.depths, profile.rho)
-    if out is None:
-        out = np.empty(z.shape, np.float32)
-    fx, fy, cx, cy = float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)
-    terms = np.empty(fits.shape[:2] + (4,))
-    _fit_terms(
-        z,
-        fits,
-        int(stride),
-        math.sqrt(fx * fy),
-        float(z0),
-        float(inv_step),
-        rho_t,
-        float(gain),
-        float(misfit_gain),
-        terms,
-    )
-    _sigma_kernel(
-        z,
-        valid,
-        normals,
-        np.float32(fill),
-        fits,
-        terms,
-        int(stride),
-        (fx, fy, cx, cy),
-        float(disagreement),
-        float(FLOOR_DEG if floor is None else floor),
-        float(NO_FIT_DEG),
-        out,
-    )
-    return out
+    return max(trace - along, 0.0) * zf * zf
 
 
 @pixel
-def _fit3(z, valid, v, u):
-    """(rss / dof, n, g_u, g_v, w at (v, u)) of the least-squares plane of w = 1/z over the valid pixels of the
-    3x3 window centred on (v, u); (inf, 0, 0, 0, 0) where fewer than 4 points or points on a line."""
-    H, W = z.shape
-    n = s_x = s_y = s_xx = s_xy = s_yy = s_w = s_xw = s_yw = s_ww = 0.0
-    for dy in range(-1, 2):
-        y = v + dy
-        if y < 0 or y >= H:
-            continue
-        for dx in range(-1, 2):
-            x = u + dx
-            if x < 0 or x >= W or not valid[y, x]:
-                continue
-            w = 1.0 / z[y, x]
-            n += 1.0
-            s_x += dx
-            s_y += dy
-            s_xx += dx * dx
-            s_xy += dx * dy
-            s_yy += dy * dy
-            s_w += w
-            s_xw += dx * w
-            s_yw += dy * w
-            s_ww += w * w
-    if n < 4.0:
-        return np.inf, 0.0, 0.0, 0.0, 0.0
-    mx, my, mw = s_x / n, s_y / n, s_w / n
-    cxx = s_xx - s_x * mx
-    cxy = s_xy - s_x * my
-    cyy = s_yy - s_y * my
-    cxw = s_xw - s_x * mw
-    cyw = s_yw - s_y * mw
-    cww = s_ww - s_w * mw
-    det = cxx * cyy - cxy * cxy
-    if not det > 1e-6 * cxx * cyy:
-        return np.inf, 0.0, 0.0, 0.0, 0.0
-    g_x = (cyy * cxw - cxy * cyw) / det
-    g_y = (cxx * cyw - cxy * cxw) / det
-    return max(cww - g_x * cxw - g_y * cyw, 0.0) / (n - 3.0), n, g_x, g_y, mw - g_x * mx - g_y * my
+def _has_normal(normals, v, u, fill):
+    """Whether pixel (v, u) holds a normal: finite and not ``fill`` in all three components."""
+    n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
+    return not (n0 == fill and n1 == fill and n2 == fill) and (n0 - n0 == 0.0 and n1 - n1 == 0.0 and n2 - n2 == 0.0)
+
+
+@pixel
+def _degrees(var, floor2):
+    """sigma in degrees from an angular variance (radians^2), ``floor2`` (degrees^2) added, at most ``MAX_DEG``."""
+    return min(math.sqrt(math.degrees(1.0) ** 2 * var + floor2), MAX_DEG)
+
+
+@pixel
+def _noise2(zp, f, rho_z0, rho_inv_step, rho_t):
+    """The frame's noise variance of w = 1/z at depth ``zp``: (rho / (z f))^2, rho from the profile's table."""
+    t = min(max(int((zp - rho_z0) * rho_inv_step), 0), rho_t.shape[0] - 1)
+    s = rho_t[t] / (zp * f)
+    return s * s
 
 
 @njit(nogil=True)
-def _fits3(z, valid, out):
-    """Each valid pixel's best 3x3 plane of inverse depth: of the window centred on it and the four with it at a
-    corner, the one with the smallest residual per dof (a pixel beside a discontinuity is judged by its own
-    side, as DAG takes its gradient from the smoother side): (rss / dof, n, 1, offset u, offset v, g_u, g_v, w at
-    the pixel) into ``out`` (H, W, 8); NaN where no window has a plane."""
-    H, W = z.shape
-    for v in range(H):
+def _pair_sums(var, i, W, total, count):
+    """Fitted row i's variances at full width: at column u, the sum and count of the finite ones among the fitted
+    pixels of columns u and u + 1's pair (u even: its own twice; u odd: its left and right ones)."""
+    Wf = var.shape[1]
+    for u in range(W):
+        j0 = u // 2
+        j1 = min((u + 1) // 2, Wf - 1)
+        a = var[i, j0]
+        b = var[i, j1]
+        ok_a = a == a
+        ok_b = b == b
+        total[u] = (a if ok_a else 0.0) + (b if ok_b else 0.0)
+        count[u] = ok_a + ok_b
+
+
+@njit(nogil=True)
+def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
+    """Rows v0 .. v1 - 1 of sigma: a fitted pixel's own variance; every other pixel with a normal the mean of those
+    of the fitted pixels whose planes it may have taken (with ``stride`` 2: left and right, above and below, or
+    the four diagonal ones; else those of its 5x5 neighbourhood), as the adaptive fit assembles it; ``no_fit``
+    (degrees) where none has one; NaN where there is no normal."""
+    Hf, Wf = var.shape
+    W = valid.shape[1]
+    if stride == 1:
+        for v in range(v0, v1):
+            for u in range(W):
+                x = var[v, u]
+                has = valid[v, u] and _has_normal(normals, v, u, fill)
+                out[v, u] = np.nan if not has else _degrees(x, floor2) if x == x else no_fit
+        return
+    up_t = np.empty(W)
+    up_c = np.empty(W)
+    dn_t = np.empty(W)
+    dn_c = np.empty(W)
+    for v in range(v0, v1):
+        i = v // 2
+        if v % 2 == 0:
+            _pair_sums(var, i, W, up_t, up_c)
+            for u in range(W):
+                out[v, u] = _degrees(up_t[u] / up_c[u], floor2) if up_c[u] > 0 else np.inf
+        else:
+            _pair_sums(var, i, W, up_t, up_c)
+            if i + 1 < Hf:
+                _pair_sums(var, i + 1, W, dn_t, dn_c)
+            else:
+                dn_t[:] = 0.0
+                dn_c[:] = 0.0
+            for u in range(W):
+                c = up_c[u] + dn_c[u]
+                out[v, u] = _degrees((up_t[u] + dn_t[u]) / c, floor2) if c > 0 else np.inf
         for u in range(W):
-            out[v, u, 0] = np.nan
-            if not valid[v, u]:
+            if not (valid[v, u] and _has_normal(normals, v, u, fill)):
+                out[v, u] = np.nan
+            elif out[v, u] == np.inf:  # the few without a neighbour's fit: those of the 5x5 neighbourhood
+                total = 0.0
+                k = 0
+                for ii in range(max((v - 1) // 2, 0), min((v + 2) // 2, Hf - 1) + 1):
+                    for jj in range(max((u - 1) // 2, 0), min((u + 2) // 2, Wf - 1) + 1):
+                        x = var[ii, jj]
+                        if x == x:
+                            total += x
+                            k += 1
+                out[v, u] = _degrees(total / k, floor2) if k > 0 else no_fit
+
+
+def _cam(cam):
+    return float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)
+
+
+def sigma_from_fits(valid, normals, variance, stride, *, floor=None, fill=0.0, out=None, bands=whole) -> np.ndarray:
+    """Each normal's sigma (degrees; NaN where it is ``fill`` or not finite) from the angular variances of the fits
+    its plane came from: ``variance`` (H / stride, W / stride), radians^2, NaN where a fitted pixel has no fit (as
+    the adaptive fit's kernel records it); ``floor`` (degrees, default ``FLOOR_DEG``) added in quadrature.
+    ``bands``: rows on several threads (:mod:`surfnorm._bands`), the same result.
+    """
+    out = np.empty(valid.shape, np.float32) if out is None else out
+    floor2 = float(FLOOR_DEG if floor is None else floor) ** 2
+    args = (valid, normals, np.float32(fill), variance, int(stride), floor2, float(NO_FIT_DEG), out)
+    bands(lambda a, b: _spread(*args, a, b), valid.shape[0])
+    return out
+
+
+# --- d2nt_v3: each pixel's best 3x3 plane ------------------------------------------------------------------------
+
+
+@njit(nogil=True)
+def _centred_fits3(z, valid, out, v0, v1):
+    """Rows v0 .. v1 - 1: the least-squares plane of w = 1/z over the valid pixels of each pixel's 3x3 window (the
+    pixel itself valid or not), offsets from the centre as coordinates: (rss / dof, n, g_u, g_v, w at the centre)
+    into ``out`` (H, W, 5); rss / dof inf where fewer than 4 points or points on a line. The sums come from
+    column sums of three rows, then three columns (separable)."""
+    H, W = z.shape
+    # per column of the current window's three rows: count, sum dy, sum dy^2, sum w, sum dy w, sum w^2
+    col = np.zeros((6, W + 2))
+    for v in range(v0, v1):
+        col[:, :] = 0.0
+        for dy in range(-1, 2):
+            y = v + dy
+            if y < 0 or y >= H:
                 continue
-            best, n_best, g_u, g_v, a = _fit3(z, valid, v, u)
-            o_u = o_v = 0.0
+            for u in range(W):
+                if valid[y, u]:
+                    w = 1.0 / z[y, u]
+                    col[0, u + 1] += 1.0
+                    col[1, u + 1] += dy
+                    col[2, u + 1] += dy * dy
+                    col[3, u + 1] += w
+                    col[4, u + 1] += dy * w
+                    col[5, u + 1] += w * w
+        for u in range(W):
+            # columns u - 1, u, u + 1 at col[:, u], col[:, u + 1], col[:, u + 2]: dx = -1, 0, +1
+            n = col[0, u] + col[0, u + 1] + col[0, u + 2]
+            s_x = col[0, u + 2] - col[0, u]
+            s_xx = col[0, u + 2] + col[0, u]
+            s_y = col[1, u] + col[1, u + 1] + col[1, u + 2]
+            s_xy = col[1, u + 2] - col[1, u]
+            s_yy = col[2, u] + col[2, u + 1] + col[2, u + 2]
+            s_w = col[3, u] + col[3, u + 1] + col[3, u + 2]
+            s_xw = col[3, u + 2] - col[3, u]
+            s_yw = col[4, u] + col[4, u + 1] + col[4, u + 2]
+            s_ww = col[5, u] + col[5, u + 1] + col[5, u + 2]
+            out[v, u, 0] = np.inf
+            if n < 4.0:
+                continue
+            inv_n = 1.0 / n
+            mx, my, mw = s_x * inv_n, s_y * inv_n, s_w * inv_n
+            cxx = s_xx - s_x * mx
+            cxy = s_xy - s_x * my
+            cyy = s_yy - s_y * my
+            cxw = s_xw - s_x * mw
+            cyw = s_yw - s_y * mw
+            cww = s_ww - s_w * mw
+            det = cxx * cyy - cxy * cxy
+            if not det > 1e-6 * cxx * cyy:
+                continue
+            g_x = (cyy * cxw - cxy * cyw) / det
+            g_y = (cxx * cyw - cxy * cxw) / det
+            out[v, u, 0] = max(cww - g_x * cxw - g_y * cyw, 0.0) / (n - 3.0)
+            out[v, u, 1] = n
+            out[v, u, 2] = g_x
+            out[v, u, 3] = g_y
+            out[v, u, 4] = mw - g_x * mx - g_y * my
+
+
+@njit(nogil=True)
+def _d2nt_sigma(
+    z, valid, normals, fill, fits, cam, noise, gain, misfit_gain, disagreement, floor2, no_fit, out, v0, v1
+):
+    """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma: of the 3x3 windows centred on the pixel and with it at a corner
+    (``fits`` of :func:`_centred_fits3`), the one with the smallest residual per dof (a pixel beside a
+    discontinuity is judged by its own side, as DAG takes its gradient from the smoother side): its plane's
+    variance at the pixel (:func:`fit_variance` at r = 1), plus ``disagreement`` times the squared sine of the angle
+    between the normal and that plane's."""
+    H, W = z.shape
+    fx, fy, cx, cy = cam
+    f = math.sqrt(fx * fy)
+    rho_z0, rho_inv_step, rho_t = noise
+    for v in range(v0, v1):
+        for u in range(W):
+            if not (valid[v, u] and _has_normal(normals, v, u, fill)):
+                out[v, u] = np.nan
+                continue
+            best = fits[v, u, 0]
+            bv, bu = v, u
             for dv in (-1, 1):
                 for du in (-1, 1):
-                    s2, n, gu_k, gv_k, a_k = _fit3(z, valid, v + dv, u + du)
-                    if s2 < best:
-                        best, n_best, o_u, o_v = s2, n, float(du), float(dv)
-                        g_u, g_v, a = gu_k, gv_k, a_k - gu_k * du - gv_k * dv
-            if n_best > 0.0:
-                out[v, u, 0] = best
-                out[v, u, 1] = n_best
-                out[v, u, 2] = 1.0
-                out[v, u, 3] = o_u
-                out[v, u, 4] = o_v
-                out[v, u, 5] = g_u
-                out[v, u, 6] = g_v
-                out[v, u, 7] = a
+                    y, x = v + dv, u + du
+                    if 0 <= y < H and 0 <= x < W and fits[y, x, 0] < best:
+                        best, bv, bu = fits[y, x, 0], y, x
+            if not best < np.inf:
+                out[v, u] = no_fit
+                continue
+            zp = z[v, u]
+            o_u, o_v = float(u - bu), float(v - bv)
+            g, a, c_u, c_v = fit_variance(
+                best, fits[bv, bu, 1], 1.0, o_u, o_v, _noise2(zp, f, rho_z0, rho_inv_step, rho_t), gain, misfit_gain
+            )
+            n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
+            var = angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g, a, c_u, c_v)
+            # the plane's own normal at the pixel, and the sine of its angle to d2nt_v3's
+            g_u, g_v = fits[bv, bu, 2], fits[bv, bu, 3]
+            m0 = fx * g_u
+            m1 = fy * g_v
+            m2 = fits[bv, bu, 4] + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
+            m2n = m0 * m0 + m1 * m1 + m2 * m2
+            if m2n > 0.0:
+                dot = n0 * m0 + n1 * m1 + n2 * m2
+                var += disagreement * max(1.0 - dot * dot / m2n, 0.0)
+            out[v, u] = _degrees(var, floor2)
 
 
-def neighbourhood_fits(z, valid) -> np.ndarray:
-    """Every valid pixel's best 3x3 plane fit of inverse depth, as ``fits`` of :func:`sigma_from_fits` (stride 1),
-    with the plane itself at the pixel (g_u, g_v, w) in channels 5-7."""
-    out = np.empty(z.shape + (8,), np.float32)
-    _fits3(z, valid, out)
+def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole) -> np.ndarray:
+    """``d2nt_v3``'s sigma (degrees; NaN where the normal is ``fill``), see :func:`_d2nt_sigma`, with ``D2NT_GAIN``,
+    ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT`` and ``FLOOR_DEG``; ``noise``: the frame's rho against depth as
+    (z0, inv_step, table) of :func:`surfnorm.kernels.adaptive_fit.radius_table`."""
+    out = np.empty(z.shape, np.float32) if out is None else out
+    fits = np.empty(z.shape + (5,))
+    bands(lambda a, b: _centred_fits3(z, valid, fits, a, b), z.shape[0])
+    args = (z, valid, normals, np.float32(fill), fits, _cam(cam), noise)
+    gains = (float(D2NT_GAIN), float(D2NT_MISFIT_GAIN), float(D2NT_DISAGREEMENT), float(FLOOR_DEG) ** 2)
+    bands(lambda a, b: _d2nt_sigma(*args, *gains, float(NO_FIT_DEG), out, a, b), z.shape[0])
     return out

@@ -70,7 +70,7 @@ sensor's own focal length in its own pixels).
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -120,6 +120,25 @@ class Sensor:
     matcher: bool = False  # disparity: depth from OpenCV's SGBM on a rendered, textured stereo pair (see _stereo)
 
 
+#: The RealSense D435 model, also behind a spatial filter (``post_filtered``).
+_D435 = Sensor(
+    "d435",
+    "active stereo, RealSense D435: ~0.08 px RMS disparity noise (correlated), 1/32-px steps, B 50 mm, 0.7 m",
+    "disparity",
+    distance_m=0.7,
+    focal_px=640.0,
+    baseline_m=0.050,
+    disparity_step_px=1 / 32,
+    disparity_noise_px=0.05,
+    disparity_corr_px=0.06,
+    corr_width_px=2.0,
+    depth_step_m=0.001,
+    shadow=True,
+    edge_width=1,
+    edge_dropout=0.3,
+    flying=0.3,
+)
+
 SENSORS: dict[str, Sensor] = {
     s.name: s
     for s in (
@@ -154,23 +173,7 @@ SENSORS: dict[str, Sensor] = {
             edge_dropout=0.6,
             flying=0.05,
         ),
-        Sensor(
-            "d435",
-            "active stereo, RealSense D435: ~0.08 px RMS disparity noise (correlated), 1/32-px steps, B 50 mm, 0.7 m",
-            "disparity",
-            distance_m=0.7,
-            focal_px=640.0,
-            baseline_m=0.050,
-            disparity_step_px=1 / 32,
-            disparity_noise_px=0.05,
-            disparity_corr_px=0.06,
-            corr_width_px=2.0,
-            depth_step_m=0.001,
-            shadow=True,
-            edge_width=1,
-            edge_dropout=0.3,
-            flying=0.3,
-        ),
+        _D435,
         Sensor(
             "kinect_v1_raw",
             "raw structured light, Kinect v1/Xtion (TUM RGB-D, NYU raw, SUN RGB-D): disparity error correlated over "
@@ -199,24 +202,12 @@ SENSORS: dict[str, Sensor] = {
             baseline_m=0.12,
             matcher=True,
         ),
-        Sensor(
-            "post_filtered",
-            "active stereo behind a camera's spatial filter (RealSense-like): D435 noise, smoothed over ~3 px "
+        replace(
+            _D435,
+            name="post_filtered",
+            summary="active stereo behind a camera's spatial filter (RealSense-like): D435 noise, smoothed over ~3 px "
             "(edge-preserving, in disparity), then stored in millimetres; 0.7 m",
-            "disparity",
-            distance_m=0.7,
-            focal_px=640.0,
-            baseline_m=0.050,
-            disparity_step_px=1 / 32,
-            disparity_noise_px=0.05,
-            disparity_corr_px=0.06,
-            corr_width_px=2.0,
             smooth_px=3.0,
-            depth_step_m=0.001,
-            shadow=True,
-            edge_width=1,
-            edge_dropout=0.3,
-            flying=0.3,
         ),
         Sensor(
             "smooth_error",

@@ -76,7 +76,7 @@ def _one_fit_sigma(r, sigma_w, offset=(0.0, 0.0)):
     ``offset`` from the pixel) whose residual is sigma_w^2, without gains, floor or misfit."""
     u, v = PIXEL
     n = _normal(PLANE[1], PLANE[2], PLANE[0], u, v)
-    terms = U.fit_variance(sigma_w**2, (2 * r + 1) ** 2, r, -offset[0], -offset[1], 0.0, 1.0, 0.0)
+    terms = U.fit_variance(sigma_w**2, (2 * r + 1) ** 2, r, -offset[0], -offset[1], sigma_w**2, 1.0, 0.0, 0.0)
     return math.degrees(math.sqrt(U.angle_variance(*n, 1.0 / PLANE[0], u, v, FX, FY, CX, CY, *terms)))
 
 
@@ -85,6 +85,19 @@ def _one_fit_sigma(r, sigma_w, offset=(0.0, 0.0)):
 def test_sigma_of_an_exact_plane_with_known_noise_is_the_analytic_one(r, sigma_w):
     u, v = PIXEL
     assert _one_fit_sigma(r, sigma_w) == pytest.approx(_analytic_sigma_deg(PLANE, r, sigma_w, u, v), rel=0.10)
+
+
+def test_on_a_plane_with_white_noise_sigma_is_the_rms_error():
+    """End to end: adaptive_fit's normals on a tilted plane with white noise in inverse depth, against the
+    plane's exact normals; sigma without its floor predicts their RMS error within 10 %."""
+    z, K = _noisy_plane(3e-3, shape=(240, 320))
+    exact = surfnorm.estimate(_noisy_plane(0.0, shape=(240, 320))[0], K, method="adaptive_fit")
+    n, sigma = surfnorm.estimate(z, K, method="adaptive_fit", uncertainty=True)
+    inner = (slice(20, -20), slice(20, -20))
+    error = np.degrees(np.arccos(np.clip(np.sum(n * exact, -1), -1.0, 1.0)))[inner]
+    rms_error = math.sqrt(np.mean(np.square(error.astype(np.float64))))
+    rms_sigma = math.sqrt(np.mean(np.square(_core(sigma[inner]))))
+    assert rms_sigma == pytest.approx(rms_error, rel=0.10)
 
 
 def test_a_quadrant_window_is_less_certain_at_its_corner():

@@ -74,8 +74,33 @@ except Exception:  # another Numba's internals: its own behaviour stays
     pass
 
 
+def _package_stamp() -> tuple[int, int, int]:
+    """(how many, latest modification in ns, total size) of the package's ``.py`` files, read once per process."""
+    global _STAMP
+    if _STAMP is None:
+        root = os.path.dirname(os.path.abspath(__file__))
+        count = latest = total = 0
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = [d for d in dirs if d != "__pycache__"]
+            for name in files:
+                if name.endswith(".py"):
+                    st = os.stat(os.path.join(folder, name))
+                    count, latest, total = count + 1, max(latest, st.st_mtime_ns), total + st.st_size
+        _STAMP = (count, latest, total)
+    return _STAMP
+
+
+_STAMP: tuple[int, int, int] | None = None
+
+
 class _SafeCache(caching.FunctionCache):
-    """Numba's disk cache of one kernel, where a damaged or concurrently written cache never fails a call.
+    """Numba's disk cache of one kernel, where a damaged or concurrently written cache never fails a call, and
+    which is stale once any of the package's sources changed.
+
+    Numba judges a cached kernel by its own file only (its modification time and size), but a kernel compiles
+    in the functions it calls from other modules (a pixel function of :mod:`surfnorm.kernels.uncertainty` inside
+    the adaptive fit's kernel): after an edit there, the cache would keep running the old code. So the stamp
+    also holds :func:`_package_stamp`.
 
     Numba raises from its cache when an index file cannot be unpickled (truncated, overwritten by a crashed or
     concurrent writer, or left by another Numba), and when saving fails (a full disk, a read-only folder, or
@@ -83,6 +108,12 @@ class _SafeCache(caching.FunctionCache):
     compiled. Here a cache that cannot be loaded is a miss (the kernel compiles), and a save that fails removes
     the index it could not read and tries once more, else leaves the cache as it is.
     """
+
+    def __init__(self, py_func):
+        super().__init__(py_func)
+        cache_file = getattr(self, "_cache_file", None)
+        if cache_file is not None and hasattr(cache_file, "_source_stamp"):  # (another Numba: its own stamp)
+            cache_file._source_stamp = (cache_file._source_stamp, _package_stamp())
 
     def load_overload(self, sig, target_context):
         try:

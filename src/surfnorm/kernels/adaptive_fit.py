@@ -86,7 +86,7 @@ from .._aot import ahead_of_time
 from .._bands import Offers, Part, whole
 from .._config import njit, pixel, select
 from ._spare import Spares
-from .uncertainty import FIT_GAIN, MISFIT_GAIN, angle_variance, fit_variance
+from .uncertainty import MISFIT_GAIN, MISFIT_SIGNIFICANCE, angle_variance, fit_variance, noise_gain
 
 __all__ = [
     "adaptive_fit",
@@ -490,6 +490,12 @@ class NoiseProfile(NamedTuple):
         (a stereo network's float output) shows less at stride 1 than here; curvature raises
         only the first (a sphere filling the frame), fine detail only the second (a tree's
         foliage), noise both. The 12 3F2N sample frames give 0.000-0.012.
+    correlation : float
+        The clipped mean square of the second differences at stride 2 over that at stride 1: 1 for noise
+        independent from pixel to pixel, more where neighbours' errors go together (a matcher's window, a
+        spatial filter: 1.3 for the simulated raw Kinect v1, about 3 for SGBM, 11 for error smooth over 2
+        pixels), where a fitted slope moves more than its residual says. Curvature raises it too. 1 without
+        enough samples.
     """
 
     depths: np.ndarray
@@ -498,6 +504,20 @@ class NoiseProfile(NamedTuple):
     terraced: float = 0.0
     step: float = 0.0
     smooth: float = 0.0
+    correlation: float = 1.0
+
+
+def _correlation(rms, starts, min_samples):
+    """:attr:`NoiseProfile.correlation` from the clipped RMS ``rms`` (3, nbins) of the second differences at
+    strides 1, 2 and 4 and the bins' ``starts``: the mean square at stride 2 over that at stride 1, over the bins
+    with at least ``min_samples`` samples (weighted by their samples); 1 without any."""
+    num = den = 0.0
+    for b in range(rms.shape[1]):
+        n = starts[b + 1] - starts[b]
+        if n >= min_samples and rms[0, b] > 0.0:
+            num += n * rms[1, b] * rms[1, b] / (rms[0, b] * rms[0, b])
+            den += n
+    return num / den if den > 0.0 else 1.0
 
 
 def terrace_statistics(jumps: np.ndarray, changed: int) -> tuple[float, float]:
@@ -545,7 +565,8 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
     centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
     terraced, step = terraces.result()
-    return NoiseProfile(centres, rho, median.result() / 0.6745, terraced, step, smooth.result())
+    correlation = _correlation(ms, starts, MIN_SAMPLES)
+    return NoiseProfile(centres, rho, median.result() / 0.6745, terraced, step, smooth.result(), correlation)
 
 
 @ahead_of_time
@@ -1713,6 +1734,7 @@ def _adaptive_fit_kernel(
                         noise * noise,
                         gains[0],
                         gains[1],
+                        gains[2],
                     )
                     u = stride * i
                     nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
@@ -1725,7 +1747,7 @@ def _adaptive_fit_kernel(
 
 #: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded, and its ``gains`` then.
 _NO_INFO = np.empty((0, 0))
-_NO_GAINS = np.zeros(2)
+_NO_GAINS = np.zeros(3)
 
 
 def adaptive_fit(
@@ -1800,7 +1822,8 @@ def adaptive_fit(
         info, gains = _NO_INFO, _NO_GAINS
     else:  # every fitted row is written by a band
         info = np.empty(((H + stride - 1) // stride, (z.shape[1] + stride - 1) // stride))
-        gains = np.array([FIT_GAIN, MISFIT_GAIN])
+        gains = np.zeros(3)  # the noise's variance factor, set once the profile is known; misfit's; significance
+        gains[1:] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
         record.update(stride=stride, variance=info)
 
     # bands waiting for the noise take parts of its measuring (Offers.help) until it is done
@@ -1819,6 +1842,7 @@ def adaptive_fit(
                 offers.close()
         if record is not None:
             record["profile"] = p
+            gains[0] = noise_gain(p)
         if use is not None and not use(p):
             return None
         return radius_table(p.depths, p.rho, alpha=alpha, window=window, max_window=max_window)

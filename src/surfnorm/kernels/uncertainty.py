@@ -41,10 +41,16 @@ from .._config import njit, pixel
 
 __all__ = ["sigma_from_fits", "d2nt_sigma", "fit_variance", "angle_variance", "FIT_GAIN", "D2NT_GAIN", "NO_FIT_DEG"]
 
-#: Variance factor of the adaptive fit's slopes over the independent-noise formula (1).
-FIT_GAIN = 4.0
+#: Variance factor of the adaptive fit's slopes over the independent-noise formula (1), times the frame's
+#: ``NoiseProfile.correlation`` (at least 1, at most ``MAX_CORRELATION``): :func:`noise_gain`.
+FIT_GAIN = 1.0
+#: The most that a frame's noise correlation multiplies the slopes' variance by.
+MAX_CORRELATION = 16.0
 #: Variance factor of the 3x3 fits that stand for ``d2nt_v3``'s gradients.
 D2NT_GAIN = 1.0
+#: How far (in standard deviations of a residual per degree of freedom under noise alone) a fit's residual must
+#: exceed the noise before the excess counts as misfit.
+MISFIT_SIGNIFICANCE = 3.0
 #: Variance factor of the misfit (a fit's residual beyond the noise), which tilts a plane by about its size over
 #: the window's radius, however many points it has.
 MISFIT_GAIN = 1.0
@@ -61,16 +67,25 @@ MAX_DEG = 60.0
 
 
 @pixel
-def fit_variance(s2, n, r, o_u, o_v, noise2, gain, misfit_gain):
+def fit_variance(s2, n, r, o_u, o_v, noise2, gain, misfit_gain, significance):
     """(var_g, var_a, cov(a, g_u), cov(a, g_v)) of a fit (residual per dof s2, n points, radius r) carried to a
-    pixel offset (o_u, o_v) from its window's centre: the noise (the residual, at least ``noise2``, times
-    ``gain``) averaged over the n points, and the misfit (the residual beyond ``noise2``, times ``misfit_gain``),
+    pixel offset (o_u, o_v) from its window's centre: the frame's noise at its depth (``noise2``, times ``gain``)
+    averaged over the n points, and the misfit (the residual beyond what noise alone gives in
+    ``significance`` standard deviations of a residual of n - 3 degrees of freedom, times ``misfit_gain``),
     which the points do not average away."""
-    s = gain * max(s2, noise2)
-    mis = misfit_gain * max(s2 - noise2, 0.0)
+    s = gain * noise2
+    chance = noise2 * (1.0 + significance * math.sqrt(2.0 / max(n - 3.0, 1.0)))
+    mis = misfit_gain * max(s2 - chance, 0.0)
     spread = r * (r + 1.0) / 3.0
     var_g = s / (n * spread) + mis / spread
     return var_g, s / n + mis + (o_u * o_u + o_v * o_v) * var_g, o_u * var_g, o_v * var_g
+
+
+def noise_gain(profile) -> float:
+    """The noise's variance factor of a frame's fits: ``FIT_GAIN`` times its noise correlation (1 to
+    ``MAX_CORRELATION``; 1 for white noise, whose residual tells a slope's variance as it is)."""
+    c = profile.correlation
+    return FIT_GAIN * (min(max(c, 1.0), MAX_CORRELATION) if c == c else 1.0)
 
 
 @pixel
@@ -258,7 +273,22 @@ def _centred_fits3(z, valid, out, v0, v1):
 
 @njit(nogil=True)
 def _d2nt_sigma(
-    z, valid, normals, fill, fits, cam, noise, gain, misfit_gain, disagreement, floor2, no_fit, out, v0, v1
+    z,
+    valid,
+    normals,
+    fill,
+    fits,
+    cam,
+    noise,
+    gain,
+    misfit_gain,
+    significance,
+    disagreement,
+    floor2,
+    no_fit,
+    out,
+    v0,
+    v1,
 ):
     """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma: of the 3x3 windows centred on the pixel and with it at a corner
     (``fits`` of :func:`_centred_fits3`), the one with the smallest residual per dof (a pixel beside a
@@ -287,7 +317,15 @@ def _d2nt_sigma(
             zp = z[v, u]
             o_u, o_v = float(u - bu), float(v - bv)
             g, a, c_u, c_v = fit_variance(
-                best, fits[bv, bu, 1], 1.0, o_u, o_v, _noise2(zp, f, rho_z0, rho_inv_step, rho_t), gain, misfit_gain
+                best,
+                fits[bv, bu, 1],
+                1.0,
+                o_u,
+                o_v,
+                _noise2(zp, f, rho_z0, rho_inv_step, rho_t),
+                gain,
+                misfit_gain,
+                significance,
             )
             n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
             var = angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g, a, c_u, c_v)
@@ -311,6 +349,12 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole
     fits = np.empty(z.shape + (5,))
     bands(lambda a, b: _centred_fits3(z, valid, fits, a, b), z.shape[0])
     args = (z, valid, normals, np.float32(fill), fits, _cam(cam), noise)
-    gains = (float(D2NT_GAIN), float(D2NT_MISFIT_GAIN), float(D2NT_DISAGREEMENT), float(FLOOR_DEG) ** 2)
+    gains = (
+        float(D2NT_GAIN),
+        float(D2NT_MISFIT_GAIN),
+        float(MISFIT_SIGNIFICANCE),
+        float(D2NT_DISAGREEMENT),
+        float(FLOOR_DEG) ** 2,
+    )
     bands(lambda a, b: _d2nt_sigma(*args, *gains, float(NO_FIT_DEG), out, a, b), z.shape[0])
     return out

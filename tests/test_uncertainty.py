@@ -254,3 +254,74 @@ def test_cli_writes_sigma_into_the_ply_and_beside_the_npy(tmp_path):
     res = run(app, ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "m"), "--uncertainty", "-m", "plane_svd", *k])
     assert res.exit_code == 2 and res.output.count("\n") == 1
     assert "uncertainty: True is available for the methods auto, adaptive_fit, d2nt_v3" in res.output
+
+
+def _naive_spread(has, var, floor):
+    """sigma from the fitted pixels' variances (stride 2), written from the docstring: a fitted pixel its own; a
+    pixel on an even row the mean of its left and right fitted neighbours (or its own), on an odd row of those
+    above and below (or the four diagonal ones); else the mean over the fitted pixels of its 5x5 neighbourhood."""
+    H, W = has.shape
+    out = np.full((H, W), np.nan)
+    for v in range(H):
+        for u in range(W):
+            if not has[v, u]:
+                continue
+            rows = [v] if v % 2 == 0 else [v - 1, v + 1]
+            cols = [u] if u % 2 == 0 else [u - 1, u + 1]
+            near = [var[y // 2, x // 2] for y in rows for x in cols if 0 <= y < H and 0 <= x < W]
+            near = [x for x in near if not np.isnan(x)]
+            if not near:
+                near = [
+                    var[y // 2, x // 2]
+                    for y in range(v - 2, v + 3)
+                    for x in range(u - 2, u + 3)
+                    if 0 <= y < H and 0 <= x < W and y % 2 == 0 and x % 2 == 0 and not np.isnan(var[y // 2, x // 2])
+                ]
+            if not near:
+                out[v, u] = U.NO_FIT_DEG
+                continue
+            out[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * np.mean(near) + floor**2), U.MAX_DEG)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(9, 11), (10, 12), (7, 6)])
+def test_spread_against_a_naive_reference(shape):
+    rng = np.random.default_rng(sum(shape))
+    H, W = shape
+    var = rng.uniform(0, 0.01, ((H + 1) // 2, (W + 1) // 2))
+    var[rng.random(var.shape) < 0.4] = np.nan
+    has = rng.random(shape) < 0.8
+    normals = np.zeros(shape + (3,), np.float32)
+    normals[has] = (0.0, 0.6, -0.8)
+    out = U.sigma_from_fits(np.ones(shape, bool), normals, var, 2, floor=1.5)
+    np.testing.assert_allclose(out, _naive_spread(has, var, 1.5), rtol=1e-6)
+    out_bands = U.sigma_from_fits(
+        np.ones(shape, bool), normals, var, 2, floor=1.5, bands=lambda f, n: [f(0, 3), f(3, n)]
+    )
+    np.testing.assert_array_equal(out, out_bands)
+
+
+def test_centred_3x3_fits_against_least_squares():
+    rng = np.random.default_rng(7)
+    H, W = 8, 9
+    z = rng.uniform(1.0, 2.0, (H, W))
+    valid = rng.random((H, W)) < 0.75
+    fits = np.empty((H, W, 5))
+    U._centred_fits3(z, valid, fits, 0, H)
+    for v in range(H):
+        for u in range(W):
+            pts = [
+                (dx, dy, 1.0 / z[v + dy, u + dx])
+                for dy in (-1, 0, 1)
+                for dx in (-1, 0, 1)
+                if 0 <= v + dy < H and 0 <= u + dx < W and valid[v + dy, u + dx]
+            ]
+            X = np.array([[1.0, dx, dy] for dx, dy, _ in pts]).reshape(-1, 3)
+            if len(pts) < 4 or np.linalg.matrix_rank(X) < 3:
+                assert fits[v, u, 0] == np.inf
+                continue
+            w = np.array([p[2] for p in pts])
+            coef, *_ = np.linalg.lstsq(X, w, rcond=None)
+            rss = float(np.sum((X @ coef - w) ** 2))
+            np.testing.assert_allclose(fits[v, u, 1:], [len(pts), coef[1], coef[2], coef[0]], rtol=1e-9, atol=1e-12)
+            assert fits[v, u, 0] == pytest.approx(rss / (len(pts) - 3), rel=1e-6, abs=1e-15)

@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 from .._bands import whole
-from .._config import njit, pixel
+from .._config import njit, pixel, select
 
 __all__ = ["sigma_from_fits", "d2nt_sigma", "fit_variance", "angle_variance", "FIT_GAIN", "D2NT_GAIN", "NO_FIT_DEG"]
 
@@ -129,17 +129,15 @@ def _noise2(zp, f, rho_z0, rho_inv_step, rho_t):
 @njit(nogil=True)
 def _pair_sums(var, i, W, total, count):
     """Fitted row i's variances at full width: at column u, the sum and count of the finite ones among the fitted
-    pixels of columns u and u + 1's pair (u even: its own twice; u odd: its left and right ones)."""
+    pixels of columns u and u + 1's pair (u even: its own twice; u odd: its left and right ones). Branch-free."""
     Wf = var.shape[1]
     for u in range(W):
-        j0 = u // 2
-        j1 = min((u + 1) // 2, Wf - 1)
-        a = var[i, j0]
-        b = var[i, j1]
+        a = var[i, u >> 1]
+        b = var[i, min((u + 1) >> 1, Wf - 1)]
         ok_a = a == a
         ok_b = b == b
-        total[u] = (a if ok_a else 0.0) + (b if ok_b else 0.0)
-        count[u] = ok_a + ok_b
+        total[u] = select(ok_a, a, 0.0) + select(ok_b, b, 0.0)
+        count[u] = select(ok_a, 1.0, 0.0) + select(ok_b, 1.0, 0.0)
 
 
 @njit(nogil=True)
@@ -159,16 +157,21 @@ def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
         return
     up_t = np.empty(W)
     up_c = np.empty(W)
-    dn_t = np.empty(W)
-    dn_c = np.empty(W)
+    dn_t = np.zeros(W)
+    dn_c = np.zeros(W)
+    made = -1  # the fitted row whose sums up_t, up_c hold
+    scale = math.degrees(1.0) ** 2
     for v in range(v0, v1):
-        i = v // 2
-        if v % 2 == 0:
+        i = v >> 1
+        if made != i:
             _pair_sums(var, i, W, up_t, up_c)
+            made = i
+        row = out[v]
+        if v & 1 == 0:
             for u in range(W):
-                out[v, u] = _degrees(up_t[u] / up_c[u], floor2) if up_c[u] > 0 else np.inf
+                c = up_c[u]
+                row[u] = select(c > 0.0, min(math.sqrt(scale * up_t[u] / max(c, 1.0) + floor2), MAX_DEG), np.inf)
         else:
-            _pair_sums(var, i, W, up_t, up_c)
             if i + 1 < Hf:
                 _pair_sums(var, i + 1, W, dn_t, dn_c)
             else:
@@ -176,11 +179,15 @@ def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
                 dn_c[:] = 0.0
             for u in range(W):
                 c = up_c[u] + dn_c[u]
-                out[v, u] = _degrees((up_t[u] + dn_t[u]) / c, floor2) if c > 0 else np.inf
+                mean = (up_t[u] + dn_t[u]) / max(c, 1.0)
+                row[u] = select(c > 0.0, min(math.sqrt(scale * mean + floor2), MAX_DEG), np.inf)
+            up_t, dn_t = dn_t, up_t  # the row below is the next even row's
+            up_c, dn_c = dn_c, up_c
+            made = i + 1
         for u in range(W):
             if not (valid[v, u] and _has_normal(normals, v, u, fill)):
-                out[v, u] = np.nan
-            elif out[v, u] == np.inf:  # the few without a neighbour's fit: those of the 5x5 neighbourhood
+                row[u] = np.nan
+            elif row[u] == np.inf:  # the few without a neighbour's fit: those of the 5x5 neighbourhood
                 total = 0.0
                 k = 0
                 for ii in range(max((v - 1) // 2, 0), min((v + 2) // 2, Hf - 1) + 1):
@@ -189,7 +196,7 @@ def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
                         if x == x:
                             total += x
                             k += 1
-                out[v, u] = _degrees(total / k, floor2) if k > 0 else no_fit
+                row[u] = _degrees(total / k, floor2) if k > 0 else no_fit
 
 
 def _cam(cam):

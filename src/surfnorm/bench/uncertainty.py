@@ -21,16 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..metrics import angular_error
+
 #: 3F2N frames whose ground truth does not match their depth (see the module docstring).
 SKIP = ("Hard/room", "Medium/chair")
 #: Shares of the most confident pixels on the sparsification curve.
 SHARES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
-
-
-def _angles(n: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """Folded angles (degrees) between rows of unit vectors."""
-    c = np.abs(np.sum(np.asarray(n, np.float64) * np.asarray(ref, np.float64), axis=-1))
-    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
 
 
 def deciles(error: np.ndarray, sigma: np.ndarray, bins: int = 10) -> list[dict]:
@@ -62,7 +58,7 @@ def calibration(root=None, sensors=None, *, method: str = "auto", skip=SKIP, see
             z = simulate(fr.depth, fr.K, s, seed=frame_seed(seed, name, s), mask=fr.mask, normals=fr.normals)
             n, sigma = estimate(z, fr.K, method=method, uncertainty=True, threads=1)
             m = fr.mask & (z > 0) & np.isfinite(sigma)
-            errors.append(_angles(n[m], fr.normals[m]))
+            errors.append(angular_error(n, fr.normals)[m])
             sigmas.append(sigma[m].astype(np.float64))
         e, g = np.concatenate(errors), np.concatenate(sigmas)
         d = deciles(e, g)
@@ -99,14 +95,15 @@ def spearman(a: np.ndarray, b: np.ndarray) -> float:
 def plane_pixel_errors(normals: np.ndarray, frame) -> tuple[np.ndarray, np.ndarray]:
     """(error in degrees, flat index) of every reference-plane pixel of a sensor frame with a normal (gt.npy's
     pixels for a rendered frame)."""
-    has = np.isfinite(normals).all(-1) & np.any(normals != 0, -1)
     if frame.planes is None:
-        m = has & np.any(frame.gt != 0, -1)
-        return _angles(normals[m], frame.gt[m]), np.flatnonzero(m)
+        err = angular_error(normals, frame.gt)
+        m = np.isfinite(err)
+        return err[m], np.flatnonzero(m)
     errs, idx = [], []
     for pn, pm in zip(*frame.planes):
-        m = pm & has
-        errs.append(_angles(normals[m], pn))
+        err = angular_error(normals, np.broadcast_to(pn, normals.shape))
+        m = pm & np.isfinite(err)
+        errs.append(err[m])
         idx.append(np.flatnonzero(m))
     return np.concatenate(errs), np.concatenate(idx)
 

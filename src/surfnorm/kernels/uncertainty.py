@@ -220,62 +220,70 @@ def sigma_from_fits(valid, normals, variance, stride, *, floor=None, fill=0.0, o
 
 
 @njit(nogil=True)
-def _centred_fits3(z, valid, out, v0, v1):
-    """Rows v0 .. v1 - 1: the least-squares plane of w = 1/z over the valid pixels of each pixel's 3x3 window (the
-    pixel itself valid or not), offsets from the centre as coordinates: (rss / dof, n, g_u, g_v, w at the centre)
-    into ``out`` (H, W, 5); rss / dof inf where fewer than 4 points or points on a line. The sums come from
-    column sums of three rows, then three columns (separable)."""
+def _fit3_row(z, valid, v, col, dst):
+    """Row v: the least-squares plane of w = 1/z over the valid pixels of each pixel's 3x3 window (the pixel
+    itself valid or not), offsets from the centre as coordinates: (rss / dof, n, g_u, g_v, w at the centre) into
+    ``dst`` (W, 5); rss / dof inf where fewer than 4 points or points on a line, or v outside the frame. The sums
+    come from column sums of three rows, then three columns (separable); ``col`` is scratch (6, W + 2)."""
     H, W = z.shape
-    # per column of the current window's three rows: count, sum dy, sum dy^2, sum w, sum dy w, sum w^2
-    col = np.zeros((6, W + 2))
-    for v in range(v0, v1):
-        col[:, :] = 0.0
-        for dy in range(-1, 2):
-            y = v + dy
-            if y < 0 or y >= H:
-                continue
-            for u in range(W):
-                if valid[y, u]:
-                    w = 1.0 / z[y, u]
-                    col[0, u + 1] += 1.0
-                    col[1, u + 1] += dy
-                    col[2, u + 1] += dy * dy
-                    col[3, u + 1] += w
-                    col[4, u + 1] += dy * w
-                    col[5, u + 1] += w * w
+    dst[:, 0] = np.inf
+    if v < 0 or v >= H:
+        return
+    # per column of the window's three rows: count, sum dy, sum dy^2, sum w, sum dy w, sum w^2
+    col[:, :] = 0.0
+    for dy in range(-1, 2):
+        y = v + dy
+        if y < 0 or y >= H:
+            continue
         for u in range(W):
-            # columns u - 1, u, u + 1 at col[:, u], col[:, u + 1], col[:, u + 2]: dx = -1, 0, +1
-            n = col[0, u] + col[0, u + 1] + col[0, u + 2]
-            s_x = col[0, u + 2] - col[0, u]
-            s_xx = col[0, u + 2] + col[0, u]
-            s_y = col[1, u] + col[1, u + 1] + col[1, u + 2]
-            s_xy = col[1, u + 2] - col[1, u]
-            s_yy = col[2, u] + col[2, u + 1] + col[2, u + 2]
-            s_w = col[3, u] + col[3, u + 1] + col[3, u + 2]
-            s_xw = col[3, u + 2] - col[3, u]
-            s_yw = col[4, u] + col[4, u + 1] + col[4, u + 2]
-            s_ww = col[5, u] + col[5, u + 1] + col[5, u + 2]
-            out[v, u, 0] = np.inf
-            if n < 4.0:
-                continue
-            inv_n = 1.0 / n
-            mx, my, mw = s_x * inv_n, s_y * inv_n, s_w * inv_n
-            cxx = s_xx - s_x * mx
-            cxy = s_xy - s_x * my
-            cyy = s_yy - s_y * my
-            cxw = s_xw - s_x * mw
-            cyw = s_yw - s_y * mw
-            cww = s_ww - s_w * mw
-            det = cxx * cyy - cxy * cxy
-            if not det > 1e-6 * cxx * cyy:
-                continue
-            g_x = (cyy * cxw - cxy * cyw) / det
-            g_y = (cxx * cyw - cxy * cxw) / det
-            out[v, u, 0] = max(cww - g_x * cxw - g_y * cyw, 0.0) / (n - 3.0)
-            out[v, u, 1] = n
-            out[v, u, 2] = g_x
-            out[v, u, 3] = g_y
-            out[v, u, 4] = mw - g_x * mx - g_y * my
+            if valid[y, u]:
+                w = 1.0 / z[y, u]
+                col[0, u + 1] += 1.0
+                col[1, u + 1] += dy
+                col[2, u + 1] += dy * dy
+                col[3, u + 1] += w
+                col[4, u + 1] += dy * w
+                col[5, u + 1] += w * w
+    for u in range(W):
+        # columns u - 1, u, u + 1 at col[:, u], col[:, u + 1], col[:, u + 2]: dx = -1, 0, +1
+        n = col[0, u] + col[0, u + 1] + col[0, u + 2]
+        s_x = col[0, u + 2] - col[0, u]
+        s_xx = col[0, u + 2] + col[0, u]
+        s_y = col[1, u] + col[1, u + 1] + col[1, u + 2]
+        s_xy = col[1, u + 2] - col[1, u]
+        s_yy = col[2, u] + col[2, u + 1] + col[2, u + 2]
+        s_w = col[3, u] + col[3, u + 1] + col[3, u + 2]
+        s_xw = col[3, u + 2] - col[3, u]
+        s_yw = col[4, u] + col[4, u + 1] + col[4, u + 2]
+        s_ww = col[5, u] + col[5, u + 1] + col[5, u + 2]
+        if n < 4.0:
+            continue
+        inv_n = 1.0 / n
+        mx, my, mw = s_x * inv_n, s_y * inv_n, s_w * inv_n
+        cxx = s_xx - s_x * mx
+        cxy = s_xy - s_x * my
+        cyy = s_yy - s_y * my
+        cxw = s_xw - s_x * mw
+        cyw = s_yw - s_y * mw
+        cww = s_ww - s_w * mw
+        det = cxx * cyy - cxy * cxy
+        if not det > 1e-6 * cxx * cyy:
+            continue
+        g_x = (cyy * cxw - cxy * cyw) / det
+        g_y = (cxx * cyw - cxy * cxw) / det
+        dst[u, 0] = max(cww - g_x * cxw - g_y * cyw, 0.0) / (n - 3.0)
+        dst[u, 1] = n
+        dst[u, 2] = g_x
+        dst[u, 3] = g_y
+        dst[u, 4] = mw - g_x * mx - g_y * my
+
+
+@njit(nogil=True)
+def _centred_fits3(z, valid, out, v0, v1):
+    """Rows v0 .. v1 - 1 of :func:`_fit3_row` into ``out`` (H, W, 5)."""
+    col = np.empty((6, z.shape[1] + 2))
+    for v in range(v0, v1):
+        _fit3_row(z, valid, v, col, out[v])
 
 
 @njit(nogil=True)
@@ -284,7 +292,6 @@ def _d2nt_sigma(
     valid,
     normals,
     fill,
-    fits,
     cam,
     noise,
     gain,
@@ -306,18 +313,24 @@ def _d2nt_sigma(
     fx, fy, cx, cy = cam
     f = math.sqrt(fx * fy)
     rho_z0, rho_inv_step, rho_t = noise
+    # the 3x3 fits of rows v - 1, v, v + 1, row y at y % 3 (:func:`_fit3_row`)
+    fits = np.empty((3, W, 5))
+    col = np.empty((6, W + 2))
+    _fit3_row(z, valid, v0 - 1, col, fits[(v0 - 1) % 3])
+    _fit3_row(z, valid, v0, col, fits[v0 % 3])
     for v in range(v0, v1):
+        _fit3_row(z, valid, v + 1, col, fits[(v + 1) % 3])
         for u in range(W):
             if not (valid[v, u] and _has_normal(normals, v, u, fill)):
                 out[v, u] = np.nan
                 continue
-            best = fits[v, u, 0]
+            best = fits[v % 3, u, 0]
             bv, bu = v, u
             for dv in (-1, 1):
                 for du in (-1, 1):
                     y, x = v + dv, u + du
-                    if 0 <= y < H and 0 <= x < W and fits[y, x, 0] < best:
-                        best, bv, bu = fits[y, x, 0], y, x
+                    if 0 <= x < W and fits[y % 3, x, 0] < best:
+                        best, bv, bu = fits[y % 3, x, 0], y, x
             if not best < np.inf:
                 out[v, u] = no_fit
                 continue
@@ -325,7 +338,7 @@ def _d2nt_sigma(
             o_u, o_v = float(u - bu), float(v - bv)
             g, a, c_u, c_v = fit_variance(
                 best,
-                fits[bv, bu, 1],
+                fits[bv % 3, bu, 1],
                 1.0,
                 o_u,
                 o_v,
@@ -337,10 +350,10 @@ def _d2nt_sigma(
             n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
             var = angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g, a, c_u, c_v)
             # the plane's own normal at the pixel, and the sine of its angle to d2nt_v3's
-            g_u, g_v = fits[bv, bu, 2], fits[bv, bu, 3]
+            g_u, g_v = fits[bv % 3, bu, 2], fits[bv % 3, bu, 3]
             m0 = fx * g_u
             m1 = fy * g_v
-            m2 = fits[bv, bu, 4] + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
+            m2 = fits[bv % 3, bu, 4] + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
             m2n = m0 * m0 + m1 * m1 + m2 * m2
             if m2n > 0.0:
                 dot = n0 * m0 + n1 * m1 + n2 * m2
@@ -353,9 +366,7 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole
     ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT`` and ``FLOOR_DEG``; ``noise``: the frame's rho against depth as
     (z0, inv_step, table) of :func:`surfnorm.kernels.adaptive_fit.radius_table`."""
     out = np.empty(z.shape, np.float32) if out is None else out
-    fits = np.empty(z.shape + (5,))
-    bands(lambda a, b: _centred_fits3(z, valid, fits, a, b), z.shape[0])
-    args = (z, valid, normals, np.float32(fill), fits, _cam(cam), noise)
+    args = (z, valid, normals, np.float32(fill), _cam(cam), noise)
     gains = (
         float(D2NT_GAIN),
         float(D2NT_MISFIT_GAIN),

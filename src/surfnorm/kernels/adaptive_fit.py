@@ -1161,6 +1161,29 @@ def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_
         out_row[3 * u + 2] = select(ok, nz, fill)
 
 
+@njit(noalias=True, _nrt=False)
+def variance_row(
+    z_row, valid_row, v, stride, a, g_u, g_v, rss, dof, r_row, shift_u, shift_v, rho_table, t_row, cam, gains, out_row
+):
+    """Each fitted pixel of row v: its normal's angular variance (radians^2) from the fit its plane came from
+    (:func:`surfnorm.kernels.uncertainty.fit_variance`, :func:`~surfnorm.kernels.uncertainty.angle_variance`:
+    residual per dof, points, radius, window offset ``shift_u``, ``shift_v``, the noise at its depth, ``gains``);
+    NaN where it has no fit. Branch-free."""
+    fx, fy, cx, cy = cam
+    f = math.sqrt(fx * fy)
+    for i in range(out_row.shape[0]):
+        ok = valid_row[i] & (dof[i] > 0.0)
+        d = select(ok, dof[i], 1.0)
+        zp = select(ok, z_row[i], 1.0)
+        noise = rho_table[t_row[i]] / (zp * f)
+        var_g, var_a, c_u, c_v = fit_variance(
+            rss[i] / d, d + 3.0, r_row[i], -shift_u[i], -shift_v[i], noise * noise, gains[0], gains[1], gains[2]
+        )
+        u = stride * i
+        nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
+        out_row[i] = select(ok, angle_variance(nx, ny, nz, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v), np.nan)
+
+
 @pixel
 def unit_normal(zp, a, g_u, g_v, u, v, fx, fy, cx, cy):
     """Eq. (2) at pixel (u, v) of depth ``zp`` from its plane (a: w there, g_u, g_v), as float32."""
@@ -1719,26 +1742,25 @@ def _adaptive_fit_kernel(
                         shift_u[i] = du
                         shift_v[i] = dv
         if record:
-            k = v // stride
-            for i in range(n_fit):
-                info[k, i] = np.nan
-                if valid_row[i] and dof[i] > 0.0:
-                    zp = z_row[i]
-                    noise = rho_table[t_row[i]] / (zp * f)
-                    var_g, var_a, c_u, c_v = fit_variance(
-                        rss[i] / dof[i],
-                        dof[i] + 3.0,
-                        r_row[i],
-                        -shift_u[i],
-                        -shift_v[i],
-                        noise * noise,
-                        gains[0],
-                        gains[1],
-                        gains[2],
-                    )
-                    u = stride * i
-                    nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
-                    info[k, i] = angle_variance(nx, ny, nz, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v)
+            variance_row(
+                z_row,
+                valid_row,
+                v,
+                stride,
+                a,
+                g_u,
+                g_v,
+                rss,
+                dof,
+                r_row,
+                shift_u,
+                shift_v,
+                rho_table,
+                t_row,
+                cam,
+                gains,
+                info[v // stride],
+            )
         _row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:

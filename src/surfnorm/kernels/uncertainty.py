@@ -95,14 +95,12 @@ def angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v)
     du = u - cx
     dv = v - cy
     facing = -(n0 * du / fx + n1 * dv / fy + n2)
-    if not facing > 1e-6:
-        return np.inf
     zf = zp * facing  # 1 / |m|
     trace = var_g * (fx * fx + du * du + fy * fy + dv * dv) + var_a - 2.0 * (c_u * du + c_v * dv)
     p_u = n0 * fx - n2 * du  # n . J_gu
     p_v = n1 * fy - n2 * dv  # n . J_gv
     along = var_g * (p_u * p_u + p_v * p_v) + var_a * n2 * n2 + 2.0 * n2 * (c_u * p_u + c_v * p_v)
-    return max(trace - along, 0.0) * zf * zf
+    return select(facing > 1e-6, max(trace - along, 0.0) * zf * zf, np.inf)
 
 
 @pixel

@@ -62,6 +62,8 @@ D2NT_DISAGREEMENT = 0.3
 FLOOR_DEG = 3.0
 #: Sigma (degrees) of a normal without a fit to judge it by.
 NO_FIT_DEG = 30.0
+#: Square degrees per square radian.
+_DEG2 = math.degrees(1.0) ** 2
 #: The largest sigma (degrees): a direction known to face the camera, nothing more.
 MAX_DEG = 60.0
 
@@ -113,7 +115,7 @@ def _has_normal(normals, v, u, fill):
 @pixel
 def _degrees(var, floor2):
     """sigma in degrees from an angular variance (radians^2), ``floor2`` (degrees^2) added, at most ``MAX_DEG``."""
-    return min(math.sqrt(math.degrees(1.0) ** 2 * var + floor2), MAX_DEG)
+    return min(math.sqrt(_DEG2 * var + floor2), MAX_DEG)
 
 
 @pixel
@@ -158,7 +160,7 @@ def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
     dn_t = np.zeros(W)
     dn_c = np.zeros(W)
     made = -1  # the fitted row whose sums up_t, up_c hold
-    scale = math.degrees(1.0) ** 2
+    scale = _DEG2
     for v in range(v0, v1):
         i = v >> 1
         if made != i:

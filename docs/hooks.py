@@ -3,6 +3,8 @@
 - ``kernels.md``: every registered method and where its code lives, read from ``surfnorm.methods()``;
 - ``reference/cli.md``: the ``--help`` of ``surfnorm`` and of each of its commands;
 - ``changelog.md``: ``CHANGELOG.md`` of the repository;
+- in ``methods.md``, the table that :data:`METHODS_MARKER` marks: every registered method with its category and
+  summary, from the registry's own entries;
 - in ``methods.md``, the section that :data:`OPTIONS_MARKER` marks: every option of every method with its meaning,
   default and allowed values, from the registry's own text (what ``surfnorm methods NAME`` prints).
 
@@ -45,13 +47,31 @@ def on_files(files, config):
 OPTIONS_MARKER = "<!-- options of every method: generated from the registry by docs/hooks.py -->"
 
 
+#: The line of docs/methods.md that the generated table of methods replaces.
+METHODS_MARKER = "<!-- the methods: generated from the registry by docs/hooks.py -->"
+
+
 def on_page_markdown(markdown, page, config, files):
-    """Put the generated options section where methods.md marks it."""
+    """Put the generated table of methods and options section where methods.md marks them."""
     if page.file.src_uri == "methods.md":
-        if OPTIONS_MARKER not in markdown:
-            raise RuntimeError(f"docs/methods.md: expected the line {OPTIONS_MARKER!r}")
-        markdown = markdown.replace(OPTIONS_MARKER, options_section())
+        for marker, section in ((METHODS_MARKER, methods_table), (OPTIONS_MARKER, options_section)):
+            if marker not in markdown:
+                raise RuntimeError(f"docs/methods.md: expected the line {marker!r}")
+            markdown = markdown.replace(marker, section())
     return markdown
+
+
+def methods_table() -> str:
+    """Every registered method: name (the default marked), category, summary; then the ``+mnr`` recipes."""
+    import surfnorm
+    from surfnorm.methods import DEFAULT_METHOD
+
+    lines = ["| name | category | what it is |", "|---|---|---|"]
+    for name, info in surfnorm.methods().items():
+        label = f"`{name}`" + (" (default)" if name == DEFAULT_METHOD else "")
+        lines.append("| " + " | ".join(_cell(c) for c in (label, info.category, info.summary)) + " |")
+    lines.append("| `<any>+mnr` | | any method followed by MNR (Table IV: `3f2n_median+mnr`, `cp2tv+mnr`) |")
+    return "\n".join(lines) + "\n"
 
 
 def options_section() -> str:

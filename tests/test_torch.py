@@ -131,9 +131,28 @@ class TestParity:
 
     def test_every_registered_method_runs_in_torch(self):
         # Issue 16, acceptance 1: every method of surfnorm.methods() (the parity tests above take their
-        # list from st.methods(), so a method missing here would be missing there too)
-        assert st.NUMPY_ONLY == ()
-        assert list(st.methods()) == list(surfnorm.methods())
+        # list from st.methods(), so a method missing here would be missing there too), except those whose
+        # registry entry declares that they have no torch twin (torch=False, issue 29): those are NUMPY_ONLY.
+        declared = tuple(name for name, info in surfnorm.methods().items() if not info.torch)
+        assert st.NUMPY_ONLY == declared
+        assert list(st.methods()) == [name for name in surfnorm.methods() if name not in declared]
+        assert set(st._KERNELS) == set(st.methods())  # no torch kernel without a registry entry that declares it
+        # the methods of issue 16 all keep their torch twin
+        issue_16 = ["d2nt_basic", "d2nt_v2", "d2nt_v3", "cp2tv", "3f2n_mean", "3f2n_median", "sne_roadseg"]
+        issue_16 += ["sda_sne", "plane_svd", "plane_pca", "vector_svd", "area_weighted", "angle_weighted"]
+        assert set(issue_16 + ["adaptive_fit", "auto"]) <= set(st.methods())
+
+    def test_a_method_without_torch_twin_names_itself(self, monkeypatch):
+        """A registered method declared ``torch=False``: surfnorm.torch.estimate raises an InputError that says so."""
+        from surfnorm.methods import _REGISTRY, Method
+
+        entry = Method("numpy_only_test", "averaging", "test", "no twin", kernel="x.y", torch=False)
+        monkeypatch.setitem(_REGISTRY, "numpy_only_test", entry)
+        monkeypatch.setattr(st, "NUMPY_ONLY", (*st.NUMPY_ONLY, "numpy_only_test"))
+        assert "numpy_only_test" not in st.methods()
+        for name in ("numpy_only_test", "numpy_only_test+mnr"):
+            with pytest.raises(InputError, match=r"numpy_only_test.*no torch kernel.*surfnorm\.estimate"):
+                st.estimate(torch.ones(1, 1, 4, 4), torch.eye(3), method=name)
 
     def test_options_match_the_numpy_backend(self):
         for name in TORCH_METHODS:

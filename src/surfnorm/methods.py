@@ -5,17 +5,20 @@ A method name is a recipe. ``d2nt_v3`` is DAG gradients -> D2NT translation
 ``3f2n_median+mnr``, ``cp2tv+mnr``). The CLI and the benchmark read their
 choices from here, so a new estimator appears everywhere once registered.
 
-Every entry below names the kernel that computes it: the function written
-before its ``register`` call imports it (``from .kernels.<module> import
-<function>``) on the method's first run, so that ``import surfnorm`` loads no
-Numba, and a first ``estimate(..., method="d2nt_v3")`` loads only the D2NT
-kernels. ``Method.kernel`` says the same for :func:`methods` to report
-(tests/test_methods.py checks that each run calls the kernel it names).
+Every entry names the function that computes it, ``kernel="surfnorm.kernels.<module>.<function>"``,
+written out once: the entry's ``run`` imports that module on the method's first run and calls the
+function with the checked options (and the entry's ``kernel_args``, e.g. ``gradient="fd"``), so that
+``import surfnorm`` loads no Numba, and a first ``estimate(..., method="d2nt_v3")`` loads only the D2NT
+kernels (tests/test_methods.py checks that each path imports and that each run calls it). ``torch``
+says whether :mod:`surfnorm.torch` has a twin of the kernel; the documentation's method listing and
+kernel page are generated from these entries. How to add an estimator: docs/contributing.md.
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Callable
 
 from ._choices import BORDERS, DLF_NAMES, SDA_BASES, SDA_MAX_ITERATIONS
@@ -120,21 +123,29 @@ MNR_OPTIONS = {
 }
 
 
+def _call_kernel(kernel: str, kernel_args: dict, z, valid, cam, out, **options):
+    """Import the module of ``kernel`` (``"package.module.function"``) and call the function: the run of an entry."""
+    module, _, function = kernel.rpartition(".")
+    return getattr(importlib.import_module(module), function)(z, valid, cam, out, **kernel_args, **options)
+
+
 @dataclass(frozen=True)
 class Method:
     """A registered estimator.
 
     ``run(z, valid, cam, out, **options)`` fills ``out`` (H, W, 3) float32 from
     validated depth ``z`` (H, W) float32, ``valid`` (H, W) bool and
-    :class:`~surfnorm.camera.Intrinsics` ``cam``; it calls the function that
-    ``kernel`` names (``"surfnorm.kernels.<module>.<function>"``).
+    :class:`~surfnorm.camera.Intrinsics` ``cam``. Left out (the usual case), it
+    is derived from the entry: it calls the function that ``kernel`` names
+    (``"surfnorm.kernels.<module>.<function>"``, imported on the first run) with
+    ``kernel_args`` and the method's checked options.
     """
 
     name: str
     category: str
     reference: str
     summary: str
-    run: Callable
+    run: Callable = None  # type: ignore[assignment]  # None: derived from kernel and kernel_args (__post_init__)
     options: dict = field(default_factory=dict)
     mnr: bool = False  # the recipe ends with MNR, which run does itself (fused), taking mnr_dlf
     ties: bool = False  # run takes ``tie_tol`` (near-ties as ties), which the scale-invariant mode passes
@@ -151,13 +162,28 @@ class Method:
     # Checks between options (each option's own checker sees only its value): raises InputError. Called by
     # resolve, so both backends share it.
     check_options: Callable[[dict], None] | None = None
+    # Keyword arguments the derived run passes to the kernel besides the options (d2nt_basic: gradient="fd").
+    kernel_args: dict = field(default_factory=dict)
+    # Whether surfnorm.torch has a twin of the kernel (registered there under the same name). False: the method
+    # runs in surfnorm.estimate only, and surfnorm.torch.estimate says so (InputError).
+    torch: bool = True
+
+    def __post_init__(self):
+        """Derive ``run`` from ``kernel`` and ``kernel_args`` where the entry gives none."""
+        if self.run is None:
+            if not self.kernel:
+                raise ValueError(
+                    f"method {self.name!r}: expected kernel='surfnorm.kernels.<module>.<function>' or a run"
+                )
+            object.__setattr__(self, "run", partial(_call_kernel, self.kernel, dict(self.kernel_args)))
 
 
 @dataclass(frozen=True)
 class MethodInfo:
     """What :func:`surfnorm.methods` reports about a method.
 
-    ``kernel`` is where its kernel lives (``"surfnorm.kernels.<module>.<function>"``).
+    ``kernel`` is where its kernel lives (``"surfnorm.kernels.<module>.<function>"``), ``kernel_args`` what
+    the method passes to it besides its options, ``torch`` whether :mod:`surfnorm.torch` runs it too.
     """
 
     name: str
@@ -166,6 +192,8 @@ class MethodInfo:
     summary: str
     options: dict
     kernel: str = ""
+    kernel_args: dict = field(default_factory=dict)
+    torch: bool = True
 
 
 _REGISTRY: dict[str, Method] = {}
@@ -201,6 +229,8 @@ def methods() -> dict[str, MethodInfo]:
             m.summary,
             {k: o.default for k, o in option_specs(m, False).items()},
             m.kernel,
+            dict(m.kernel_args),
+            m.torch,
         )
         for m in _REGISTRY.values()
     }
@@ -290,34 +320,10 @@ def resolve(name, options: dict) -> tuple[Method, bool, dict]:
 
 
 # --- The estimators ------------------------------------------------------------------------------
-# Each run below imports its kernel where it is called (see the module docstring) and passes the
-# method's checked options on to it; ``kernel=`` names the same function.
+# Each entry's ``kernel=`` names the function that computes it; its run imports it on the first call and
+# passes the method's checked options (and ``kernel_args``) on to it (see the module docstring).
 
 D2NT_PAPER = "Feng et al., D2NT: A High-Performing Depth-to-Normal Translator, ICRA 2023"
-
-
-def _run_d2nt_basic(z, valid, cam, out, **options):
-    from .kernels.translate import d2nt
-
-    return d2nt(z, valid, cam, out, gradient="fd", **options)
-
-
-def _run_d2nt_v2(z, valid, cam, out, **options):
-    from .kernels.translate import d2nt
-
-    return d2nt(z, valid, cam, out, gradient="dag", **options)
-
-
-def _run_d2nt_v3(z, valid, cam, out, **options):
-    from .kernels.d2nt_v3 import d2nt_v3
-
-    return d2nt_v3(z, valid, cam, out, **options)
-
-
-def _run_cp2tv(z, valid, cam, out, **options):
-    from .kernels.translate import cp2tv
-
-    return cp2tv(z, valid, cam, out, **options)
 
 
 register(
@@ -326,10 +332,10 @@ register(
         "depth-to-normal",
         D2NT_PAPER + ", eq. 9",
         "D2NT translation with finite-difference gradients",
-        _run_d2nt_basic,
-        BORDER_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.translate.d2nt",
+        kernel_args=dict(gradient="fd"),
+        options=BORDER_OPTIONS,
+        bands=True,
     )
 )
 register(
@@ -338,11 +344,11 @@ register(
         "depth-to-normal",
         D2NT_PAPER + ", eq. 9-14",
         "D2NT with discontinuity-aware gradient (DAG) filter",
-        _run_d2nt_v2,
-        DAG_OPTIONS,
+        kernel="surfnorm.kernels.translate.d2nt",
+        kernel_args=dict(gradient="dag"),
+        options=DAG_OPTIONS,
         relative=True,
         bands=True,
-        kernel="surfnorm.kernels.translate.d2nt",
     )
 )
 register(
@@ -351,13 +357,12 @@ register(
         "depth-to-normal",
         D2NT_PAPER + ", eq. 9-20, Sec. IV-A",
         "D2NT with DAG filter and MRF-based normal refinement (MNR)",
-        _run_d2nt_v3,
-        DAG_OPTIONS,
+        kernel="surfnorm.kernels.d2nt_v3.d2nt_v3",
+        options=DAG_OPTIONS,
         mnr=True,
         ties=True,
         relative=True,
         bands=True,
-        kernel="surfnorm.kernels.d2nt_v3.d2nt_v3",
     )
 )
 register(
@@ -366,10 +371,9 @@ register(
         "depth-to-normal",
         "Nakagawa et al., Estimating surface normals with depth image gradients for fast and accurate registration, 3DV 2015",
         "cross product of two finite-difference tangent vectors",
-        _run_cp2tv,
-        BORDER_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.translate.cp2tv",
+        options=BORDER_OPTIONS,
+        bands=True,
     )
 )
 
@@ -378,34 +382,16 @@ register(
 THREE_F2N_PAPER = "Fan et al., Three-Filters-to-Normal: An Accurate and Ultrafast Surface Normal Estimator, RA-L 2021"
 
 
-def _run_3f2n_mean(z, valid, cam, out, **options):
-    from .kernels.three_filters import three_filters
-
-    return three_filters(z, valid, cam, out, third="mean", **options)
-
-
-def _run_3f2n_median(z, valid, cam, out, **options):
-    from .kernels.three_filters import three_filters
-
-    return three_filters(z, valid, cam, out, third="median", **options)
-
-
-def _run_sne_roadseg(z, valid, cam, out, **options):
-    from .kernels.three_filters import sne_roadseg
-
-    return sne_roadseg(z, valid, cam, out, **options)
-
-
 register(
     Method(
         "3f2n_mean",
         "depth-to-normal",
         THREE_F2N_PAPER + ", eq. 7-11",
         "3F2N: gradients of inverse depth, n_z as the mean over the 8 neighbours",
-        _run_3f2n_mean,
-        BORDER_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.three_filters.three_filters",
+        kernel_args=dict(third="mean"),
+        options=BORDER_OPTIONS,
+        bands=True,
     )
 )
 register(
@@ -414,10 +400,10 @@ register(
         "depth-to-normal",
         THREE_F2N_PAPER + ", eq. 7-11",
         "3F2N: gradients of inverse depth, n_z as the median over the 8 neighbours",
-        _run_3f2n_median,
-        BORDER_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.three_filters.three_filters",
+        kernel_args=dict(third="median"),
+        options=BORDER_OPTIONS,
+        bands=True,
     )
 )
 register(
@@ -427,10 +413,9 @@ register(
         "Fan et al., SNE-RoadSeg: Incorporating Surface Normal Information into Semantic Segmentation "
         "for Accurate Freespace Detection, ECCV 2020, Sec. 3.1",
         "SNE of SNE-RoadSeg: 3F2N gradients, unit neighbour normals fused through the polar angle",
-        _run_sne_roadseg,
-        BORDER_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.three_filters.sne_roadseg",
+        options=BORDER_OPTIONS,
+        bands=True,
     )
 )
 
@@ -455,12 +440,6 @@ SDA_OPTIONS = {
 }
 
 
-def _run_sda_sne(z, valid, cam, out, **options):
-    from .kernels.sda import sda_sne
-
-    return sda_sne(z, valid, cam, out, **options)
-
-
 register(
     Method(
         "sda_sne",
@@ -468,12 +447,11 @@ register(
         "Ming et al., SDA-SNE: Spatial Discontinuity-Aware Surface Normal Estimation via Multi-Directional "
         "Dynamic Programming, 3DV 2022",
         "depth gradients chosen by multi-directional dynamic programming, then CP2TV",
-        _run_sda_sne,
-        SDA_OPTIONS,
+        kernel="surfnorm.kernels.sda.sda_sne",
+        options=SDA_OPTIONS,
         ties=True,
         equivariant=False,
         bands=True,
-        kernel="surfnorm.kernels.sda.sda_sne",
     )
 )
 
@@ -491,36 +469,6 @@ WINDOW_OPTIONS = {
 }
 
 
-def _run_plane_svd(z, valid, cam, out, **options):
-    from .kernels.plane_fit import plane_svd
-
-    return plane_svd(z, valid, cam, out, **options)
-
-
-def _run_plane_pca(z, valid, cam, out, **options):
-    from .kernels.plane_fit import plane_pca
-
-    return plane_pca(z, valid, cam, out, **options)
-
-
-def _run_vector_svd(z, valid, cam, out, **options):
-    from .kernels.plane_fit import vector_svd
-
-    return vector_svd(z, valid, cam, out, **options)
-
-
-def _run_area_weighted(z, valid, cam, out, **options):
-    from .kernels.averaging import area_weighted
-
-    return area_weighted(z, valid, cam, out, **options)
-
-
-def _run_angle_weighted(z, valid, cam, out, **options):
-    from .kernels.averaging import angle_weighted
-
-    return angle_weighted(z, valid, cam, out, **options)
-
-
 register(
     Method(
         "plane_svd",
@@ -528,12 +476,11 @@ register(
         "Wang et al., Comparison of local plane fitting methods for range data, CVPR 2001 "
         "(as formulated by Klasing et al., ICRA 2009); D2NT Table I",
         "least-squares plane with offset: smallest right singular vector of [Q+, 1]",
-        _run_plane_svd,
-        WINDOW_OPTIONS,
+        kernel="surfnorm.kernels.plane_fit.plane_svd",
+        options=WINDOW_OPTIONS,
         relative=True,
         equivariant=False,
         bands=True,
-        kernel="surfnorm.kernels.plane_fit.plane_svd",
     )
 )
 register(
@@ -543,10 +490,9 @@ register(
         "Klasing et al., Realtime segmentation of range data using continuous nearest neighbors, ICRA 2009; "
         "D2NT Table I",
         "smallest eigenvector of the covariance of the window's points about their centroid",
-        _run_plane_pca,
-        WINDOW_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.plane_fit.plane_pca",
+        options=WINDOW_OPTIONS,
+        bands=True,
     )
 )
 register(
@@ -556,10 +502,9 @@ register(
         "Jordan and Mordohai, A quantitative evaluation of surface normal estimation in point clouds, "
         "IROS 2014; D2NT Table I",
         "smallest right singular vector of the matrix of the vectors q - p",
-        _run_vector_svd,
-        WINDOW_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.plane_fit.vector_svd",
+        options=WINDOW_OPTIONS,
+        bands=True,
     )
 )
 register(
@@ -569,9 +514,8 @@ register(
         "Klasing et al., Comparison of surface normal estimation methods for range sensing applications, "
         "ICRA 2009; D2NT eq. 2 and Table I",
         "mean of the 8 triangle normals around the pixel, weighted by triangle area",
-        _run_area_weighted,
-        bands=True,
         kernel="surfnorm.kernels.averaging.area_weighted",
+        bands=True,
     )
 )
 register(
@@ -581,9 +525,8 @@ register(
         "Jin et al., A comparison of algorithms for vertex normal computation, The Visual Computer 2005; "
         "D2NT eq. 2 and Table I",
         "mean of the 8 triangle normals around the pixel, weighted by their angle at the pixel",
-        _run_angle_weighted,
-        bands=True,
         kernel="surfnorm.kernels.averaging.angle_weighted",
+        bands=True,
     )
 )
 
@@ -635,18 +578,6 @@ def _window_within_max(options: dict) -> None:
         raise InputError(f"window: expected at most max_window ({max_window}), got {window}")
 
 
-def _run_adaptive_fit(z, valid, cam, out, **options):
-    from .kernels.adaptive_fit import adaptive_fit
-
-    return adaptive_fit(z, valid, cam, out, **options)
-
-
-def _run_auto(z, valid, cam, out, **options):
-    from .kernels.auto import auto
-
-    return auto(z, valid, cam, out, **options)
-
-
 register(
     Method(
         "adaptive_fit",
@@ -654,10 +585,9 @@ register(
         SURFNORM + ": least-squares plane of inverse depth over a window sized from the frame's noise, "
         "integral images, edge-aware quadrant windows",
         "plane fit of inverse depth, support sized from the depth's own noise; for sensor depth",
-        _run_adaptive_fit,
-        ADAPTIVE_OPTIONS,
-        bands=True,
         kernel="surfnorm.kernels.adaptive_fit.adaptive_fit",
+        options=ADAPTIVE_OPTIONS,
+        bands=True,
         check_options=_window_within_max,
     )
 )
@@ -667,8 +597,8 @@ register(
         "automatic",
         SURFNORM + ": d2nt_v3 on clean depth, adaptive_fit on sensor depth, chosen from the depth's noise floor",
         "the default: d2nt_v3 or adaptive_fit, chosen from the depth itself",
-        _run_auto,
-        {
+        kernel="surfnorm.kernels.auto.auto",
+        options={
             "tau": Option(
                 1.0,
                 DAG_OPTIONS["tau"].check,
@@ -679,6 +609,5 @@ register(
         ties=True,
         relative=True,
         bands=True,
-        kernel="surfnorm.kernels.auto.auto",
     )
 )

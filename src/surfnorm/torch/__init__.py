@@ -13,7 +13,8 @@ tensor operations instead of Numba kernels. Needs the ``torch`` extra
 (``pip install surfnorm[torch]``); ``import surfnorm`` never imports torch.
 
 Every method of :func:`surfnorm.methods` runs here (each also with
-``+mnr``), and on the CPU gives the NumPy backend's normals to 1e-4 per
+``+mnr``) except those whose registry entry says ``torch=False``
+(:data:`NUMPY_ONLY`; :func:`estimate` names them in its InputError), and on the CPU gives the NumPy backend's normals to 1e-4 per
 component (the tests compare them on the 12 frames of the 3F2N sample, with
 and without holes; ``adaptive_fit`` and ``auto`` also on the real frames of
 the sensor sample, where ``adaptive_fit`` gives the same bits).
@@ -92,10 +93,12 @@ __all__ = ["estimate", "DepthToNormal", "methods"]
 # those of the NumPy backend's method (surfnorm.methods: same names, defaults and checks; ``mnr_dlf`` is
 # taken off and applied here, as MNR runs after the kernel). Whether a recipe ends with MNR (d2nt_v3) is
 # read from the NumPy registry too, so the two backends cannot disagree on a method's options.
-# Adding a method (once surfnorm.methods registers it): write its kernel as
-# ``run(g: _ops.Grid, cam, *, <its options>, fill) -> (B, 3, H, W)`` in a module of this package (g.z is
-# depth with invalid pixels set to 1, g.valid the validity, cam = (fx, fy, cx, cy) each (B, 1, 1)) and add
-# ``_register("name", module.run)`` below; tests/test_torch.py then compares it with the NumPy backend.
+# A method registered with ``torch=False`` (surfnorm.methods) has no kernel here: it is left out of
+# :func:`methods`, and :func:`estimate` names it in an InputError (:data:`NUMPY_ONLY`). Giving one a torch
+# twin: write its kernel as ``run(g: _ops.Grid, cam, *, <its options>, fill) -> (B, 3, H, W)`` in a module
+# of this package (g.z is depth with invalid pixels set to 1, g.valid the validity, cam = (fx, fy, cx, cy)
+# each (B, 1, 1)), add ``_register("name", module.run)`` below and drop ``torch=False`` from its entry;
+# tests/test_torch.py then compares it with the NumPy backend (and fails while the two disagree).
 _KERNELS: dict[str, Callable] = {}
 
 
@@ -133,8 +136,9 @@ _FLOAT64_CAMERA = (_adaptive.adaptive_fit, _adaptive.auto)
 #: depth is brought into range first (:func:`_unit_range`), as PlaneSVD's and SDA-SNE's always is.
 _PLANE_FITS = (_plane_fit.plane_svd, _plane_fit.plane_pca, _plane_fit.vector_svd)
 
-#: Registered methods that run only in :func:`surfnorm.estimate` (none left).
-NUMPY_ONLY = ()
+#: Registered methods that run only in :func:`surfnorm.estimate`: those whose entry in
+#: :mod:`surfnorm.methods` says ``torch=False``.
+NUMPY_ONLY = tuple(name for name, info in numpy_methods().items() if not info.torch)
 
 
 def methods() -> dict[str, dict]:
@@ -143,7 +147,7 @@ def methods() -> dict[str, dict]:
     The same names, options and defaults as :func:`surfnorm.methods`.
     """
     registered = numpy_methods()
-    return {name: dict(info.options) for name, info in registered.items() if name in _KERNELS}
+    return {name: dict(info.options) for name, info in registered.items() if info.torch and name in _KERNELS}
 
 
 def _resolve(name, options: dict):
@@ -153,8 +157,8 @@ def _resolve(name, options: dict):
     base = name[: -len(MNR_SUFFIX)] if name.endswith(MNR_SUFFIX) else name
     if base in NUMPY_ONLY:
         raise InputError(
-            f"method: expected one of {', '.join(methods())} in the torch backend, got {name!r}, which "
-            f"runs only in surfnorm.estimate (NumPy) so far"
+            f"method: expected one of {', '.join(methods())} in the torch backend, got {name!r}, which has no "
+            f"torch kernel (torch=False in surfnorm.methods) and runs only in surfnorm.estimate (NumPy)"
         )
     if base not in _KERNELS:
         raise InputError(

@@ -530,6 +530,19 @@ register(
     )
 )
 
+register(
+    Method(
+        "cross_product",
+        "depth-to-normal",
+        "kornia (Riba et al., Kornia: an Open Source Differentiable Computer Vision Library for PyTorch, "
+        "WACV 2020), kornia.geometry.depth.depth_to_normals",
+        "cross product of the horizontal and vertical central differences of the back-projected points",
+        kernel="surfnorm.kernels.cross_product.cross_product",
+        bands=True,
+        torch=False,
+    )
+)
+
 # --- Sensor depth (ours) -------------------------------------------------------------------------
 
 SURFNORM = "surfnorm (ours, not in the D2NT paper)"

@@ -90,6 +90,7 @@ def test_registered_without_a_torch_twin():
     assert info.kernel == "surfnorm.kernels.cross_product.cross_product" and info.torch is False
     torch = pytest.importorskip("torch")
     import surfnorm.torch as st
+
     assert "cross_product" in st.NUMPY_ONLY and "cross_product" not in st.methods()
     with pytest.raises(InputError, match="cross_product.*no torch kernel"):
         st.estimate(torch.ones(1, 1, 4, 4), torch.eye(3), method="cross_product")

@@ -159,7 +159,7 @@ class TestParity:
             assert st.methods()[name] == surfnorm.methods()[name].options, name
 
     def test_constants_match_the_numpy_kernels(self):
-        # the torch modules copy them so as not to import Numba
+        # one source, surfnorm._constants (loads no Numba), which both backends import (tests/test_project.py)
         from surfnorm.kernels import plane_fit, sda
         from surfnorm.torch import _plane_fit, _sda
 

@@ -22,6 +22,7 @@ from functools import partial
 from typing import Any, Callable
 
 from ._choices import BORDERS, DLF_NAMES, SDA_BASES, SDA_MAX_ITERATIONS
+from ._constants import DLF_DEFAULT, MAX_WINDOW, MNR_DLF_DEFAULT, TRUNCATE_DEFAULT
 from ._validate import check_bool, check_choice, check_fill, check_iterations, check_positive, check_window
 from .errors import InputError
 
@@ -84,7 +85,7 @@ FILL = Option(
 )
 DAG_OPTIONS = {
     "dlf": Option(
-        "1d",
+        DLF_DEFAULT,
         _dlf,
         "discrete Laplace filter of the DAG smoothness (Table II): which neighbours measure how smooth each side "
         "of a pixel is",
@@ -98,7 +99,7 @@ DAG_OPTIONS = {
         "a positive finite number",
     ),
     "truncate": Option(
-        True,
+        TRUNCATE_DEFAULT,
         check_bool,
         "use the truncated softmin (eq. 14): the smoother side alone where one is clearly smoother",
         "True, False",
@@ -115,7 +116,7 @@ BORDER_OPTIONS = {
 }
 MNR_OPTIONS = {
     "mnr_dlf": Option(
-        "alpha",
+        MNR_DLF_DEFAULT,
         _dlf,
         "discrete Laplace filter of the MNR smoothness (authors' code: alpha; Sec. IV-A text: beta)",
         _DLF_ALLOWED,
@@ -569,7 +570,7 @@ ADAPTIVE_OPTIONS = {
         "None, or an odd integer >= 3 and at most max_window",
     ),
     "max_window": Option(
-        31,
+        MAX_WINDOW,
         check_window,
         "largest window side the per-pixel choice may take, also where sparse depth (LiDAR) needs wide windows",
         "an odd integer >= 3",

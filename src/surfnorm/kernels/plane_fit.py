@@ -57,14 +57,16 @@ import math
 
 import numpy as np
 
+from .. import _plane_svd
 from .._bands import whole
 from .._config import njit, pixel
+from .._constants import NEWTON_STEPS, NEWTON_TOL
 from ._rows import facing_sign, point_cloud
 
 __all__ = ["plane_svd", "plane_pca", "vector_svd"]
 
-_NEWTON_STEPS = 64
-_NEWTON_TOL = 1e-14
+# Newton's method on PlaneSVD's characteristic polynomial (shared with the PyTorch backend)
+_NEWTON_STEPS, _NEWTON_TOL = NEWTON_STEPS, NEWTON_TOL
 
 
 @pixel
@@ -233,30 +235,9 @@ def scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
     )
 
 
-@pixel
-def plane_svd_characteristic(c_x, c_y, c_z, s_00, s_01, s_02, s_11, s_12, s_22):
-    """(t_1, t_2, t_3, g_0, g_1, g_2) of det(M - l I) = (m - l) D(l) - m l G(l) (see :func:`plane_svd_lambda`)."""
-    t_1 = s_00 + s_11 + s_22
-    t_2 = s_00 * s_11 - s_01 * s_01 + s_00 * s_22 - s_02 * s_02 + s_11 * s_22 - s_12 * s_12
-    a_00, a_11, a_22 = s_11 * s_22 - s_12 * s_12, s_00 * s_22 - s_02 * s_02, s_00 * s_11 - s_01 * s_01  # adj(S)
-    a_01, a_02, a_12 = s_02 * s_12 - s_01 * s_22, s_01 * s_12 - s_02 * s_11, s_01 * s_02 - s_00 * s_12
-    t_3 = s_00 * a_00 + s_01 * a_01 + s_02 * a_02
-    g_0 = (
-        a_00 * c_x * c_x
-        + a_11 * c_y * c_y
-        + a_22 * c_z * c_z
-        + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z)
-    )
-    c_c = c_x * c_x + c_y * c_y + c_z * c_z
-    c_s_c = (
-        s_00 * c_x * c_x
-        + s_11 * c_y * c_y
-        + s_22 * c_z * c_z
-        + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z)
-    )
-    g_1 = c_s_c - t_1 * c_c
-    g_2 = c_c
-    return t_1, t_2, t_3, g_0, g_1, g_2
+#: (t_1, t_2, t_3, g_0, g_1, g_2) of det(M - l I) = (m - l) D(l) - m l G(l) (see :func:`plane_svd_lambda`): the
+#: arithmetic of :func:`surfnorm._plane_svd.plane_svd_characteristic`, which the PyTorch backend runs on tensors.
+plane_svd_characteristic = pixel(_plane_svd.plane_svd_characteristic)
 
 
 @pixel

@@ -69,14 +69,13 @@ import numpy as np
 from .._bands import whole
 from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from .._config import njit, pixel, select
+from .._constants import SDA_PENALTY  # B, the weight of the state penalty (shared with surfnorm.torch)
 from ._rows import camera_facing, fill_pixel, store_unit_flat, write_unit
 from ._spare import Spares
 from .three_filters import fronto_parallel_fallback, third_nz
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
 
-#: B, the weight of the state penalty in the energies of candidates 0 and 1 (authors' code: 1e10).
-SDA_PENALTY = 1e10
 
 #: The iteration cap of ``iterations=None``, and the bases (defined beside the other choices, in _choices.py).
 MAX_ITERATIONS, BASES = SDA_MAX_ITERATIONS, SDA_BASES

@@ -1,5 +1,5 @@
-"""The adaptive plane fit of inverse depth and ``auto`` on tensors (the twins of ``surfnorm.adaptive_fit`` and
-``surfnorm.auto``).
+"""The adaptive plane fit of inverse depth and ``auto`` on tensors (the twins of
+``surfnorm.kernels.adaptive_fit`` and ``surfnorm.kernels.auto``).
 
 Same rule as the NumPy kernel, step for step (its module docstring explains the method):
 
@@ -46,37 +46,40 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+# One source with the NumPy kernels (surfnorm.kernels.adaptive_fit and surfnorm.kernels.auto), in a module
+# that loads no Numba; tests/test_torch.py checks that the kernels use the same values.
+from .._constants import (
+    _CLIP_ROUNDS,
+    _CLIP_SIGMAS,
+    _FOURTH_RMS,
+    _MAX_GAP,
+    _MAX_SPREAD,
+    _NOISE_SAMPLES,
+    _SMOOTH_GAUSS,
+    _SMOOTH_SAMPLES,
+    _TABLE,
+    ALPHA,
+    CLEAN_FLOOR,
+    KAPPA,
+    MAX_UNREACHED,
+    MAX_WINDOW,
+    MIN_POINTS,
+    MIN_SAMPLES,
+    N_BINS,
+    N_WIDEN,
+    NOISY_FLOOR,
+    RADII,
+    RHO_FLOOR,
+    SHIFTS,
+    SMOOTH_SHARE,
+    TERRACED_HIGH,
+    TERRACED_LOW,
+    TIE,
+)
 from ._ops import Grid
 
-# As surfnorm.adaptive_fit and surfnorm.auto (not imported: those modules load Numba); tests/test_torch.py
-# checks that they agree.
-ALPHA = 1.0
-KAPPA = 3.0
-RHO_FLOOR = 0.25
-MAX_WINDOW = 31  # auto's (adaptive_fit's default)
-RADII = (1, 2, 4, 8, 16, 32, 64, 128)
-N_WIDEN = 3
-MIN_POINTS = 12
-N_BINS = 8
-MIN_SAMPLES = 64
-_NOISE_SAMPLES = 12_000
-_MAX_GAP = 4
-_MAX_SPREAD = 1.25
-_CLIP_SIGMAS = 5.0
-_CLIP_ROUNDS = 5
-_TABLE = 512
-TIE = 1e-3
-MAX_UNREACHED = 0.01
-CLEAN_FLOOR = 0.10
-NOISY_FLOOR = 0.20
-TERRACED_LOW = 0.15
-TERRACED_HIGH = 0.30
-SMOOTH_SHARE = 0.10
-_SMOOTH_GAUSS = 0.12566
-_FOURTH_RMS = math.sqrt(70.0 / 6.0)
-_SMOOTH_SAMPLES = 4096
 #: The quadrant windows (dv, du) / r, in the NumPy kernel's order.
-_SHIFTS = ((1, 1), (1, -1), (-1, 1), (-1, -1))
+_SHIFTS = SHIFTS
 
 _F64 = torch.float64
 

@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import torch
 
+from .._constants import NEWTON_STEPS, NEWTON_TOL
+from .._plane_svd import plane_svd_characteristic
 from ._averaging import point_cloud, ring_offsets
 from ._ops import Grid, facing_sign
 
-# As surfnorm.kernels.plane_fit (not imported: that module loads Numba).
-_NEWTON_STEPS = 64
-_NEWTON_TOL = 1e-14
+# As surfnorm.kernels.plane_fit: one source, in modules that load no Numba.
+_NEWTON_STEPS, _NEWTON_TOL = NEWTON_STEPS, NEWTON_TOL
 
 
 def window_moments(P, valid, window: int):
@@ -122,31 +123,6 @@ def characteristic(a_00, a_01, a_02, a_11, a_12, a_22):
     return t_1, t_2, t_3
 
 
-def plane_svd_characteristic(S, c):
-    """``plane_fit.plane_svd_characteristic``: (t_1, t_2, t_3, g_0, g_1, g_2) of det(M - l I) = (m - l) D(l) - m l G(l)."""
-    s_00, s_01, s_02, s_11, s_12, s_22 = S
-    c_x, c_y, c_z = c
-    t_1 = s_00 + s_11 + s_22
-    t_2 = s_00 * s_11 - s_01 * s_01 + s_00 * s_22 - s_02 * s_02 + s_11 * s_22 - s_12 * s_12
-    a_00, a_11, a_22 = s_11 * s_22 - s_12 * s_12, s_00 * s_22 - s_02 * s_02, s_00 * s_11 - s_01 * s_01  # adj(S)
-    a_01, a_02, a_12 = s_02 * s_12 - s_01 * s_22, s_01 * s_12 - s_02 * s_11, s_01 * s_02 - s_00 * s_12
-    t_3 = s_00 * a_00 + s_01 * a_01 + s_02 * a_02
-    g_0 = (
-        a_00 * c_x * c_x
-        + a_11 * c_y * c_y
-        + a_22 * c_z * c_z
-        + 2.0 * (a_01 * c_x * c_y + a_02 * c_x * c_z + a_12 * c_y * c_z)
-    )
-    c_c = c_x * c_x + c_y * c_y + c_z * c_z
-    c_s_c = (
-        s_00 * c_x * c_x
-        + s_11 * c_y * c_y
-        + s_22 * c_z * c_z
-        + 2.0 * (s_01 * c_x * c_y + s_02 * c_x * c_z + s_12 * c_y * c_z)
-    )
-    return t_1, t_2, t_3, g_0, c_s_c - t_1 * c_c, c_c
-
-
 def plane_svd_step(m, t_1, t_2, t_3, g_0, g_1, g_2, lam):
     """``plane_fit.plane_svd_step``: one Newton step on det(M - l I) at l = lam (0 where the slope is not negative)."""
     d = t_3 + lam * (-t_2 + lam * (t_1 - lam))
@@ -207,7 +183,7 @@ def _fit(kind: str, g: Grid, cam, window: int, fill: float):
         )
     if kind == "plane_svd":
         c = (p_x + s_x / m_safe, p_y + s_y / m_safe, p_z + s_z / m_safe)  # centroid
-        coefficients = plane_svd_characteristic(S, c)
+        coefficients = plane_svd_characteristic(*c, *S)
         lam = smallest_root(plane_svd_step, (m_safe,) + coefficients, active)
         mu = m_safe * lam / (m_safe - lam)
         s_00, s_01, s_02, s_11, s_12, s_22 = S

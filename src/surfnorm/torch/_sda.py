@@ -31,11 +31,9 @@ import torch
 import torch.nn.functional as F
 
 from .._choices import SDA_MAX_ITERATIONS as MAX_ITERATIONS
+from .._constants import SDA_PENALTY  # B, the weight of the state penalty, as surfnorm.kernels.sda
 from ._ops import Grid, pixel_offsets, unit
 from ._sne import camera_facing, candidates, neighbour_maps
-
-#: B, the weight of the state penalty (``surfnorm.kernels.sda.SDA_PENALTY``, not imported: that module loads Numba).
-SDA_PENALTY = 1e10
 
 _P = 2  # padding of the state: every read of a pass stays inside
 _INF = math.inf

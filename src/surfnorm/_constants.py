@@ -1,0 +1,106 @@
+"""Constants that the NumPy kernels and the PyTorch backend share, in one module that loads no Numba.
+
+The kernels (:mod:`surfnorm.kernels.adaptive_fit`, :mod:`surfnorm.kernels.auto`,
+:mod:`surfnorm.kernels.plane_fit`, :mod:`surfnorm.kernels.sda`), their twins in :mod:`surfnorm.torch`
+and the registry (:mod:`surfnorm.methods`) import them from here, so that the two backends cannot drift
+apart. (The Numba kernels are compiled with these values and cached: after changing one, delete the Numba
+cache files in ``src/surfnorm/**/__pycache__``, as for :data:`surfnorm._choices.ORIENTATION_TIE`.)
+"""
+
+from __future__ import annotations
+
+import math
+
+# --- the registry's defaults that auto passes to d2nt_v3 --------------------------------------------
+
+#: Default discrete Laplace filter of the DAG smoothness (``dlf`` of d2nt_v2 and d2nt_v3; Table II).
+DLF_DEFAULT = "1d"
+#: Default discrete Laplace filter of MNR (``mnr_dlf``; the authors' code: alpha, Sec. IV-A text: beta).
+MNR_DLF_DEFAULT = "alpha"
+#: Default of ``truncate``: the truncated softmin (eq. 14).
+TRUNCATE_DEFAULT = True
+
+# --- adaptive_fit (surfnorm.kernels.adaptive_fit, surfnorm.torch._adaptive) ------------------------
+
+#: Radius gain of the starting window: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors
+#: (``python benchmarks/sensor_sim.py``), with KAPPA.
+ALPHA = 1.0
+#: A fit is trusted when its residual per degree of freedom is below (KAPPA * sigma_w)^2.
+KAPPA = 3.0
+#: Lowest noise level (pixel spacings) assumed by the edge test, so clean depth still tolerates rounding.
+RHO_FLOOR = 0.25
+#: Largest window side (odd); the radius is at most (MAX_WINDOW - 1) / 2.
+MAX_WINDOW = 31
+#: The radii a window may take (x2 apart, and ``max_window``'s): few distinct radii in a row keep the box
+#: sums cheap, and a window widened x2 stays on the ladder.
+RADII = (1, 2, 4, 8, 16, 32, 64, 128)
+#: Times a window that fits within the noise is tried twice as wide. On the simulated sensors 2 is better by
+#: 0.15 degrees (13.35 against 13.50); 3 was kept for the wider planes of real scenes (7.5 against 8.4 degrees on
+#: the real frames of the sensor benchmark).
+N_WIDEN = 3
+#: Fewest valid pixels a window is grown to hold (sparse depth).
+MIN_POINTS = 12
+#: Depth bins (log-spaced between the nearest and farthest valid depth) of the noise profile.
+N_BINS = 8
+#: Samples a depth bin needs to have its own noise level; bins with fewer take their neighbours'.
+MIN_SAMPLES = 64
+#: About how many pixels the noise profile samples (every step-th row and column).
+_NOISE_SAMPLES = 12_000
+#: Widest gap (pixels) between the samples of a second difference, for sparse depth.
+_MAX_GAP = 4
+#: Depth ratio within a second-difference stencil above which it counts as spanning a discontinuity.
+_MAX_SPREAD = 1.25
+_CLIP_SIGMAS = 5.0
+_CLIP_ROUNDS = 5
+#: Ties between windows. Quantised depth makes mirror-image windows fit equally well, and a window
+#: whose points fit a plane exactly has a residual made of rounding; rounding then decides, and it
+#: differs with the unit of depth (integer millimetres against float32 metres move a residual by
+#: about 1e-4 of itself). So residuals per degree of freedom below TIE times the noise level count
+#: as that level, a window replaces the best so far only with a residual lower by more than TIE of
+#: it, and within that margin the first window in the fixed order wins, in every unit.
+TIE = 1e-3
+
+#: The quiet share of the samples that :attr:`NoiseProfile.smooth` reads, and the quantile of |N(0, 1)| at that
+#: share (so that white noise of RMS rho reads rho).
+SMOOTH_SHARE = 0.10
+_SMOOTH_GAUSS = 0.12566
+#: RMS of x_4 - 4 x_2 under white noise of RMS 1 in each x (sqrt((1 + 16 + 36 + 16 + 1) / 6): its stencil's weights).
+_FOURTH_RMS = math.sqrt(70.0 / 6.0)
+#: Most samples :attr:`NoiseProfile.smooth` reads (every s-th, s = ceil(n / _SMOOTH_SAMPLES)): its two buffers stay
+#: small enough to come from memory the process has already touched (larger fresh buffers cost a page fault per
+#: 4 KiB, 0.3 ms a frame measured), and 4096 samples place a 10 % quantile within about half a percent of rank.
+_SMOOTH_SAMPLES = 4096
+
+#: Largest share of the valid pixels that are not fitted with ``stride`` 2 that may have no valid fitted pixel
+#: (even row and column) in their 5x5 neighbourhood: such a pixel gets no normal. The real frames of the
+#: sensor benchmark have 0-0.16 % (NYU's Kinect v1 frame the most), 3F2N frames through the simulated
+#: cameras at most 0.6 %; LiDAR 7.5 % (the KITTI frame) and 40-60 % (simulated).
+MAX_UNREACHED = 0.01
+#: Entries of the depth -> (radius, rho) look-up table, linear in depth between the nearest and farthest.
+_TABLE = 512
+#: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner, (dv, du) / r.
+SHIFTS = ((1, 1), (1, -1), (-1, 1), (-1, -1))
+
+# --- auto (surfnorm.kernels.auto, surfnorm.torch._adaptive) -----------------------------------------
+
+#: Noise reading (units of the point spacing) at or below which depth counts as clean: ``d2nt_v3`` alone.
+CLEAN_FLOOR = 0.10
+#: Noise reading at or above which depth counts as sensor depth: ``adaptive_fit`` alone.
+NOISY_FLOOR = 0.20
+#: ``NoiseProfile.terraced`` at or below which the steps between equal depths are not counted as noise. The 12
+#: rendered 3F2N sample frames measure 0.000-0.097 (the most: fronto-parallel walls, whose steps are rounding).
+TERRACED_LOW = 0.15
+#: ``NoiseProfile.terraced`` at or above which the steps count in full. Raw structured light and stereo matchers
+#: measure 0.4-0.9, and so do registered Kinect v1, RealSense and float16 depth (their floors read noisy already).
+TERRACED_HIGH = 0.30
+
+# --- the plane fits (surfnorm.kernels.plane_fit, surfnorm.torch._plane_fit) ---------------------------
+
+#: Newton's method on PlaneSVD's characteristic polynomial: at most this many steps, stopping below this step.
+NEWTON_STEPS = 64
+NEWTON_TOL = 1e-14
+
+# --- SDA-SNE (surfnorm.kernels.sda, surfnorm.torch._sda) ---------------------------------------------
+
+#: B, the weight of the state penalty in the energies of candidates 0 and 1 (authors' code: 1e10).
+SDA_PENALTY = 1e10

@@ -1,0 +1,77 @@
+"""The project's own bookkeeping: one source for the constants both backends use, names in pyproject.toml that
+exist, and the Numba that the package declares."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src"
+
+
+# --- constants shared by the NumPy kernels and the PyTorch backend --------------------------------------------------
+
+
+def test_kernels_use_the_shared_constants():
+    """surfnorm._constants is the one source: the kernels hold the same values (tests/test_torch.py: the torch side)."""
+    from surfnorm import _constants as C
+    from surfnorm.kernels import adaptive_fit, auto, plane_fit, sda
+
+    for name in (
+        "ALPHA",
+        "KAPPA",
+        "RHO_FLOOR",
+        "MAX_WINDOW",
+        "RADII",
+        "N_WIDEN",
+        "MIN_POINTS",
+        "N_BINS",
+        "MIN_SAMPLES",
+        "_NOISE_SAMPLES",
+        "_MAX_GAP",
+        "_MAX_SPREAD",
+        "_CLIP_SIGMAS",
+        "_CLIP_ROUNDS",
+        "TIE",
+        "SMOOTH_SHARE",
+        "_SMOOTH_GAUSS",
+        "_FOURTH_RMS",
+        "_SMOOTH_SAMPLES",
+        "MAX_UNREACHED",
+        "_TABLE",
+    ):
+        assert getattr(adaptive_fit, name) == getattr(C, name), name
+    assert tuple(map(tuple, adaptive_fit._SHIFTS.tolist())) == C.SHIFTS
+    for name in ("CLEAN_FLOOR", "NOISY_FLOOR", "TERRACED_LOW", "TERRACED_HIGH"):
+        assert getattr(auto, name) == getattr(C, name), name
+    assert (plane_fit._NEWTON_STEPS, plane_fit._NEWTON_TOL) == (C.NEWTON_STEPS, C.NEWTON_TOL)
+    assert sda.SDA_PENALTY == C.SDA_PENALTY
+
+
+def test_the_registry_defaults_are_the_shared_ones():
+    import surfnorm
+    from surfnorm import _constants as C
+
+    info = surfnorm.methods()
+    assert info["d2nt_v3"].options["dlf"] == C.DLF_DEFAULT
+    assert info["d2nt_v3"].options["mnr_dlf"] == C.MNR_DLF_DEFAULT
+    assert info["d2nt_v2"].options["truncate"] is C.TRUNCATE_DEFAULT
+    assert info["adaptive_fit"].options["max_window"] == C.MAX_WINDOW
+
+
+def test_plane_svd_characteristic_has_one_home():
+    """The Numba kernel compiles the same Python function that the torch backend runs on tensors."""
+    from surfnorm import _plane_svd
+    from surfnorm.kernels import plane_fit
+
+    assert plane_fit.plane_svd_characteristic.py_func is _plane_svd.plane_svd_characteristic
+    args = (0.3, -0.2, 1.5, 2.0, 0.1, -0.3, 1.7, 0.2, 0.9)
+    assert plane_fit.plane_svd_characteristic(*args) == _plane_svd.plane_svd_characteristic(*args)
+    torch = pytest.importorskip("torch")
+    from surfnorm.torch import _plane_fit
+
+    assert _plane_fit.plane_svd_characteristic is _plane_svd.plane_svd_characteristic
+    got = _plane_fit.plane_svd_characteristic(*(torch.tensor([a], dtype=torch.float64) for a in args))
+    assert tuple(float(t) for t in got) == _plane_svd.plane_svd_characteristic(*args)

@@ -1,6 +1,6 @@
 """A slow, obvious adaptive_fit: Python loops, explicit windows, np.linalg.lstsq.
 
-Written from the module docstring of surfnorm.adaptive_fit, not from its kernels: the
+Written from the module docstring of surfnorm.kernels.adaptive_fit, not from its kernels: the
 noise profile from the second differences of inverse depth at strides a, 2a, 4a, the
 radius ladder, the sparse growth, the noise test, the widening, the quadrant windows, and the pixels
 between the fitted ones (stride 2: fits on the even rows and columns only).

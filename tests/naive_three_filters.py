@@ -4,7 +4,7 @@ Written from the papers and the description of the authors' code, pixel by
 pixel in plain Python with 3D points X, Y, Z computed the textbook way
 (X = (u - c_x) Z / f_x). Not derived from surfnorm's kernels.
 
-Conventions under test (see surfnorm.three_filters): float64; inverse depth
+Conventions under test (see surfnorm.kernels.three_filters): float64; inverse depth
 D = 1/Z; gradient = central difference / 2, one-sided beside an unusable
 neighbour; with border "reflect" the image border mirrors (OpenCV
 BORDER_REFLECT_101: gradient 0 across it, mirrored neighbour as candidate);

@@ -75,3 +75,38 @@ def test_plane_svd_characteristic_has_one_home():
     assert _plane_fit.plane_svd_characteristic is _plane_svd.plane_svd_characteristic
     got = _plane_fit.plane_svd_characteristic(*(torch.tensor([a], dtype=torch.float64) for a in args))
     assert tuple(float(t) for t in got) == _plane_svd.plane_svd_characteristic(*args)
+
+
+# --- pyproject.toml names modules that exist ------------------------------------------------------------------------
+
+
+def _pyproject() -> dict:
+    try:
+        import tomllib
+    except ImportError:  # Python 3.10
+        tomllib = pytest.importorskip("tomli")
+    return tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+
+
+def _module_exists(name: str) -> bool:
+    """Whether ``name`` (``surfnorm.x.y`` or a ``surfnorm.x.*`` pattern) is a module or package under src/."""
+    path = SRC.joinpath(*name.removesuffix(".*").split("."))
+    if name.endswith(".*"):
+        return (path / "__init__.py").is_file()
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def test_mypy_overrides_name_modules_that_exist():
+    overrides = _pyproject()["tool"]["mypy"]["overrides"]
+    names = [m for o in overrides for m in ([o["module"]] if isinstance(o["module"], str) else o["module"])]
+    ours = [m for m in names if m == "surfnorm" or m.startswith("surfnorm.")]
+    assert "surfnorm.kernels.*" in ours
+    missing = [m for m in ours if not _module_exists(m)]
+    assert not missing, f"pyproject.toml [[tool.mypy.overrides]] names modules that do not exist under src/: {missing}"
+
+
+def test_the_module_check_tells_a_module_from_a_dead_name():
+    assert _module_exists("surfnorm.kernels.*") and _module_exists("surfnorm._config")
+    assert _module_exists("surfnorm.torch") and _module_exists("surfnorm.io.depth")
+    assert not _module_exists("surfnorm.orientation") and not _module_exists("surfnorm.adaptive_fit")
+    assert not _module_exists("surfnorm.methods.*")

@@ -785,7 +785,7 @@ def _cameras64(cam, batch: int):
 
 
 def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float, stride=None):
-    """Adaptive plane fit of inverse depth (``surfnorm.adaptive_fit``); ``cam`` in float64."""
+    """Adaptive plane fit of inverse depth (``surfnorm.kernels.adaptive_fit``); ``cam`` in float64."""
     z = g.z.to(_F64)
     cam = _cameras64(cam, z.shape[0])
     r_max = (max_window - 1) // 2
@@ -834,7 +834,7 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
 
 
 def auto(g: Grid, cam, *, tau: float, fill: float):
-    """``surfnorm.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
+    """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
     ``adaptive_fit`` at or above NOISY_FLOOR, their blend between; ``cam`` in float64.
 
     On the CPU each estimator runs on the frames that need it only; elsewhere both run on the whole batch

@@ -1,7 +1,7 @@
 """The estimators as whole-tensor PyTorch operations on a batch (B, H, W).
 
-Every function here follows its NumPy-backend twin (``gradients.py``,
-``translate.py``, ``mnr.py``) pixel for pixel, but is written as a fixed
+Every function here follows its NumPy-backend twin (``surfnorm.kernels.gradients``,
+``surfnorm.kernels.translate``, ``surfnorm.kernels.mnr``) pixel for pixel, but is written as a fixed
 sequence of element-wise tensor operations on shifted views of the image
 instead of a loop, so that it runs on any device, batches for free, is
 differentiable and traces under ``torch.compile``. Choices that the loop

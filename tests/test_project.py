@@ -110,3 +110,59 @@ def test_the_module_check_tells_a_module_from_a_dead_name():
     assert _module_exists("surfnorm.torch") and _module_exists("surfnorm.io.depth")
     assert not _module_exists("surfnorm.orientation") and not _module_exists("surfnorm.adaptive_fit")
     assert not _module_exists("surfnorm.methods.*")
+
+
+# --- Numba: the versions the package declares and checks ---------------------------------------------------------
+
+
+def _numba_specs() -> list[str]:
+    """The numba requirement of [project] dependencies and of [build-system] requires, as written."""
+    data = _pyproject()
+    found = []
+    for requirement in data["project"]["dependencies"] + data["build-system"]["requires"]:
+        if requirement.replace(" ", "").startswith("numba") and not requirement.startswith("numba-"):
+            found.append(requirement.replace(" ", "")[len("numba") :])
+    return found
+
+
+def test_numba_is_bounded_alike_in_dependencies_build_requires_and_the_check():
+    from surfnorm._numba_internals import NUMBA_SUPPORTED
+
+    (low, high) = NUMBA_SUPPORTED
+    expected = f">={low[0]}.{low[1]},<{high[0]}.{high[1]}"
+    assert _numba_specs() == [expected, expected]
+
+
+def test_the_installed_numba_is_inside_the_declared_bound():
+    """Fails where an environment (CI, a fresh clone) installed a Numba that pyproject.toml does not allow."""
+    import numba
+
+    specifiers = pytest.importorskip("packaging.specifiers")
+    spec = specifiers.SpecifierSet(_numba_specs()[0])
+    assert spec.contains(numba.__version__, prereleases=True), f"numba {numba.__version__} is outside {spec}"
+
+
+@pytest.mark.parametrize("version", ["0.58.1", "0.69.0", "0.70.0rc1", "1.0.0"])
+def test_an_unknown_numba_is_refused_with_the_supported_range(version, monkeypatch):
+    import importlib.util
+
+    import numba
+
+    from surfnorm._numba_internals import NUMBA_SUPPORTED, check_numba_version
+
+    (low, high) = NUMBA_SUPPORTED
+    with pytest.raises(ImportError, match=rf"numba>={low[0]}\.{low[1]},<{high[0]}\.{high[1]}.*found numba {version}"):
+        check_numba_version(version)
+    # and at import: the module, loaded afresh under that version, refuses to load
+    monkeypatch.setattr(numba, "__version__", version)
+    spec = importlib.util.spec_from_file_location("numba_internals_check", SRC / "surfnorm" / "_numba_internals.py")
+    module = importlib.util.module_from_spec(spec)
+    with pytest.raises(ImportError, match=f"found numba {version}"):
+        spec.loader.exec_module(module)
+
+
+@pytest.mark.parametrize("version", ["0.59.0", "0.68.1", "0.68.2rc1"])
+def test_a_supported_numba_passes_the_check(version):
+    from surfnorm._numba_internals import check_numba_version
+
+    check_numba_version(version)

@@ -3,8 +3,8 @@
 The kernels (:mod:`surfnorm.kernels.adaptive_fit`, :mod:`surfnorm.kernels.auto`,
 :mod:`surfnorm.kernels.plane_fit`, :mod:`surfnorm.kernels.sda`), their twins in :mod:`surfnorm.torch`
 and the registry (:mod:`surfnorm.methods`) import them from here, so that the two backends cannot drift
-apart. (The Numba kernels are compiled with these values and cached: after changing one, delete the Numba
-cache files in ``src/surfnorm/**/__pycache__``, as for :data:`surfnorm._choices.ORIENTATION_TIE`.)
+apart. (The Numba kernels are compiled with these values and cached; a changed value recompiles them, since
+the disk cache is stale once any source of the package changed: ``surfnorm._numba_internals._SafeCache``.)
 """
 
 from __future__ import annotations

@@ -2,6 +2,8 @@
 #   make demo   set up .venv and run every estimator on the sample frames shipped in the package
 #   make test   set up .venv (test extras, Dask, the CPU build of PyTorch, Open3D, the authors' d2nt) and run all tests:
 #               make lint, make docs, the docstrings' and the documentation's examples, then pytest
+#   make test-fast  the tests not marked slow (pytest -m "not slow"): every module under src/surfnorm runs (checked),
+#               the naive references at small sizes; about a minute warm, for the loop of changing code (make test: all)
 #   make lint   ruff (lint, docstrings, formatting) and mypy (the modules that are not Numba kernels)
 #   make docs   the documentation site, warnings as errors -> site/index.html
 #   make bench  speed of the D2NT family next to the authors' d2nt package -> bench-output/speed.{md,json}
@@ -21,7 +23,7 @@ OPEN3D_STAMP := $(VENV)/.open3d-installed-$(OPEN3D_VERSION)
 # The authors' d2nt package: the peer that the speed benchmark and the tests compare with
 D2NT_STAMP := $(VENV)/.d2nt-installed-0.1.3
 
-.PHONY: demo test lint docs doctest bench pictures clean
+.PHONY: demo test test-fast lint docs doctest bench pictures clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -56,6 +58,10 @@ demo: $(STAMP)
 test: $(TEST_STAMP) $(TORCH_STAMP) $(OPEN3D_STAMP) $(D2NT_STAMP)
 	@$(MAKE) --no-print-directory lint docs doctest
 	$(PY) -m pytest -q
+
+# The same environment as make test; --every-module fails the run if a module of src/surfnorm ran no code.
+test-fast: $(TEST_STAMP) $(TORCH_STAMP) $(OPEN3D_STAMP) $(D2NT_STAMP)
+	$(PY) -m pytest -q -m "not slow" --every-module
 
 lint: $(TEST_STAMP)
 	$(PY) -m ruff check .

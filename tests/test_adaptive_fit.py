@@ -53,6 +53,7 @@ def test_noise_profile_matches_naive(seed):
     assert got.floor == pytest.approx(floor, rel=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stride", [None, 1, 2])
 @pytest.mark.parametrize("seed", range(6))
 def test_matches_naive_reference(seed, stride):

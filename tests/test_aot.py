@@ -90,6 +90,7 @@ def built(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
 def test_build_writes_one_module_per_level_and_an_index(built):
     index = json.loads((built / "surfnorm" / _aot.INDEX).read_text())
     assert sorted(index["kernels"]) == sorted(KERNELS)
@@ -100,6 +101,7 @@ def test_build_writes_one_module_per_level_and_an_index(built):
         assert index["modules"] == ["_aot_x86_64_v4", "_aot_x86_64_v3", "_aot_x86_64"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("level", ["1", "_aot_x86_64_v3", "_aot_x86_64"])
 def test_aot_code_runs_without_compiling_and_gives_the_jit_bits(built, tmp_path, level):
     """Every level this machine can run (the host's best, AVX2 where it has more, and the baseline), in a new
@@ -117,6 +119,7 @@ def test_aot_code_runs_without_compiling_and_gives_the_jit_bits(built, tmp_path,
     assert out["same"] and out["other"]
 
 
+@pytest.mark.slow
 def test_changed_sources_or_switch_off_fall_back_to_the_jit(built, tmp_path):
     out = json.loads(_run(CHECK, built, tmp_path / "cache", SURFNORM_AOT="0").splitlines()[-1])
     assert not out["available"] and out["compiled"] and out["same"]
@@ -165,3 +168,13 @@ def test_kernel_runs_the_aot_code_for_exported_types_only(monkeypatch):
     assert calls == ["aot", "aot"]
     np.testing.assert_array_equal(out, 2 * x)
     assert kernel.py_func is twice and kernel.__name__ == "twice"
+
+
+def test_the_build_refuses_a_process_that_has_loaded_numba(capsys):
+    """python -m surfnorm._aot_build must run in a new process (it sets Numba's cache folder before importing it)."""
+    import numba  # noqa: F401 - loaded, as in any process that has run a kernel
+
+    from surfnorm._aot_build import main
+
+    assert main([]) == 2
+    assert "run it in a new process" in capsys.readouterr().err

@@ -133,6 +133,7 @@ def simulated():
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sensor", sorted(REAL))
 def test_presets_measure_what_real_frames_of_their_family_measure(simulated, sensor):
     rows = simulated[sensor]
@@ -209,6 +210,7 @@ def test_auto_decision_follows_the_frames_of_a_stack_and_their_masks():
     assert str(got[1]).startswith("auto ran adaptive_fit: noise reading ")
 
 
+@pytest.mark.slow
 def test_torch_reads_the_same(simulated):
     torch = pytest.importorskip("torch")
     from surfnorm.torch import _adaptive

@@ -62,6 +62,7 @@ SHAPES = [(37, 53), (64, 45), (9, 71)]
 PARTS = [[(0, 1), (1, 2), (2, 5), (5, 6), (6, 20), (20, 35), (35, 36), (36, 10**6)], [(0, 13), (13, 10**6)]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(surfnorm.methods()))
 def test_bands_same_bits_as_one_sweep(name):
     """Every stage of every method computes any row band exactly as a sweep over all rows does."""
@@ -92,6 +93,7 @@ def test_bands_same_bits_as_one_sweep(name):
                         )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(surfnorm.methods()))
 def test_threads_same_bits_as_one_thread(name, monkeypatch):
     """estimate(threads=N) on one frame: the same bits as threads=1, bands on real threads."""

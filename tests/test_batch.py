@@ -286,6 +286,7 @@ def batch(tmp_path_factory):
     return folder, sorted(folder / f"frame_{i:03d}.png" for i in bad)
 
 
+@pytest.mark.slow
 def test_200_pngs_with_5_corrupt(batch, tmp_path):
     folder, bad = batch
     out = tmp_path / "out"
@@ -331,6 +332,7 @@ def _interrupt(command, env, out: Path, at_least: int, sig) -> subprocess.Comple
     return subprocess.CompletedProcess(command, proc.returncode, stdout, stderr)
 
 
+@pytest.mark.slow
 def test_interrupted_and_killed_mid_run_then_restarted_finishes_every_output(tmp_path):
     folder = tmp_path / "in"
     folder.mkdir()

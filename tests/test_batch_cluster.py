@@ -189,6 +189,7 @@ def assert_same_bytes(out: Path, reference: Path, inputs):
 # --- acceptance 1: a 2-worker LocalCluster writes what the local path writes ----------------------
 
 
+@pytest.mark.slow
 @needs_dask
 def test_cluster_outputs_identical_to_local(client, inputs, local_outputs, tmp_path):
     seen = []
@@ -244,6 +245,7 @@ def test_results_stream_back_as_shards_finish(client, inputs, patched, tmp_path)
 # --- acceptance 2: a worker killed mid-shard loses nothing -----------------------------------------
 
 
+@pytest.mark.slow
 @needs_dask
 def test_worker_killed_mid_write_loses_nothing(client, inputs, local_outputs, patched, tmp_path):
     marker = tmp_path / "killed-once"
@@ -263,6 +265,7 @@ def test_worker_killed_mid_write_loses_nothing(client, inputs, local_outputs, pa
     client.wait_for_workers(2, timeout=30)
 
 
+@pytest.mark.slow
 @needs_dask
 def test_file_that_kills_every_worker_is_one_error(client, inputs, local_outputs, patched, tmp_path):
     client.run_on_scheduler(_set_allowed_failures, 0)  # give up on a task after one worker death (default 3)
@@ -285,6 +288,7 @@ def raise_on(real, task, settings, *, victim):
     return real(task, settings)
 
 
+@pytest.mark.slow
 @needs_dask
 def test_exception_escaping_convert_file_is_that_files_error(client, inputs, local_outputs, patched, tmp_path):
     patched(raise_on, victim="d006.png")
@@ -359,6 +363,7 @@ def test_cluster_client_refuses_both_or_neither():
             pass
 
 
+@pytest.mark.slow
 @needs_dask
 def test_cluster_client_unreachable_address():
     from surfnorm.batch.cluster import cluster_client
@@ -417,6 +422,7 @@ def test_cli_cluster_address(client, inputs, local_outputs, tmp_path):
     assert_same_bytes(out, local_outputs, inputs[:10])
 
 
+@pytest.mark.slow
 @needs_dask
 def test_cli_local_cluster(inputs, local_outputs, tmp_path):
     out = tmp_path / "out"
@@ -444,6 +450,7 @@ def test_cli_usage_errors(inputs, tmp_path, args, message):
     assert message in " ".join(result.stderr.split())
 
 
+@pytest.mark.slow
 @needs_dask
 def test_cli_unreachable_cluster(inputs, tmp_path):
     import dask
@@ -454,6 +461,7 @@ def test_cli_unreachable_cluster(inputs, tmp_path):
     assert "cluster address 'tcp://127.0.0.1:9': no Dask scheduler answered there" in " ".join(result.stderr.split())
 
 
+@pytest.mark.slow
 def test_cli_without_dask_says_how_to_install(monkeypatch, inputs, tmp_path):
     monkeypatch.setitem(sys.modules, "distributed", None)
     for option in (["--cluster", "tcp://127.0.0.1:8786"], ["--local-cluster", 2]):

@@ -115,6 +115,7 @@ MODES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", list(MODES))
 def test_killed_at_random_moments_then_rerun_gives_the_clean_bytes(dataset, tmp_path, mode):
     if mode == "dask":

@@ -51,6 +51,7 @@ def d2nt_importable() -> bool:
 
 
 class TestCli:
+    @pytest.mark.slow
     def test_small_bench_with_the_d2nt_peer(self, tmp_path):
         out = tmp_path / "rep"
         res = CliRunner().invoke(
@@ -146,6 +147,7 @@ class TestCli:
 # ---------------------------------------------------------------------------- all experiments
 
 
+@pytest.mark.slow
 def test_every_table_and_figure_on_one_frame(tmp_path):
     cfg = small(tmp_path, methods=["d2nt_basic"], tables=runner.TABLES, noise_std=(0.0, 0.001))
     result = run_bench(cfg)
@@ -228,6 +230,7 @@ def test_rerun_reuses_cached_results(tmp_path, monkeypatch):
     assert len(third.timing) == 3 and len(third.accuracy) == len(first.accuracy) + 1
 
 
+@pytest.mark.slow
 def test_failing_method_and_missing_peer_are_reported(tmp_path, monkeypatch):
     def broken(z, valid, cam, out, *, fill):
         raise RuntimeError("kernel exploded")
@@ -254,6 +257,7 @@ def _copy_sample(dst: Path) -> Path:
     return dst
 
 
+@pytest.mark.slow
 def test_layout_with_more_frames_broken_and_missing_ones(tmp_path):
     root = _copy_sample(tmp_path / "3f2n")
     obj = root / "Easy" / "android"
@@ -285,6 +289,7 @@ def test_layout_with_more_frames_broken_and_missing_ones(tmp_path):
     assert runner.discover(small(tmp_path, root=root, frames_per_object=1))[0] == ["Easy/android/000001"]
 
 
+@pytest.mark.slow
 def test_jobs_give_the_same_numbers(tmp_path):
     root = _copy_sample(tmp_path / "3f2n")
     one = run_bench(small(tmp_path, root=root, out=tmp_path / "a", methods=["d2nt_basic"], levels=("Easy", "Medium")))

@@ -89,6 +89,7 @@ def folder(tmp_path):
 
 
 class TestSensorBench:
+    @pytest.mark.slow
     def test_report_table_json_and_figure(self, folder, tmp_path):
         names = ["d2nt_basic", "plane_pca:window=7"] + (["opencv_fals_w7"] if has_rgbd_normals() else [])
         result, paths = sensor_bench(folder, tmp_path / "R", names=names, repeats=2)
@@ -115,6 +116,7 @@ class TestSensorBench:
         assert paths["figure"].read_bytes()[:8] == PNG_MAGIC
         assert not [p for p in (tmp_path / "R").iterdir() if p.name.startswith(".")]  # no temporary left
 
+    @pytest.mark.slow
     def test_absent_peer_is_reported_and_a_failing_one_recorded(self, folder, tmp_path, monkeypatch):
         def missing():
             raise ImportError("No module named 'nolib'")
@@ -168,6 +170,7 @@ class TestSensorBench:
         monkeypatch.setattr(os, "cpu_count", lambda: 1)
         assert not [x for x in (e.label for e in make_entries(None, peer_libraries=[])[0]) if "threads" in x]
 
+    @pytest.mark.slow
     def test_cli(self, folder, tmp_path):
         out = tmp_path / "R"
         res = CliRunner().invoke(
@@ -245,6 +248,7 @@ def test_simulated_sensors_small():
         run_simulated(sample_root(), entries, ["kinect_v9"])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not (SENSOR_SAMPLE / "redwood_00000").is_dir(), reason="sensor sample not beside the repository")
 def test_one_real_frame_matches_the_published_peer_score(tmp_path):
     names = ["d2nt_v3"] + (["opencv_fals_w7"] if has_rgbd_normals() else [])

@@ -82,6 +82,7 @@ def test_methods_lists_registry(monkeypatch):
     assert "surfnorm.kernels.d2nt_v3.d2nt_v3" in result.output and "surfnorm.kernels.sda.sda_sne" in result.output
 
 
+@pytest.mark.slow
 def test_demo_table_and_pictures(tmp_path):
     result = runner.invoke(app, ["demo", str(tmp_path / "demo")])
     assert result.exit_code == 0, result.output
@@ -172,6 +173,7 @@ USAGE_ERRORS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, needle", USAGE_ERRORS, ids=[" ".join(map(str, a))[:60] for a, _ in USAGE_ERRORS])
 def test_every_command_usage_error_is_one_line_exit_2(workdir, args, needle):
     _one_line_exit_2(args, needle)

@@ -73,6 +73,7 @@ def test_shipped_frame_equals_the_published_depth():
         np.testing.assert_array_equal(frame.plane_masks, planes["masks"])
 
 
+@pytest.mark.slow
 def test_sensor_demo_default_beside_opencv(tmp_path):
     rows, skipped, picture = run_sensor_demo(tmp_path, repeats=1)
     frame = read_sensor_frame()
@@ -122,6 +123,7 @@ def test_sensor_demo_follows_the_default(tmp_path, monkeypatch):
     assert calls and all("method" not in c for c in calls)
 
 
+@pytest.mark.slow
 def test_cli_demo_prints_the_sensor_table(tmp_path, monkeypatch):
     monkeypatch.setattr(demo, "demo_methods", lambda: ["d2nt_basic"])  # the 3F2N part, kept short
     monkeypatch.delattr(cv2, "RgbdNormals", raising=False)
@@ -139,6 +141,7 @@ def _rgb(path):
     return cv2.imread(str(path), cv2.IMREAD_COLOR)[:, :, ::-1]
 
 
+@pytest.mark.slow
 def test_contact_sheet_shows_every_frame_and_method(tmp_path):
     """One PNG beside the per-method files: each tile is that file at half size, each error tile's caption
     carries e_A (and the authors' figure), and the colour scale spans the error maps' 0 to 30 degrees."""

@@ -400,6 +400,7 @@ def test_bad_mask_files_are_named(tmp_path, arr, pattern):
         read_mask(tmp_path / "mask.npy")
 
 
+@pytest.mark.slow
 def test_gzip_bomb_is_refused_while_decompressing(tmp_path):
     import tracemalloc
 

@@ -84,6 +84,7 @@ def run_shell_line(line: str, where: str, folder: Path):
         assert done.returncode == 0, f"{where}: `{line.strip()}` failed: {done.stderr}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_every_example_of_the_page_runs(page, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)

@@ -49,6 +49,7 @@ def test_shipped_frames_within_0_1_deg(frame_name):
         assert abs(e_a - ref[OFFICIAL_KEYS[method]]) < 0.1, (method, e_a, ref[OFFICIAL_KEYS[method]])
 
 
+@pytest.mark.slow
 def test_all_twelve_frames_per_level(shared_sample):
     with open(SHARED_REFERENCE) as fh:
         ref = json.load(fh)["frames"]

@@ -48,6 +48,7 @@ def test_softmin_exp_is_correctly_rounded():
     assert math.isnan(out[0]) and out[1] == 0.0 and out[2] == np.inf
 
 
+@pytest.mark.slow
 def test_importing_the_kernels_leaves_the_decimal_context_alone():
     code = (
         "import decimal; decimal.getcontext().prec = 7; import surfnorm.kernels.gradients; "
@@ -91,6 +92,7 @@ def test_every_accepted_tau_gives_unit_normals(method, truncate, tau):
     np.testing.assert_allclose(np.linalg.norm(n[ok], axis=-1), 1.0, atol=1e-5)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(log_tau=st.floats(-320, 307))
 def test_small_tau_truncation_can_not_fire(log_tau):

@@ -101,6 +101,7 @@ def test_the_cycle_finder_finds_a_cycle():
     assert find_cycle({"a": {"b"}, "b": set()}) is None
 
 
+@pytest.mark.slow
 def test_graph_sees_lazy_and_relative_imports():
     graph = import_graph()
     # methods.py imports each kernel when it first runs it (the module its entry's kernel= names)
@@ -110,6 +111,7 @@ def test_graph_sees_lazy_and_relative_imports():
     assert "surfnorm._config" in graph["surfnorm.kernels.translate"]
 
 
+@pytest.mark.slow
 def test_kernels_never_import_the_registry_or_the_front_door():
     graph = import_graph()
     for name, targets in graph.items():
@@ -118,6 +120,7 @@ def test_kernels_never_import_the_registry_or_the_front_door():
             assert not bad, f"{name} imports {sorted(bad)}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("heavy", ["numba", "torch", "dask", "distributed", "cv2", "open3d"])
 def test_import_surfnorm_loads_no_heavy_dependency(heavy):
     code = f"import sys, surfnorm; surfnorm.methods(); assert {heavy!r} not in sys.modules, 'imported'"

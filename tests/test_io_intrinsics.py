@@ -244,6 +244,7 @@ HOSTILE = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, text, pattern", HOSTILE, ids=[h[0] for h in HOSTILE])
 def test_hostile_intrinsics_files_are_named_with_bounded_memory(tmp_path, name, text, pattern):
     import tracemalloc

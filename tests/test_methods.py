@@ -146,6 +146,7 @@ def is_fill(n, fill):
     return np.isnan(n).all(-1) if np.isnan(fill) else (n == fill).all(-1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 @settings(max_examples=40, **SETTINGS)
 @given(scene=scenes(), fill=st.sampled_from([0.0, np.nan, -3.0]))
@@ -166,6 +167,7 @@ def test_outputs_are_fill_or_unit_and_invalid_pixels_are_fill(method, scene, fil
     assert got[1:-1, 1:-1][inner].all(), "a pixel with full support got no normal"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 @settings(max_examples=30, **SETTINGS)
 @given(scene=scenes(), garbage=st.sampled_from([0.0, np.nan, 1e-3, 7.0, 1e6, -5.0]))
@@ -178,6 +180,7 @@ def test_invalid_values_are_never_read(method, scene, garbage):
     np.testing.assert_array_equal(surfnorm.estimate(other, cam, method=method, mask=valid, fill=np.nan), expected)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 @settings(max_examples=30, **SETTINGS)
 @given(scene=scenes())
@@ -225,6 +228,7 @@ def test_mirroring_mirrors_n_x(method, scene):
         np.testing.assert_allclose(raw_m * flip, raw_normals(method, z, mask, cam), atol=2e-5, equal_nan=True)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 @settings(max_examples=30, **SETTINGS)
 @given(scene=scenes(), factor=st.floats(1e-3, 1e3))
@@ -243,6 +247,7 @@ def test_scale_invariant_mode_ignores_the_unit(method, scene, factor):
         )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 @settings(max_examples=15, **SETTINGS)
 @given(scene=scenes(), power=st.integers(-20, 20))

@@ -58,6 +58,7 @@ def _as_unprivileged():
     return [setpriv, "--reuid=65534", "--regid=65534", "--clear-groups"]
 
 
+@pytest.mark.slow
 def test_read_only_install_precompiles_into_the_user_cache():
     """A package directory nobody may write to: Numba falls back to the user-wide cache, both for
     ``python -m surfnorm.precompile`` and for the first call after it, which then compiles nothing."""
@@ -102,6 +103,7 @@ def test_read_only_install_precompiles_into_the_user_cache():
         shutil.rmtree(tmp_path)
 
 
+@pytest.mark.slow
 def test_nowhere_writable_but_the_temp_directory():
     """A read-only package and no writable home: Numba's own locations all fail (it then refused to define any
     kernel: "no locator available"); surfnorm caches into a private directory in the temporary directory, so

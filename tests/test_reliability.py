@@ -106,6 +106,7 @@ def test_float64_depth_of_any_magnitude_gives_what_it_gives_at_one(method, mode)
         assert np.abs(n - ref).mean() < 2e-3, (s, np.abs(n - ref).max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", _method_names())
 def test_both_backends_agree_at_any_magnitude(method):
     torch = pytest.importorskip("torch")
@@ -183,6 +184,7 @@ def _variants():
     return calls
 
 
+@pytest.mark.slow
 def test_every_method_loads_from_the_disk_cache_in_a_new_process():
     calls = _variants()
     _run_calls(calls)  # compiles what no earlier process left in the cache
@@ -190,6 +192,7 @@ def test_every_method_loads_from_the_disk_cache_in_a_new_process():
     assert second["compiled"] == [], second["compiled"]
 
 
+@pytest.mark.slow
 def test_a_damaged_cache_recompiles_instead_of_failing(tmp_path):
     import math
 
@@ -253,6 +256,7 @@ def test_cli_a_lying_npy_header_is_one_line_exit_2(lying_npy, monkeypatch):
 # ---------------------------------------------------------------------------- row 7: a window wider than the frame
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["plane_pca", "plane_svd", "vector_svd"])
 def test_a_window_wider_than_the_frame_is_clipped_to_it(method):
     import surfnorm
@@ -264,6 +268,7 @@ def test_a_window_wider_than_the_frame_is_clipped_to_it(method):
         assert np.array_equal(surfnorm.estimate(z, K, method=method, window=window), widest), window
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["plane_pca", "plane_svd", "vector_svd"])
 def test_a_window_wider_than_the_frame_is_clipped_in_torch_too(method):
     torch = pytest.importorskip("torch")
@@ -397,6 +402,7 @@ app()
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["npy", "png16"])
 def test_a_write_that_the_system_refuses_is_one_line_with_its_reason(tmp_path, fmt):
     import subprocess
@@ -417,6 +423,7 @@ def test_a_write_that_the_system_refuses_is_one_line_with_its_reason(tmp_path, f
 # ---------------------------------------------------------------------------- row 9: only our one line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".png", ".tif", ".pgm", "mask"])
 def test_a_truncated_image_is_only_our_one_line_on_stderr(tmp_path, suffix):
     import subprocess

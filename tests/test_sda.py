@@ -223,6 +223,7 @@ def test_faithful_on_shipped_frames(frame_name):
     assert passes == DEMO_PASSES[frame_name.rsplit("/", 1)[0]]
 
 
+@pytest.mark.slow
 def test_faithful_on_all_twelve_frames(shared_sample):
     with open(SHARED_REFERENCE) as fh:
         ref = json.load(fh)["frames"]

@@ -37,6 +37,7 @@ def run(z, valid, iterations, bands, **kwargs):
     return [a.copy() for a in result], passes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stop", sorted(STOPS))
 @pytest.mark.parametrize("iterations", [None, 3, 6, 7, 8, 9, 12])
 def test_fused_sweeps_give_the_bits_of_the_stages_one_by_one(stop, iterations):

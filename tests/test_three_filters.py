@@ -192,6 +192,7 @@ def test_faithful_on_shipped_frames(frame_name):
         assert abs(mean_angular_error(n, f.normals, f.mask) - official[method]) < 1e-3
 
 
+@pytest.mark.slow
 def test_faithful_on_all_twelve_frames(shared_sample):
     import json
 

@@ -102,6 +102,7 @@ def assert_parity(depth, masks, Ks, method, options, names):
 class TestParity:
     """Issue 7, acceptance 1: the torch backend on the CPU matches the NumPy backend to 1e-4 per component."""
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("name", TORCH_METHODS)
     def test_shipped_frames(self, name):
         root = threef2n.sample_root()
@@ -120,6 +121,7 @@ class TestParity:
                 np.ascontiguousarray(depth[crop]), np.ascontiguousarray(masks[crop]), Ks_crop, method, options, names
             )
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("name", TORCH_METHODS)
     def test_twelve_frames(self, shared_sample, name):
         names = threef2n.find_frames(shared_sample)
@@ -317,6 +319,7 @@ class TestAdaptive:
         assert (choice.shift >= 0).sum() > 20  # quadrant windows
         assert set(range(4)) <= set(choice.shift.tolist())
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("seed", [1, 2, 3])
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
     def test_sensor_like_batch(self, method, seed):
@@ -367,6 +370,7 @@ class TestAdaptive:
         np.testing.assert_array_equal(got[1], nchw(st.estimate(torch.from_numpy(noisy), Kc, method="adaptive_fit"))[0])
         np.testing.assert_array_equal(got[3], got[0])
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
     def test_masked_path_as_gathered_path(self, method, monkeypatch):
         # other devices work on all pixels (and frames) with masks; the CPU on the ones concerned: same normals
@@ -388,6 +392,7 @@ class TestAdaptive:
             monkeypatch.setattr(_adaptive, "_GATHER_ON_CPU", True)
             np.testing.assert_array_equal(masked, gathered)
 
+    @pytest.mark.slow
     @pytest.mark.skipif(not SENSOR_FRAMES, reason=f"the sensor sample is not at {SENSOR_SAMPLE}")
     @pytest.mark.parametrize("name", SENSOR_FRAMES or ["none"])
     def test_sensor_sample(self, name):
@@ -406,6 +411,7 @@ class TestAdaptive:
 class TestAdaptiveGradients:
     """The choices carry no gradient; given them, the fit is differentiable and the gradient flows through it."""
 
+    @pytest.mark.slow
     def test_gradcheck_through_chosen_windows(self):
         # big enough to have a noise profile (several radii, widening, quadrant windows), small enough for gradcheck
         depth = sensor_like(12, 16, seed=3, holes=0.05).astype(np.float64)
@@ -418,6 +424,7 @@ class TestAdaptiveGradients:
             lambda d: st.estimate(d, K, method="adaptive_fit"), (z,), eps=1e-6, fast_mode=True
         )
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])
     def test_same_normals_with_and_without_a_graph(self, method):
         # with a graph the chosen windows are summed once more from integral images that carry it
@@ -486,6 +493,7 @@ class TestSDA:
 class TestSmallScenes:
     """Every method and option against the NumPy backend on small random scenes with holes and a step."""
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("method,options", [v for name in TORCH_METHODS for v in variants(name)])
     def test_parity(self, method, options):
         scenes = [scene_with_holes(seed=s) for s in (1, 2)]
@@ -537,6 +545,7 @@ class TestThreeFilters:
         expected = np.where((key > 0)[..., None], -ref, ref)
         np.testing.assert_allclose(got[inside], expected[inside], atol=1e-6)
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("third", ["mean", "median"])
     def test_authors_figures_on_shipped_frames(self, third):
         root = threef2n.sample_root()
@@ -578,6 +587,7 @@ def random_depth(h=6, w=7, seed=0):
 class TestGradients:
     """Issue 7, acceptance 2: gradcheck in float64 on small random depth for each method."""
 
+    @pytest.mark.slow
     @pytest.mark.parametrize(
         "method,options",
         [v for name in TORCH_METHODS for v in variants(name)[:2]]
@@ -647,6 +657,7 @@ class TestGradients:
         assert torch.isfinite(z.grad).all() and z.grad[1, 1] == 0 and z.grad[4, 5] == 0
         assert (z.grad != 0).sum() > z.numel() // 2  # the valid pixels do get a gradient
 
+    @pytest.mark.slow
     @pytest.mark.parametrize("name", TORCH_METHODS)
     def test_finite_gradient_on_a_real_frame(self, name):
         # a corner of a sample frame: silhouette (depth steps of x100), background, holes from the mask
@@ -796,6 +807,7 @@ class TestShapesDtypesDevices:
 
 
 class TestCompile:
+    @pytest.mark.slow
     @pytest.mark.parametrize("method", ["d2nt_v3", "3f2n_median+mnr"])
     def test_traces_as_one_graph(self, method):
         # fullgraph=True fails on any graph break, e.g. a Python branch on a tensor value or .item();
@@ -812,6 +824,7 @@ class TestCompile:
         (g_ref,) = torch.autograd.grad(st.estimate(z, Kt, method=method)[..., 2:-2, 2:-2].sum(), z)
         torch.testing.assert_close(g, g_ref, rtol=1e-5, atol=1e-6)
 
+    @pytest.mark.slow
     @pytest.mark.filterwarnings("ignore:`torch.jit.script_method` is deprecated:DeprecationWarning")
     def test_inductor(self):
         # the default backend generates and compiles C++ on the CPU (needs a C compiler)

@@ -181,6 +181,7 @@ def sensor_scenes(draw):
     return z.astype(np.float32), draw(st.floats(1e-4, 1e4))
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(scene=sensor_scenes())
 def test_scale_invariant_sda_sne_ignores_the_unit_of_sensor_depth(scene):
@@ -328,6 +329,7 @@ def far_from(square, reach):
 LOCAL_METHODS = [m for m in ALL_METHODS if m != "adaptive_fit"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", LOCAL_METHODS + ["3f2n_median+mnr"])
 def test_a_hole_changes_no_normal_far_from_it_in_the_scale_invariant_mode(method):
     # a single 10x10 NaN hole changed 1,904 3f2n_median pixels at least 10 px away (some by 180 degrees), sda_sne 6,907
@@ -347,6 +349,7 @@ def test_a_hole_changes_no_normal_far_from_it_in_the_scale_invariant_mode(method
     assert not (changed & far).any(), int((changed & far).sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("factor", [10, 1000])
 @pytest.mark.parametrize("method", ALL_METHODS + ["cp2tv+mnr"])
 def test_metres_and_millimetres_agree_with_holes(method, factor):

@@ -146,6 +146,7 @@ def test_presets_measure_what_real_frames_of_their_family_measure(simulated, sen
         assert lo - TOLERANCE[key] <= got[key] <= hi + TOLERANCE[key], (sensor, key, got[key], (lo, hi))
 
 
+@pytest.mark.slow  # its fixture simulates every preset on the 12 frames (about 9 s)
 def test_raw_structured_light_has_disparity_steps_and_few_levels(simulated):
     """The raw preset's depth lies on 1/8-px disparity levels (as the real sensor's), a few hundred of them on an
     object, where the dithered ``kinect_v1`` preset's per-pixel noise shows as a floor the real raw frames lack."""

@@ -85,6 +85,32 @@ import numpy as np
 from .._aot import ahead_of_time
 from .._bands import Offers, Part, whole
 from .._config import njit, pixel, select
+
+# The constants shared with surfnorm.torch._adaptive, with their meaning: surfnorm._constants (loads no Numba).
+from .._constants import (
+    _CLIP_ROUNDS,
+    _CLIP_SIGMAS,
+    _FOURTH_RMS,
+    _MAX_GAP,
+    _MAX_SPREAD,
+    _NOISE_SAMPLES,
+    _SMOOTH_GAUSS,
+    _SMOOTH_SAMPLES,
+    _TABLE,
+    ALPHA,
+    KAPPA,
+    MAX_UNREACHED,
+    MAX_WINDOW,
+    MIN_POINTS,
+    MIN_SAMPLES,
+    N_BINS,
+    N_WIDEN,
+    RADII,
+    RHO_FLOOR,
+    SHIFTS,
+    SMOOTH_SHARE,
+    TIE,
+)
 from ._spare import Spares
 from .uncertainty import MISFIT_GAIN, MISFIT_SIGNIFICANCE, angle_variance, fit_variance, noise_gain
 
@@ -101,44 +127,7 @@ __all__ = [
     "MAX_WINDOW",
 ]
 
-#: Radius gain of the starting window: r = ceil(ALPHA * sqrt(rho)). Tuned on the simulated sensors
-#: (``python benchmarks/sensor_sim.py``), with KAPPA.
-ALPHA = 1.0
-#: A fit is trusted when its residual per degree of freedom is below (KAPPA * sigma_w)^2.
-KAPPA = 3.0
-#: Lowest noise level (pixel spacings) assumed by the edge test, so clean depth still tolerates rounding.
-RHO_FLOOR = 0.25
-#: Largest window side (odd); the radius is at most (MAX_WINDOW - 1) / 2.
-MAX_WINDOW = 31
-#: The radii a window may take (x2 apart, and ``max_window``'s): few distinct radii in a row keep the box
-#: sums cheap, and a window widened x2 stays on the ladder.
-RADII = (1, 2, 4, 8, 16, 32, 64, 128)
-#: Times a window that fits within the noise is tried twice as wide. On the simulated sensors 2 is better by
-#: 0.15 degrees (13.35 against 13.50); 3 was kept for the wider planes of real scenes (7.5 against 8.4 degrees on
-#: the real frames of the sensor benchmark).
-N_WIDEN = 3
-#: Fewest valid pixels a window is grown to hold (sparse depth).
-MIN_POINTS = 12
-#: Depth bins (log-spaced between the nearest and farthest valid depth) of the noise profile.
-N_BINS = 8
-#: Samples a depth bin needs to have its own noise level; bins with fewer take their neighbours'.
-MIN_SAMPLES = 64
-#: About how many pixels the noise profile samples (every step-th row and column).
-_NOISE_SAMPLES = 12_000
-#: Widest gap (pixels) between the samples of a second difference, for sparse depth.
-_MAX_GAP = 4
-#: Depth ratio within a second-difference stencil above which it counts as spanning a discontinuity.
-_MAX_SPREAD = 1.25
-_CLIP_SIGMAS = 5.0
-_CLIP_ROUNDS = 5
 _N_MOMENTS = 10
-#: Ties between windows. Quantised depth makes mirror-image windows fit equally well, and a window
-#: whose points fit a plane exactly has a residual made of rounding; rounding then decides, and it
-#: differs with the unit of depth (integer millimetres against float32 metres move a residual by
-#: about 1e-4 of itself). So residuals per degree of freedom below TIE times the noise level count
-#: as that level, a window replaces the best so far only with a residual lower by more than TIE of
-#: it, and within that margin the first window in the fixed order wins, in every unit.
-TIE = 1e-3
 
 
 # --- noise profile -------------------------------------------------------------------------------
@@ -361,18 +350,6 @@ def _by_bin(xs, bins, nbins):
         for i in range(xs.shape[0]):
             grouped[i, k] = xs[i, j]
     return grouped, starts
-
-
-#: The quiet share of the samples that :attr:`NoiseProfile.smooth` reads, and the quantile of |N(0, 1)| at that
-#: share (so that white noise of RMS rho reads rho).
-SMOOTH_SHARE = 0.10
-_SMOOTH_GAUSS = 0.12566
-#: RMS of x_4 - 4 x_2 under white noise of RMS 1 in each x (sqrt((1 + 16 + 36 + 16 + 1) / 6): its stencil's weights).
-_FOURTH_RMS = math.sqrt(70.0 / 6.0)
-#: Most samples :attr:`NoiseProfile.smooth` reads (every s-th, s = ceil(n / _SMOOTH_SAMPLES)): its two buffers stay
-#: small enough to come from memory the process has already touched (larger fresh buffers cost a page fault per
-#: 4 KiB, 0.3 ms a frame measured), and 4096 samples place a 10 % quantile within about half a percent of rank.
-_SMOOTH_SAMPLES = 4096
 
 
 @pixel
@@ -600,13 +577,6 @@ def _by_depth(rms, starts, zmin, zmax, min_samples):
     return centres, np.interp(log_c, log_c[ok], rho[ok])
 
 
-#: Largest share of the valid pixels that are not fitted with ``stride`` 2 that may have no valid fitted pixel
-#: (even row and column) in their 5x5 neighbourhood: such a pixel gets no normal. The real frames of the
-#: sensor benchmark have 0-0.16 % (NYU's Kinect v1 frame the most), 3F2N frames through the simulated
-#: cameras at most 0.6 %; LiDAR 7.5 % (the KITTI frame) and 40-60 % (simulated).
-MAX_UNREACHED = 0.01
-
-
 @ahead_of_time
 @njit
 def _unreached(valid):
@@ -750,10 +720,6 @@ class Balance:
 
 
 _balance = Balance()
-
-
-#: Entries of the depth -> (radius, rho) look-up table, linear in depth between the nearest and farthest.
-_TABLE = 512
 
 
 def radius_table(
@@ -1350,7 +1316,7 @@ def assembled_row(z_row, valid_row, o, up2, up1, same, dn1, dn2, cam, fill, got,
 
 
 #: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner.
-_SHIFTS = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], np.int64)
+_SHIFTS = np.array(SHIFTS, np.int64)
 
 
 @pixel

@@ -57,6 +57,18 @@ import numpy as np
 
 from .._aot import ahead_of_time
 from .._config import njit
+
+# The noise floors that surfnorm.torch._adaptive shares, with their meaning, and the registry's defaults of the
+# d2nt_v3 options that auto does not expose: surfnorm._constants (loads no Numba).
+from .._constants import (
+    CLEAN_FLOOR,
+    DLF_DEFAULT,
+    MNR_DLF_DEFAULT,
+    NOISY_FLOOR,
+    TERRACED_HIGH,
+    TERRACED_LOW,
+    TRUNCATE_DEFAULT,
+)
 from .adaptive_fit import NoiseProfile, adaptive_fit, noise_profile
 
 __all__ = [
@@ -72,17 +84,6 @@ __all__ = [
     "TERRACED_LOW",
     "TERRACED_HIGH",
 ]
-
-#: Noise reading (units of the point spacing) at or below which depth counts as clean: ``d2nt_v3`` alone.
-CLEAN_FLOOR = 0.10
-#: Noise reading at or above which depth counts as sensor depth: ``adaptive_fit`` alone.
-NOISY_FLOOR = 0.20
-#: ``NoiseProfile.terraced`` at or below which the steps between equal depths are not counted as noise. The 12
-#: rendered 3F2N sample frames measure 0.000-0.097 (the most: fronto-parallel walls, whose steps are rounding).
-TERRACED_LOW = 0.15
-#: ``NoiseProfile.terraced`` at or above which the steps count in full. Raw structured light and stereo matchers
-#: measure 0.4-0.9, and so do registered Kinect v1, RealSense and float16 depth (their floors read noisy already).
-TERRACED_HIGH = 0.30
 
 
 def quantisation(profile: NoiseProfile) -> float:
@@ -258,7 +259,15 @@ def auto(
     t = adaptive_weight(profile)
     if record is not None:
         record["weight"] = t
-    d2nt_options = dict(dlf="1d", tau=tau, truncate=True, mnr_dlf="alpha", tie_tol=tie_tol, relative=relative, **bands)
+    d2nt_options = dict(
+        dlf=DLF_DEFAULT,
+        tau=tau,
+        truncate=TRUNCATE_DEFAULT,
+        mnr_dlf=MNR_DLF_DEFAULT,
+        tie_tol=tie_tol,
+        relative=relative,
+        **bands,
+    )
     if t == 0.0:
         return d2nt_v3(z, valid, cam, out, fill=fill, **d2nt_options)
     a = d2nt_v3(z, valid, cam, np.empty_like(out), fill=np.nan, **d2nt_options)

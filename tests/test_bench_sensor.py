@@ -181,6 +181,32 @@ class TestSensorBench:
         assert {p.name for p in out.iterdir()} == {"report.md", "results.json", "sensor.png", "uncertainty.png"}
         assert "## Uncertainty" in (out / "report.md").read_text()
 
+    def test_cli_refuses_a_dataset_without_3f2n_frames(self, folder, tmp_path):
+        empty = tmp_path / "empty"
+        empty.mkdir()
+        out = tmp_path / "R"
+        res = CliRunner().invoke(
+            app,
+            [
+                "bench",
+                str(empty),
+                "--sensor",
+                str(folder),
+                "--out",
+                str(out),
+                "--methods",
+                "d2nt_basic",
+                "--repeats",
+                "1",
+            ],
+        )
+        assert res.exit_code == 2
+        assert res.output.count("\n") == 1
+        assert (
+            f"dataset: expected 3F2N frames (Easy|Medium|Hard/<object>/depth/*.bin) for the calibration of sigma, "
+            f"found none under {empty} but Hard/room, Medium/chair"
+        ) in " ".join(res.output.split())
+
 
 class TestBadFolders:
     def test_no_frame(self, tmp_path):

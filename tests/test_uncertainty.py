@@ -325,3 +325,24 @@ def test_centred_3x3_fits_against_least_squares():
             rss = float(np.sum((X @ coef - w) ** 2))
             np.testing.assert_allclose(fits[v, u, 1:], [len(pts), coef[1], coef[2], coef[0]], rtol=1e-9, atol=1e-12)
             assert fits[v, u, 0] == pytest.approx(rss / (len(pts) - 3), rel=1e-6, abs=1e-15)
+
+
+def test_cli_refuses_an_existing_sigma_file_without_overwrite(tmp_path):
+    from typer.testing import CliRunner
+
+    from surfnorm.cli import app
+
+    z, K = _noisy_plane(5e-3)
+    np.save(tmp_path / "d.npy", z)
+    (tmp_path / "n.sigma.npy").write_bytes(b"keep")
+    k = ["--fx", str(K[0, 0]), "--fy", str(K[1, 1]), "--cx", str(K[0, 2]), "--cy", str(K[1, 2])]
+    res = CliRunner().invoke(app, ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "n"), "--uncertainty", *k])
+    assert res.exit_code == 2 and res.output.count("\n") == 1
+    assert "n.sigma.npy" in res.output and "--overwrite" in res.output
+    assert (tmp_path / "n.sigma.npy").read_bytes() == b"keep"
+    assert not (tmp_path / "n.npy").exists()
+    res = CliRunner().invoke(
+        app, ["estimate", str(tmp_path / "d.npy"), str(tmp_path / "n"), "--uncertainty", "--overwrite", *k]
+    )
+    assert res.exit_code == 0, res.output
+    assert np.load(tmp_path / "n.sigma.npy").shape == z.shape

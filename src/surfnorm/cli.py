@@ -683,6 +683,12 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
         libs = []
     t0 = time.perf_counter()
     try:
+        # the folder and the dataset checked before the progress bar starts (its end would add a line to an error)
+        from .bench.sensor import find_sensor_frames
+        from .bench.uncertainty import calibration_frames
+
+        find_sensor_frames(folder)
+        calibration_frames(dataset)
         with Progress(
             TextColumn("{task.description}"),
             BarColumn(),

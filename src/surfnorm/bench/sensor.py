@@ -653,6 +653,10 @@ def sensor_bench(
     from .peers import peer_versions, single_thread
 
     find_sensor_frames(root)  # a bad folder fails before any library is imported
+    if uncertainty:
+        from .uncertainty import calibration_frames
+
+        calibration_frames(calibration_root)  # and a dataset without frames before hours of work
     threads = single_thread()
     entries, absent = make_entries(names, peer_libraries=peer_libraries)
     result = run_folder(root, entries, repeats=repeats, progress=progress)

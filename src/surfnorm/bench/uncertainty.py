@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..metrics import angular_error
 
 #: 3F2N frames whose ground truth does not match their depth (see the module docstring).
@@ -40,16 +41,31 @@ def deciles(error: np.ndarray, sigma: np.ndarray, bins: int = 10) -> list[dict]:
     return out
 
 
+def calibration_frames(root=None, skip=SKIP) -> list[str]:
+    """The 3F2N frames under ``root`` (default: the sample shipped in the package) that :func:`calibration` uses:
+    all but ``skip``; InputError (naming ``dataset``, the command line's argument) where there are none."""
+    from ..io.threef2n import find_frames, sample_root
+
+    root = sample_root() if root is None else root
+    names = [n for n in find_frames(root) if not any(n.startswith(s + "/") for s in skip)]
+    if not names:
+        raise InputError(
+            f"dataset: expected 3F2N frames (Easy|Medium|Hard/<object>/depth/*.bin) for the calibration of sigma, "
+            f"found none under {root}" + (f" but {', '.join(skip)}" if skip else "")
+        )
+    return names
+
+
 def calibration(root=None, sensors=None, *, method: str = "auto", skip=SKIP, seed: int = 0) -> dict:
     """Calibration of sigma on every simulated sensor (``sensors``: default all) over the 3F2N frames under
     ``root`` (default: the sample shipped in the package) but ``skip``. Returns {sensor: {"deciles", "overall",
     "within": deciles with a ratio in 0.67-1.5, "pixels"}}."""
     from .._api import estimate
-    from ..io.threef2n import find_frames, read_frame, sample_root
+    from ..io.threef2n import read_frame, sample_root
     from .simulate import SENSORS, frame_seed, simulate
 
     root = sample_root() if root is None else root
-    names = [n for n in find_frames(root) if not any(n.startswith(s + "/") for s in skip)]
+    names = calibration_frames(root, skip)
     result = {}
     for s in sensors or list(SENSORS):
         errors, sigmas = [], []

@@ -11,8 +11,8 @@ import surfnorm
 from surfnorm import InputError
 from surfnorm.camera import Intrinsics
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
-from surfnorm.kernels.adaptive_fit import noise_profile
 from surfnorm.kernels.auto import choose
+from surfnorm.kernels.sensor_noise import noise_profile
 
 from . import naive_adaptive_fit as naive
 from .surfaces import camera, plane, sphere
@@ -193,8 +193,8 @@ def test_auto_tau_is_checked():
 
 def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     """Between CLEAN_FLOOR and NOISY_FLOOR auto is the normalised weighted mean of both estimators' normals."""
-    from surfnorm.kernels.adaptive_fit import NoiseProfile
     from surfnorm.kernels.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
+    from surfnorm.kernels.sensor_noise import NoiseProfile
 
     one = np.ones(1)
     assert adaptive_weight(NoiseProfile(one, one, CLEAN_FLOOR)) == 0.0
@@ -279,7 +279,7 @@ def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
     clipped, with the integral columns where integral_positions places them; box_row keeps src elsewhere
     unless ``first``, and coordinate_sums fills only windows that are not the full square. The kernel's
     outputs rest on these bits (the windows' fits and every decision made from them)."""
-    from surfnorm.kernels.adaptive_fit import (
+    from surfnorm.kernels._windows import (
         _BOXED,
         _COORDS,
         box_row,
@@ -322,7 +322,7 @@ def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
 def test_stride_follows_the_density_of_the_depth():
     """Every other row and column is fitted where the pixels between have fitted pixels near them (dense depth),
     every pixel where many do not (LiDAR scanlines); the rule agrees with the naive one on random masks."""
-    from surfnorm.kernels.adaptive_fit import choose_stride
+    from surfnorm.kernels._schedule import choose_stride
 
     rng = np.random.default_rng(3)
     dense = rng.random((60, 80)) > 0.3
@@ -342,7 +342,7 @@ def test_integral_rows_are_the_sums_above_and_left_and_a_band_below_makes_the_sa
     """Integral row i holds, at column u (where integral_positions places it), the sums over the valid pixels of
     rows < i and columns < u of the ten moments; a band that sums only the columns of the rows above the ones
     it reads (make_rows' first_read) then makes those rows to the bit of a sweep from row 0."""
-    from surfnorm.kernels.adaptive_fit import _N_COLUMNS, _N_MOMENTS, integral_positions, make_rows
+    from surfnorm.kernels._windows import _N_COLUMNS, _N_MOMENTS, integral_positions, make_rows
 
     rng = np.random.default_rng(stride)
     H, W = 23, 17
@@ -409,7 +409,7 @@ def test_depth_range_from_the_bits_is_the_plain_one():
     """The noise profile's depth range from float32 bits (vectorised integer minima) equals the plain loop's,
     with NaN, infinities, negatives and zeros where the validity says so, and without any valid pixel."""
     from surfnorm._validate import valid_map
-    from surfnorm.kernels.adaptive_fit import _depth_range, depth_range
+    from surfnorm.kernels.sensor_noise import _depth_range, depth_range
 
     rng = np.random.default_rng(7)
     for shape in ((1, 1), (5, 7), (48, 64)):
@@ -426,7 +426,8 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
     the integral rows above their own) gives the same bits on one band and on several; ``use`` False writes
     nothing and returns None."""
     from surfnorm._bands import Part, on_threads
-    from surfnorm.kernels.adaptive_fit import adaptive_fit, noise_profile
+    from surfnorm.kernels.adaptive_fit import adaptive_fit
+    from surfnorm.kernels.sensor_noise import noise_profile
 
     z, K = scene(4, H=120, W=96, holes=0.1)  # 120 rows: up to three bands of 40
     z = z.astype(np.float32)
@@ -446,7 +447,8 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
 def test_bands_balanced_by_their_times_give_the_same_bits():
     """Balance moves band edges toward equal times from frame to frame; whatever the split, the same bits."""
     from surfnorm._bands import on_threads
-    from surfnorm.kernels.adaptive_fit import Balance, _balance, adaptive_fit
+    from surfnorm.kernels._schedule import Balance, _balance
+    from surfnorm.kernels.adaptive_fit import adaptive_fit
 
     balance = Balance()
     weights = np.ones(100)

@@ -22,7 +22,7 @@ from surfnorm._aot import Kernel, jit_only
 from surfnorm._config import njit
 
 PACKAGE = Path(surfnorm.__file__).resolve().parent
-KERNELS = ["surfnorm._validate._valid_loop", "surfnorm.kernels.adaptive_fit._depth_range"]
+KERNELS = ["surfnorm._validate._valid_loop", "surfnorm.kernels.sensor_noise._depth_range"]
 
 BUILD = """
 import sys
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from surfnorm._aot import jit_only
 from surfnorm._aot_build import build
-from surfnorm.kernels.adaptive_fit import _depth_range
+from surfnorm.kernels.sensor_noise import _depth_range
 from surfnorm._validate import valid_map
 
 def warm_up():
@@ -46,7 +46,7 @@ import json
 import numba.core.event as ev
 import numpy as np
 from surfnorm import _aot
-from surfnorm.kernels.adaptive_fit import _depth_range
+from surfnorm.kernels.sensor_noise import _depth_range
 from surfnorm._validate import _valid_kernels, valid_map
 
 rec = ev.RecordingListener()

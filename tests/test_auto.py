@@ -11,7 +11,6 @@ import pytest
 import surfnorm
 from surfnorm.bench.simulate import SENSORS, simulate
 from surfnorm.io.threef2n import find_frames, read_frame
-from surfnorm.kernels.adaptive_fit import NoiseProfile, noise_profile
 from surfnorm.kernels.auto import (
     CLEAN_FLOOR,
     NOISY_FLOOR,
@@ -21,6 +20,7 @@ from surfnorm.kernels.auto import (
     quantisation,
     reading,
 )
+from surfnorm.kernels.sensor_noise import NoiseProfile, noise_profile
 
 from . import naive_adaptive_fit as naive
 from .conftest import SAMPLE

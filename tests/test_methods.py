@@ -77,8 +77,8 @@ def auto_weight(z, mask, cam):
     import math
 
     from surfnorm._validate import as_depth, valid_pixels
-    from surfnorm.kernels.adaptive_fit import noise_profile
     from surfnorm.kernels.auto import adaptive_weight
+    from surfnorm.kernels.sensor_noise import noise_profile
 
     zz = as_depth(z, batch=False)
     c = Intrinsics.from_matrix(cam)
@@ -205,7 +205,7 @@ def test_mirroring_mirrors_n_x(method, scene):
         # their neighbours instead (the same normals to within that interpolation, not to the bit); and the
         # choice of stride counts the pixels that no fitted one reaches, which differ between the two (one may
         # take stride 1, the other 2)
-        from surfnorm.kernels.adaptive_fit import choose_stride
+        from surfnorm.kernels._schedule import choose_stride
 
         valid = np.isfinite(z) & (z > 0) & (np.ones(z.shape, bool) if mask is None else mask)
         if choose_stride(valid) == 2 or choose_stride(valid[:, ::-1].copy()) == 2:

@@ -167,7 +167,7 @@ class TestParity:
 
         assert _sda.SDA_PENALTY == sda.SDA_PENALTY and _sda.MAX_ITERATIONS == sda.MAX_ITERATIONS
         assert (_plane_fit._NEWTON_STEPS, _plane_fit._NEWTON_TOL) == (plane_fit._NEWTON_STEPS, plane_fit._NEWTON_TOL)
-        from surfnorm.kernels import adaptive_fit, auto
+        from surfnorm.kernels import _windows, adaptive_fit, auto
         from surfnorm.torch import _adaptive
 
         for name in (
@@ -196,8 +196,8 @@ class TestParity:
         )
         for r_max in (1, 3, 7, 15, 20, 63):
             widen, grow = _adaptive._ladder_tables(r_max)
-            np.testing.assert_array_equal(widen, adaptive_fit.widen_table(r_max))
-            np.testing.assert_array_equal(grow, adaptive_fit.growth_table(r_max))
+            np.testing.assert_array_equal(widen, _windows.widen_table(r_max))
+            np.testing.assert_array_equal(grow, _windows.growth_table(r_max))
 
 
 def scene_with_holes(h=40, w=52, seed=0):
@@ -261,7 +261,8 @@ class TestAdaptive:
 
     @staticmethod
     def numpy_tables(depth, K, mask=None, window=None, max_window=31):
-        from surfnorm.kernels.adaptive_fit import noise_profile, radius_table
+        from surfnorm.kernels._windows import radius_table
+        from surfnorm.kernels.sensor_noise import noise_profile
 
         valid = np.isfinite(depth) & (depth > 0) & (True if mask is None else mask)
         f = np.sqrt(K[0, 0] * K[1, 1])
@@ -342,7 +343,7 @@ class TestAdaptive:
     @pytest.mark.parametrize("stride", [1, 2])
     def test_strides(self, stride):
         # every frame at the same stride, whatever its density (the default chooses per frame: above)
-        from surfnorm.kernels.adaptive_fit import choose_stride
+        from surfnorm.kernels._schedule import choose_stride
 
         depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, holes=0.5), sensor_like(seed=7, holes=0.2)])
         assert [choose_stride(d > 0) for d in depth] == [2, 1, 2]  # otherwise the default shows nothing new

@@ -80,7 +80,8 @@ def _run_uncertain(method, options, z, valid, cam, out, sigma_out, tie_tol=0.0, 
     import math
 
     from .kernels import uncertainty as U
-    from .kernels.adaptive_fit import noise_profile, radius_table
+    from .kernels._windows import radius_table
+    from .kernels.sensor_noise import noise_profile
 
     record: dict = {}
     if method.name != "d2nt_v3":

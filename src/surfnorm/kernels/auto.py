@@ -8,7 +8,7 @@ wins: the adaptive plane fit of inverse depth (``adaptive_fit``).
 
 The choice is made on the frame's *noise reading* (:func:`reading`), in units of
 the point spacing z / f, the largest of three measurements of
-:class:`surfnorm.kernels.adaptive_fit.NoiseProfile`:
+:class:`surfnorm.kernels.sensor_noise.NoiseProfile`:
 
 * the noise floor: the median second difference of inverse depth at the pixel
   scale. Rendered frames measure 0.00-0.08, real PrimeSense, Kinect v1 (registered),
@@ -69,7 +69,8 @@ from .._constants import (
     TERRACED_LOW,
     TRUNCATE_DEFAULT,
 )
-from .adaptive_fit import NoiseProfile, adaptive_fit, noise_profile
+from .adaptive_fit import adaptive_fit
+from .sensor_noise import NoiseProfile, noise_profile
 
 __all__ = [
     "auto",
@@ -124,7 +125,7 @@ class Decision(NamedTuple):
         The noise level decided on (point spacings): the largest of ``floor``, ``smooth`` and ``quantisation``;
         NaN when too few pixels have valid neighbours (sparse depth: ``adaptive_fit``).
     floor, smooth, terraced, step : float
-        The :class:`~surfnorm.kernels.adaptive_fit.NoiseProfile`'s.
+        The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s.
     quantisation : float
         :func:`quantisation`.
     """

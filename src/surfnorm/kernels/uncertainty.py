@@ -16,7 +16,7 @@ order its angular error is the part of dm across the normal, over |m| = w / (-n 
     sigma^2 = (trace C - n^T C n) / |m|^2,   C = J cov(g_u, g_v, a) J^T                  (2)
 
 with J = d m / d(g_u, g_v, a). For s^2 the fit's own residual per degree of freedom is taken, or the frame's
-noise (``rho``, :class:`~surfnorm.kernels.adaptive_fit.NoiseProfile`, as sigma_w = rho / (z f)) where that is
+noise (``rho``, :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`, as sigma_w = rho / (z f)) where that is
 larger: a window whose few points happen to fit well is not trusted beyond the noise the frame shows. Sensor
 noise is correlated between neighbours (a matcher's window, a spatial filter, quantisation terraces), which
 a residual does not see and a slope does: ``FIT_GAIN`` (a variance factor, the one number set from data:
@@ -364,7 +364,7 @@ def _d2nt_sigma(
 def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole) -> np.ndarray:
     """``d2nt_v3``'s sigma (degrees; NaN where the normal is ``fill``), see :func:`_d2nt_sigma`, with ``D2NT_GAIN``,
     ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT`` and ``FLOOR_DEG``; ``noise``: the frame's rho against depth as
-    (z0, inv_step, table) of :func:`surfnorm.kernels.adaptive_fit.radius_table`."""
+    (z0, inv_step, table) of :func:`surfnorm.kernels._windows.radius_table`."""
     out = np.empty(z.shape, np.float32) if out is None else out
     args = (z, valid, normals, np.float32(fill), _cam(cam), noise)
     gains = (

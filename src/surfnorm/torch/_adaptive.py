@@ -1,5 +1,5 @@
 """The adaptive plane fit of inverse depth and ``auto`` on tensors (the twins of
-``surfnorm.kernels.adaptive_fit`` and ``surfnorm.kernels.auto``).
+``surfnorm.kernels.adaptive_fit``, its modules and ``surfnorm.kernels.auto``).
 
 Same rule as the NumPy kernel, step for step (its module docstring explains the method):
 
@@ -103,7 +103,7 @@ def _sqrt(x: torch.Tensor) -> torch.Tensor:
 
 
 def allowed_radii(r: torch.Tensor, r_max: int) -> torch.Tensor:
-    """``adaptive_fit.allowed_radii``: the smallest radius of RADII that is at least r, at most r_max (int64)."""
+    """``_windows.allowed_radii``: the smallest radius of RADII that is at least r, at most r_max (int64)."""
     ladder = torch.tensor(RADII, dtype=r.dtype, device=r.device)
     at = torch.searchsorted(ladder, r.contiguous(), right=False).clamp(max=len(RADII) - 1)
     rung = ladder[at]
@@ -111,7 +111,7 @@ def allowed_radii(r: torch.Tensor, r_max: int) -> torch.Tensor:
 
 
 def _ladder_tables(r_max: int) -> tuple[np.ndarray, np.ndarray]:
-    """(widen, grow) of ``adaptive_fit._tables``, from :func:`allowed_radii`."""
+    """(widen, grow) of ``_windows._tables``, from :func:`allowed_radii`."""
     r = torch.arange(r_max + 1, dtype=_F64)
     widen = torch.where(r > 0, allowed_radii(2 * r, r_max), 1)
     grow = torch.where(r > 0, allowed_radii(torch.ceil(1.5 * r), r_max), 1)
@@ -140,7 +140,7 @@ def rungs(window, r_max: int) -> list[int]:
 
 
 class NoiseTables(NamedTuple):
-    """Per frame (B,): the depth -> (radius, rho) table of ``adaptive_fit.radius_table`` and the noise floor."""
+    """Per frame (B,): the depth -> (radius, rho) table of ``_windows.radius_table`` and the noise floor."""
 
     z0: torch.Tensor  # (B,) depth of entry 0
     inv_step: torch.Tensor  # (B,) entries per unit depth
@@ -153,7 +153,7 @@ class NoiseTables(NamedTuple):
 
 
 def _samples(z, valid, f, lo, span):
-    """``adaptive_fit._second_differences`` on every frame: xs (3, B, N), taken (B, N), bins (B, N), in the
+    """``sensor_noise._second_differences`` on every frame: xs (3, B, N), taken (B, N), bins (B, N), in the
     NumPy kernel's sample order (row-major over the sampled pixels, horizontal then vertical); and its terrace
     test: changed (B, N), the stencils taken at a = 1 whose depth changes, and jumps (B, N), the jump height
     where such a stencil is a flat step beside a jump, else NaN."""
@@ -196,7 +196,7 @@ def _samples(z, valid, f, lo, span):
             for i, (z_m, z_p) in enumerate(((z_m1, z_p1), (z_m2, z_p2), (z_m4, z_p4))):
                 x = ((torch.reciprocal(z_m) - w0 + torch.reciprocal(z_p)) * zb) * scale
                 xs[i] = torch.where(take, x, xs[i])
-            if a == 1:  # the terrace test (adaptive_fit._terrace)
+            if a == 1:  # the terrace test (sensor_noise._terrace)
                 flat_m, flat_p = z_m1 == zb, z_p1 == zb
                 changed = take & ~(flat_m & flat_p)
                 other = torch.where(flat_m, z_p1, z_m1)
@@ -261,7 +261,7 @@ def _median(x: torch.Tensor, where: torch.Tensor) -> torch.Tensor:
 
 
 def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, window=None, r_max: int) -> NoiseTables:
-    """``adaptive_fit.noise_profile`` then ``radius_table`` for every frame: z (B, H, W) float64 (any value
+    """``sensor_noise.noise_profile`` then ``radius_table`` for every frame: z (B, H, W) float64 (any value
     where invalid), valid (B, H, W), f (B,) = sqrt(fx fy)."""
     B = z.shape[0]
     dev = z.device
@@ -277,14 +277,14 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     enough = n >= MIN_SAMPLES
     # the floor: median |x_1| / 0.6745
     floor = torch.where(enough, _median(xs[0].abs(), taken) / 0.6745, torch.full_like(lo, math.nan))
-    # the terraces (adaptive_fit.terrace_statistics): the share of jumps among the stencils that changed, their
+    # the terraces (sensor_noise.terrace_statistics): the share of jumps among the stencils that changed, their
     # median height; 0 and 0 with fewer than MIN_SAMPLES changed or no jump
     is_jump = ~torch.isnan(jumps)
     n_changed, n_jumps = changed.sum(dim=1), is_jump.sum(dim=1)
     counted = (n_changed >= MIN_SAMPLES) & (n_jumps > 0)
     terraced = torch.where(counted, n_jumps.to(_F64) / n_changed.clamp(min=1).to(_F64), torch.zeros_like(lo))
     heights = torch.where(counted, _median(jumps, is_jump), torch.zeros_like(lo))
-    # the smooth noise (NoiseProfile.smooth, adaptive_fit._quiet): every s-th sample (s = ceil(n / _SMOOTH_SAMPLES)),
+    # the smooth noise (NoiseProfile.smooth, sensor_noise._quiet): every s-th sample (s = ceil(n / _SMOOTH_SAMPLES)),
     # the geometric mean of |x_2| and |x_4 - 4 x_2| / its white-noise RMS, each at rank floor(SMOOTH_SHARE (m - 1))
     # of the m read, over _SMOOTH_GAUSS
     s = torch.div(n + _SMOOTH_SAMPLES - 1, _SMOOTH_SAMPLES, rounding_mode="floor").clamp(min=1).view(B, 1)
@@ -352,7 +352,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
 
 
 def integral_images(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """(10, B, H + 1, W + 1) float64: ``adaptive_fit.integral_row`` for every row of every frame (sums over the
+    """(10, B, H + 1, W + 1) float64: ``_windows.integral_row`` for every row of every frame (sums over the
     valid pixels above and left of each corner of 1, u', v', u'u', u'v', v'v', w, u'w, v'w, ww; u' = u - W/2,
     v' = v - H/2, w = 1/z), in its order of additions on the CPU."""
     B, H, W = z.shape
@@ -615,7 +615,7 @@ def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tupl
 
 
 def choose_stride(valid: torch.Tensor) -> torch.Tensor:
-    """``adaptive_fit.choose_stride`` per frame of valid (B, H, W): 2 unless more than MAX_UNREACHED of the
+    """``_schedule.choose_stride`` per frame of valid (B, H, W): 2 unless more than MAX_UNREACHED of the
     valid pixels that are not fitted (not on an even row and column) have no valid fitted pixel in their 5x5
     neighbourhood; (B,) int64."""
     B, H, W = valid.shape
@@ -631,7 +631,7 @@ def choose_stride(valid: torch.Tensor) -> torch.Tensor:
 
 
 def _carried(c, du, dv, w_p):
-    """``adaptive_fit.carried``: c = (a, g_u, g_v, ok, limit) of a fitted pixel per pixel."""
+    """``_assembly.carried``: c = (a, g_u, g_v, ok, limit) of a fitted pixel per pixel."""
     a, g_u, g_v, has, lim = c
     p = a + g_u * du + g_v * dv
     inf = torch.full_like(p, math.inf)
@@ -639,7 +639,7 @@ def _carried(c, du, dv, w_p):
 
 
 def _interpolated(cands):
-    """``adaptive_fit.interpolated`` of four :func:`_carried` candidates."""
+    """``_assembly.interpolated`` of four :func:`_carried` candidates."""
     q = [e <= lim for _, _, _, e, lim in cands]
     n = q[0].to(torch.int64) + q[1] + q[2] + q[3]
     zero = torch.zeros_like(cands[0][0])
@@ -669,7 +669,7 @@ def _interpolated(cands):
 
 
 def _between(a, g_u, g_v, ok, w, limit, valid, stride2):
-    """``adaptive_fit.assembled_row`` for the frames where ``stride2``: every pixel takes the planes of the fitted
+    """``_assembly.assembled_row`` for the frames where ``stride2``: every pixel takes the planes of the fitted
     pixels (even row and column) next to it (the mean of those that predict its w within their noise limit,
     else the closest; a fitted pixel its own), and where none has a plane, the closest other fitted pixel of
     its 5x5 neighbourhood. a, g_u, g_v, w, limit (B, H, W) float64, ok (B, H, W) where a pixel has a plane.

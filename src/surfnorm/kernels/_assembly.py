@@ -1,0 +1,246 @@
+"""From the fitted pixels' planes to every pixel's normal (eq. (2) of :mod:`surfnorm.kernels.adaptive_fit`).
+
+With ``stride`` 1 every pixel has its own fit (:func:`normal_row`). With ``stride`` 2 the windows are fitted on
+the even rows and columns only, and every other pixel takes the planes of the fitted pixels next to it
+(:func:`assembled_row`): the mean of those that predict its own w within their noise limit, else the closest.
+A band of rows keeps the planes of its last three fitted rows in a ring (:func:`row_done`) and writes a row's
+normals as soon as the planes it reads are known (:func:`emit_row`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._config import njit, pixel, select
+from .._constants import TIE
+
+__all__ = ["unit_normal", "normal_row", "assembled_row", "emit_row", "row_done", "first_fitted_row"]
+
+
+@pixel
+def unit_normal(zp, a, g_u, g_v, u, v, fx, fy, cx, cy):
+    """Eq. (2) at pixel (u, v) of depth ``zp`` from its plane (a: w there, g_u, g_v), as float32."""
+    a = select(a > 0.0, a, 1.0 / zp)  # a fit that passes behind the camera: the pixel's own w
+    nx = fx * g_u
+    ny = fy * g_v
+    nz = a - g_u * (u - cx) - g_v * (v - cy)
+    inv_norm = -1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return np.float32(nx * inv_norm), np.float32(ny * inv_norm), np.float32(nz * inv_norm)
+
+
+@njit(noalias=True, _nrt=False)
+def normal_row(z_row, valid_row, v, g_u, g_v, a, dof, fx, fy, cx, cy, fill, out_row):
+    """Eq. (2): the unit normal facing the camera from each pixel's fit; ``fill`` without one."""
+    W = z_row.shape[0]
+    for u in range(W):
+        ok = valid_row[u] & (dof[u] > 0.0)
+        nx, ny, nz = unit_normal(z_row[u], a[u], g_u[u], g_v[u], u, v, fx, fy, cx, cy)
+        out_row[3 * u] = select(ok, nx, fill)
+        out_row[3 * u + 1] = select(ok, ny, fill)
+        out_row[3 * u + 2] = select(ok, nz, fill)
+
+
+@njit(noalias=True, _nrt=False)
+def expand_row(a, g_u, g_v, ok, limit, e):
+    """The planes of a row's fitted pixels (columns 0, 2, 4, ...: a, g_u, g_v, ok and the noise limit, each
+    (n_fit,)) at full width: e[:, u] is column 2 (u // 2)'s, for u = 0 .. W (none at u = W for an even W)."""
+    W = e.shape[1] - 1
+    for i in range(a.shape[0]):
+        for c, x in ((0, a[i]), (1, g_u[i]), (2, g_v[i]), (3, ok[i]), (4, limit[i])):
+            e[c, 2 * i] = x
+            if 2 * i + 1 <= W:
+                e[c, 2 * i + 1] = x
+    if W % 2 == 0:
+        e[3, W] = 0.0
+
+
+@pixel
+def carried(rows, k, du, dv, w_p):
+    """The plane of the fitted pixel held at ``k`` in ``rows`` (:func:`expand_row`) carried to a pixel ``du``
+    columns and ``dv`` rows from it: (w there, g_u, g_v, squared error to the pixel's own w_p: inf where that
+    fitted pixel has no plane, and the fitted pixel's noise limit: -1 there)."""
+    has = rows[3, k] > 0.0
+    p = rows[0, k] + rows[1, k] * du + rows[2, k] * dv
+    return p, rows[1, k], rows[2, k], select(has, (p - w_p) * (p - w_p), np.inf), select(has, rows[4, k], -1.0)
+
+
+@pixel
+def interpolated(p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3):
+    """The plane at a pixel from those of up to four fitted pixels next to it (:func:`carried`; a missing one
+    has e = inf): the mean of those that predict the pixel's w within their noise limit (e <= l), else the
+    one that predicts it closest (one closer by more than TIE of the squared error replaces the one before
+    it). Returns (a, g_u, g_v, found); limits of -1 give the closest one."""
+    q0 = e0 <= l0
+    q1 = e1 <= l1
+    q2 = e2 <= l2
+    q3 = e3 <= l3
+    n = q0 + q1 + q2 + q3
+    s_a = select(q0, p0, 0.0) + select(q1, p1, 0.0) + select(q2, p2, 0.0) + select(q3, p3, 0.0)
+    s_u = select(q0, gu0, 0.0) + select(q1, gu1, 0.0) + select(q2, gu2, 0.0) + select(q3, gu3, 0.0)
+    s_v = select(q0, gv0, 0.0) + select(q1, gv1, 0.0) + select(q2, gv2, 0.0) + select(q3, gv3, 0.0)
+    best = e0
+    a_c = p0
+    gu_c = gu0
+    gv_c = gv0
+    c = e1 < best * (1.0 - TIE)
+    best, a_c, gu_c, gv_c = select(c, e1, best), select(c, p1, a_c), select(c, gu1, gu_c), select(c, gv1, gv_c)
+    c = e2 < best * (1.0 - TIE)
+    best, a_c, gu_c, gv_c = select(c, e2, best), select(c, p2, a_c), select(c, gu2, gu_c), select(c, gv2, gv_c)
+    c = e3 < best * (1.0 - TIE)
+    best, a_c, gu_c, gv_c = select(c, e3, best), select(c, p3, a_c), select(c, gu3, gu_c), select(c, gv3, gv_c)
+    mean = n > 0
+    inv_n = select(n == 2, 0.5, select(n == 4, 0.25, select(n == 3, 1.0 / 3.0, 1.0)))  # 1 / n, multiplied
+    return (
+        select(mean, s_a * inv_n, a_c),
+        select(mean, s_u * inv_n, gu_c),
+        select(mean, s_v * inv_n, gv_c),
+        best < np.inf,
+    )
+
+
+@pixel
+def _put_normal(z_row, valid_row, u, o, a, gu, gv, found, fx, fy, cx, cy, fill, out_row):
+    """Eq. (2) at pixel u of row o from its plane into ``out_row`` (``fill`` where it is invalid or has none);
+    returns whether it got one."""
+    ok = valid_row[u] & found
+    nx, ny, nz = unit_normal(z_row[u], a, gu, gv, u, o, fx, fy, cx, cy)
+    out_row[3 * u] = select(ok, nx, fill)
+    out_row[3 * u + 1] = select(ok, ny, fill)
+    out_row[3 * u + 2] = select(ok, nz, fill)
+    return ok
+
+
+@njit(noalias=True, _nrt=False)
+def assembled_row(z_row, valid_row, o, up2, up1, same, dn1, dn2, cam, fill, got, out_row):
+    """Eq. (2) for every pixel of row ``o`` with ``stride`` 2, from the planes of the fitted rows around it
+    (:func:`expand_row`, or a row without planes): ``same`` the row itself (o even), ``up2`` and ``dn2`` the
+    fitted rows two above and below it, ``up1`` and ``dn1`` those just above and below it (o odd).
+
+    A fitted pixel (even row and column) keeps its plane. Every other one takes :func:`interpolated` of the
+    fitted pixels of its 3x3 neighbourhood (left and right; above and below; the four diagonal ones), and
+    where none of them has a plane, the closest of the other fitted pixels of its 5x5 neighbourhood. On
+    the full-width rows of :func:`expand_row` a pixel u finds the fitted pixels of its column pair at u and
+    u + 1: its own plane twice (the mean of a value with itself is that value, to the bit), or its left
+    and right ones, so that the first pass over the row reads contiguous memory, branch-free (it
+    vectorises). ``got`` is scratch (W,).
+    """
+    W = z_row.shape[0]
+    fx, fy, cx, cy = cam
+    inf = np.inf
+    odd = o % 2 == 1
+    # two loops, not one with the choice inside: the compiler computed both sides of it for every pixel
+    if odd:  # above and below, or the four diagonal ones
+        for u in range(W):
+            w_p = 1.0 / z_row[u]
+            du = float(u % 2)
+            p0, gu0, gv0, e0, l0 = carried(up1, u, du, 1.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(up1, u + 1, -du, 1.0, w_p)
+            p2, gu2, gv2, e2, l2 = carried(dn1, u, du, -1.0, w_p)
+            p3, gu3, gv3, e3, l3 = carried(dn1, u + 1, -du, -1.0, w_p)
+            a, gu, gv, found = interpolated(
+                p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, p2, gu2, gv2, e2, l2, p3, gu3, gv3, e3, l3
+            )
+            got[u] = _put_normal(z_row, valid_row, u, o, a, gu, gv, found, fx, fy, cx, cy, fill, out_row)
+    else:  # its own plane twice, or the left and right ones; no others (the compiler drops them)
+        for u in range(W):
+            w_p = 1.0 / z_row[u]
+            du = float(u % 2)
+            p0, gu0, gv0, e0, l0 = carried(same, u, du, 0.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(same, u + 1, -du, 0.0, w_p)
+            a, gu, gv, found = interpolated(
+                p0, gu0, gv0, e0, l0, p1, gu1, gv1, e1, l1, 0.0, 0.0, 0.0, inf, -1.0, 0.0, 0.0, 0.0, inf, -1.0
+            )
+            got[u] = _put_normal(z_row, valid_row, u, o, a, gu, gv, found, fx, fy, cx, cy, fill, out_row)
+    for u in range(W):  # the few without a plane yet: the other fitted pixels of the 5x5 neighbourhood
+        if got[u] or not valid_row[u] or u % 2 == o % 2:  # fitted, or diagonal to the fitted ones: no others
+            continue
+        w_p = 1.0 / z_row[u]
+        if odd:  # even column: two columns left and right in the rows above and below
+            left = max(u - 2, 0)
+            right = min(u + 2, W)
+            p0, gu0, gv0, e0, l0 = carried(up1, left, 2.0, 1.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(up1, right, -2.0, 1.0, w_p)
+            p2, gu2, gv2, e2, l2 = carried(dn1, left, 2.0, -1.0, w_p)
+            p3, gu3, gv3, e3, l3 = carried(dn1, right, -2.0, -1.0, w_p)
+            e0, e2 = select(u >= 2, e0, inf), select(u >= 2, e2, inf)
+            e1, e3 = select(u + 2 <= W, e1, inf), select(u + 2 <= W, e3, inf)
+        else:  # odd column: left and right in the rows two above and below
+            p0, gu0, gv0, e0, l0 = carried(up2, u - 1, 1.0, 2.0, w_p)
+            p1, gu1, gv1, e1, l1 = carried(up2, u + 1, -1.0, 2.0, w_p)
+            p2, gu2, gv2, e2, l2 = carried(dn2, u - 1, 1.0, -2.0, w_p)
+            p3, gu3, gv3, e3, l3 = carried(dn2, u + 1, -1.0, -2.0, w_p)
+        a, gu, gv, found = interpolated(
+            p0, gu0, gv0, e0, -1.0, p1, gu1, gv1, e1, -1.0, p2, gu2, gv2, e2, -1.0, p3, gu3, gv3, e3, -1.0
+        )
+        if found:
+            nx, ny, nz = unit_normal(z_row[u], a, gu, gv, u, o, fx, fy, cx, cy)
+            out_row[3 * u] = nx
+            out_row[3 * u + 1] = ny
+            out_row[3 * u + 2] = nz
+
+
+@pixel
+def _fitted_row(fitted, none, v, stride, first, last):
+    """The planes of fitted row v in the ring ``fitted``, or ``none`` where v is not a fitted row there."""
+    return fitted[(v // stride) % 3] if v % stride == 0 and first <= v <= last else none
+
+
+@njit(noalias=True, _nrt=False)
+def emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, out_flat):
+    """The normals of row ``o`` from the planes of the fitted rows ``first`` .. ``last`` held in ``fitted``
+    (a ring of three: fitted row v at (v // stride) % 3; ``none`` for a row outside them); ``cam`` is
+    (fx, fy, cx, cy); ``got`` is scratch (W,)."""
+    if stride == 1:
+        rows = fitted[o % 3]
+        fx, fy, cx, cy = cam
+        normal_row(z[o], valid[o], o, rows[1], rows[2], rows[0], rows[3], fx, fy, cx, cy, fill, out_flat[o])
+        return
+    assembled_row(
+        z[o],
+        valid[o],
+        o,
+        _fitted_row(fitted, none, o - 2, stride, first, last),
+        _fitted_row(fitted, none, o - 1, stride, first, last),
+        _fitted_row(fitted, none, o, stride, first, last),
+        _fitted_row(fitted, none, o + 1, stride, first, last),
+        _fitted_row(fitted, none, o + 2, stride, first, last),
+        cam,
+        fill,
+        got,
+        out_flat[o],
+    )
+
+
+@njit(noalias=True, _nrt=False)
+def row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band):
+    """Fitted row v's planes (a, g_u, g_v where valid_row and dof > 0) into the ring ``fitted``, then the normals
+    of the band's rows (``v0`` .. ``v1`` - 1) whose planes are all known now: row v (stride 1), or the two
+    before it (stride 2; :func:`emit_row`). ``band``: what stays the same from row to row, (z, valid, v0, v1,
+    stride, v_first, fitted, none, cam, fill, got, out_flat) as in :func:`_adaptive_fit_kernel`."""
+    z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat = band
+    W = z.shape[1]
+    reach = stride - 1
+    rows = fitted[(v // stride) % 3]
+    for i in range(ok_row.shape[0]):
+        ok_row[i] = select(valid_row[i] & (dof[i] > 0.0), 1.0, 0.0)
+    if stride == 1:
+        for u in range(W):
+            rows[0, u] = a[u]
+            rows[1, u] = g_u[u]
+            rows[2, u] = g_v[u]
+            rows[3, u] = ok_row[u]
+    else:
+        expand_row(a, g_u, g_v, ok_row, limit, rows)
+    for o in range(v - 2 * reach, v + 1 - reach):
+        if v0 <= o < v1:
+            emit_row(z, valid, o, stride, fitted, v_first, v, none, cam, fill, got, out_flat)
+
+
+@pixel
+def first_fitted_row(v0, stride):
+    """The first fitted row that the band starting at row v0 reads: every stride-th row of the frame, with stride 2
+    from the one above v0 (its rows take planes from the fitted rows up to two above and below them)."""
+    v = max(v0 - (stride - 1), 0)
+    return v - v % stride

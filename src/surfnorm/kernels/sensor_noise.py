@@ -1,0 +1,482 @@
+"""The frame's noise, measured from its own depth: :func:`noise_profile` and :class:`NoiseProfile`.
+
+The second differences of inverse depth w = 1/z vanish on planes (w is affine there), so their robust RMS in bins
+of depth, at strides 1, 2 and 4, separates a sensor's noise from the scene's shape. In units of the distance
+between neighbouring pixels' points (z / f) the noise is rho(z) = sigma_z f / z. :mod:`surfnorm.kernels.adaptive_fit`
+sizes its windows from it (:func:`surfnorm.kernels._windows.radius_table`), :mod:`surfnorm.kernels.auto` decides
+from it what the frame is (clean, sensor or between: its floor, terraces and smooth noise), and
+:mod:`surfnorm.kernels.uncertainty` predicts each normal's error from it. ``surfnorm.torch`` measures the same
+statistics on tensors (:mod:`surfnorm.torch._adaptive`).
+
+A statistic of the whole frame, sampled on every step-th row and column (about ``_NOISE_SAMPLES`` pixels).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .._aot import ahead_of_time
+from .._bands import Part
+from .._config import njit, pixel, select
+from .._constants import (
+    _CLIP_ROUNDS,
+    _CLIP_SIGMAS,
+    _FOURTH_RMS,
+    _MAX_GAP,
+    _MAX_SPREAD,
+    _NOISE_SAMPLES,
+    _SMOOTH_GAUSS,
+    _SMOOTH_SAMPLES,
+    MIN_SAMPLES,
+    N_BINS,
+    SMOOTH_SHARE,
+)
+
+__all__ = ["NoiseProfile", "noise_profile", "depth_range", "terrace_statistics"]
+
+
+@ahead_of_time
+@njit
+def _depth_range(z, valid):
+    zmin = np.inf
+    zmax = 0.0
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            if valid[v, u]:
+                zmin = min(zmin, z[v, u])
+                zmax = max(zmax, z[v, u])
+    return zmin, zmax
+
+
+@ahead_of_time
+@njit(noalias=True, _nrt=False)
+def _depth_range_bits(bits, valid):
+    """:func:`_depth_range` of float32 depth from its bits (``z.view(np.int32)``): positive floats order as their
+    bits do, and integer minima and maxima vectorise. Returns the bits of the nearest and farthest valid depth
+    (2**31 - 1 and 0 without any)."""
+    lo = np.int32(2147483647)
+    hi = np.int32(0)
+    for v in range(bits.shape[0]):
+        b = bits[v]
+        m = valid[v]
+        for u in range(b.shape[0]):
+            lo = min(lo, select(m[u], b[u], np.int32(2147483647)))
+            hi = max(hi, select(m[u], b[u], np.int32(0)))
+    return lo, hi
+
+
+def depth_range(z: np.ndarray, valid: np.ndarray) -> tuple[float, float]:
+    """The nearest and farthest valid depth (inf and 0 without any)."""
+    if z.dtype != np.float32 or not z.flags.c_contiguous:
+        return _depth_range(z, valid)
+    lo, hi = _depth_range_bits(z.view(np.int32), valid)
+    if lo == 2147483647:
+        return np.inf, 0.0
+    return float(np.int32(lo).view(np.float32)), float(np.int32(hi).view(np.float32))
+
+
+@pixel
+def _spread(z0, z1, z2, z3, z4, z5, z6):
+    """True when the depths of a stencil differ by more than ``_MAX_SPREAD`` (a discontinuity)."""
+    lo = min(z0, z1, z2, z3, z4, z5, z6)
+    hi = max(z0, z1, z2, z3, z4, z5, z6)
+    return hi > _MAX_SPREAD * lo
+
+
+@pixel
+def _terrace(z_m, z_0, z_p, f, jumps, n_jumps):
+    """(1 when the depth changes along z_m, z_0, z_p at all, else 0; ``n_jumps``, plus 1 after writing a jump's
+    height into ``jumps``) for a flat step beside a jump: one neighbour at exactly z_0's depth, the other not.
+    The height |1/z_0 - 1/z_other| z_0 f is in point spacings (z_0 / f)."""
+    flat_m = z_m == z_0
+    flat_p = z_p == z_0
+    if flat_m and flat_p:
+        return 0, n_jumps
+    if flat_m != flat_p:
+        other = z_p if flat_m else z_m
+        jumps[n_jumps] = abs(1.0 / z_0 - 1.0 / other) * z_0 * f
+        n_jumps += 1
+    return 1, n_jumps
+
+
+@ahead_of_time
+@njit
+def _second_differences(z, valid, f, zmin, zmax, nbins, step, xs, bins, jumps):
+    """Second differences of w = 1/z at strides a, 2a and 4a along rows and columns, in units of
+    the point spacing z/f.
+
+    For each pixel on every ``step``-th row and column and each direction, the smallest a in
+    1..``_MAX_GAP`` for which the pixels at +-a, +-2a, +-4a are valid (sparse depth has gaps)
+    gives x_s = (w_{-sa} - 2 w_0 + w_{+sa}) z_0 f / sqrt(6) in ``xs[0, k]``, ``xs[1, k]``,
+    ``xs[2, k]`` (s = 1, 2, 4), and the centre's depth bin in ``bins[k]``. On a plane they vanish
+    (w is affine there); white noise sigma_z in depth gives each the RMS rho = sigma_z f / z; a
+    smooth curved surface gives x_2 = 4 x_1 and x_4 = 4 x_2. A stencil whose depths differ by more
+    than ``_MAX_SPREAD`` (x1.25) spans a discontinuity and is left out (only a surface seen at
+    over 80 degrees from its normal changes depth that fast).
+
+    Terraces: where the stencil is found at a = 1, its centre and two neighbours are also tested for
+    quantisation terraces (:func:`terrace_statistics`): a stencil whose depth changes at all
+    (``changed``) and whose one neighbour has exactly the centre's depth while the other differs (a
+    flat step beside a jump) puts the jump's height |w_0 - w_+-1| z_0 f (point spacings) into
+    ``jumps``. Returns (how many samples, changed, how many jumps).
+    """
+    H, W = z.shape
+    k = 0
+    changed = 0
+    n_jumps = 0
+    scale = f / math.sqrt(6.0)
+    lo = math.log(zmin)
+    span = math.log(zmax) - lo
+    for v in range(0, H, step):
+        for u in range(0, W, step):
+            if not valid[v, u]:
+                continue
+            zb = z[v, u]
+            w0 = 2.0 / zb
+            b = 0
+            if span > 0.0:
+                b = min(nbins - 1, int((math.log(zb) - lo) / span * nbins))
+            for a in range(1, _MAX_GAP + 1):
+                if (
+                    u - 4 * a >= 0
+                    and u + 4 * a < W
+                    and valid[v, u - 4 * a]
+                    and valid[v, u - 2 * a]
+                    and valid[v, u - a]
+                    and valid[v, u + a]
+                    and valid[v, u + 2 * a]
+                    and valid[v, u + 4 * a]
+                ):
+                    if _spread(
+                        z[v, u - 4 * a], z[v, u - 2 * a], z[v, u - a], zb, z[v, u + a], z[v, u + 2 * a], z[v, u + 4 * a]
+                    ):
+                        break  # across a depth discontinuity: not noise
+                    xs[0, k] = (1.0 / z[v, u - a] - w0 + 1.0 / z[v, u + a]) * zb * scale
+                    xs[1, k] = (1.0 / z[v, u - 2 * a] - w0 + 1.0 / z[v, u + 2 * a]) * zb * scale
+                    xs[2, k] = (1.0 / z[v, u - 4 * a] - w0 + 1.0 / z[v, u + 4 * a]) * zb * scale
+                    bins[k] = b
+                    k += 1
+                    if a == 1:
+                        c, n_jumps = _terrace(z[v, u - 1], zb, z[v, u + 1], f, jumps, n_jumps)
+                        changed += c
+                    break
+            for a in range(1, _MAX_GAP + 1):
+                if (
+                    v - 4 * a >= 0
+                    and v + 4 * a < H
+                    and valid[v - 4 * a, u]
+                    and valid[v - 2 * a, u]
+                    and valid[v - a, u]
+                    and valid[v + a, u]
+                    and valid[v + 2 * a, u]
+                    and valid[v + 4 * a, u]
+                ):
+                    if _spread(
+                        z[v - 4 * a, u], z[v - 2 * a, u], z[v - a, u], zb, z[v + a, u], z[v + 2 * a, u], z[v + 4 * a, u]
+                    ):
+                        break
+                    xs[0, k] = (1.0 / z[v - a, u] - w0 + 1.0 / z[v + a, u]) * zb * scale
+                    xs[1, k] = (1.0 / z[v - 2 * a, u] - w0 + 1.0 / z[v + 2 * a, u]) * zb * scale
+                    xs[2, k] = (1.0 / z[v - 4 * a, u] - w0 + 1.0 / z[v + 4 * a, u]) * zb * scale
+                    bins[k] = b
+                    k += 1
+                    if a == 1:
+                        c, n_jumps = _terrace(z[v - 1, u], zb, z[v + 1, u], f, jumps, n_jumps)
+                        changed += c
+                    break
+    return k, changed, n_jumps
+
+
+@ahead_of_time
+@njit
+def _clipped_rms(xs, starts, rounds, sigmas, rms):
+    """Per row i of ``xs`` and bin b: the RMS of xs[i, starts[b]:starts[b + 1]], then ``rounds`` times the
+    RMS of those within ``sigmas`` times it, into rms[i, b] (0 for an empty bin).
+
+    ``xs`` holds each bin's samples together (see :func:`_by_bin`). The kept sets only shrink from round to
+    round (dropping values above sigmas >= 1 times the RMS lowers the RMS, and so the bound), so a round
+    that keeps as many values as the one before kept the same ones, and every later round would too: a bin
+    is left as it is once that holds for each of its rows, and the loop stops once it holds for every bin,
+    with the same result. Each bin's squares are summed in the order of its samples, three rows at once
+    (independent chains of additions).
+    """
+    n_rows = xs.shape[0]
+    nbins = starts.shape[0] - 1
+    counts = np.zeros((n_rows, nbins), np.int64)
+    before = np.full((n_rows, nbins), -1, np.int64)
+    settled = np.zeros(nbins, np.bool_)
+    rms[:, :] = np.inf
+    for _ in range(rounds + 1):
+        for b in range(nbins):
+            if settled[b]:
+                continue
+            for i0 in range(0, n_rows, 3):
+                i1 = min(i0 + 1, n_rows - 1)
+                i2 = min(i0 + 2, n_rows - 1)
+                x0, x1, x2 = xs[i0], xs[i1], xs[i2]
+                l0, l1, l2 = sigmas * rms[i0, b], sigmas * rms[i1, b], sigmas * rms[i2, b]
+                s0 = s1 = s2 = 0.0
+                c0 = c1 = c2 = 0
+                for j in range(starts[b], starts[b + 1]):
+                    k0, k1, k2 = abs(x0[j]) <= l0, abs(x1[j]) <= l1, abs(x2[j]) <= l2
+                    s0 += select(k0, x0[j] * x0[j], 0.0)
+                    s1 += select(k1, x1[j] * x1[j], 0.0)
+                    s2 += select(k2, x2[j] * x2[j], 0.0)
+                    c0 += k0
+                    c1 += k1
+                    c2 += k2
+                for i, s, c in ((i0, s0, c0), (i1, s1, c1), (i2, s2, c2)):
+                    rms[i, b] = math.sqrt(s / c) if c > 0 else 0.0
+                    counts[i, b] = c
+        for b in range(nbins):
+            settled[b] = np.array_equal(counts[:, b], before[:, b])
+        if settled.all():
+            break
+        before[:, :] = counts
+
+
+@ahead_of_time
+@njit
+def _by_bin(xs, bins, nbins):
+    """The columns of ``xs`` grouped by bin, in their order within each bin, and each bin's start (nbins + 1)."""
+    starts = np.zeros(nbins + 1, np.int64)
+    for b in bins:
+        starts[b + 1] += 1
+    for b in range(nbins):
+        starts[b + 1] += starts[b]
+    at = starts[:-1].copy()
+    grouped = np.empty_like(xs)
+    for j in range(bins.shape[0]):
+        k = at[bins[j]]
+        at[bins[j]] = k + 1
+        for i in range(xs.shape[0]):
+            grouped[i, k] = xs[i, j]
+    return grouped, starts
+
+
+@pixel
+def _select(a, k):
+    """The k-th smallest value of ``a`` (1-D), reordering ``a`` in place (Hoare's selection; no allocation)."""
+    lo, hi = 0, a.size - 1
+    while lo < hi:
+        pivot = a[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return a[k]
+
+
+@ahead_of_time
+@njit
+def _quiet(xs, share, gauss, fourth_rms, most):
+    """:attr:`NoiseProfile.smooth` from the samples ``xs`` (3, n > 0), every s-th of them (s = ceil(n / ``most``)):
+    the geometric mean of two estimates of the noise at strides 2 and 4, each the value at rank
+    floor(share (m - 1)) of its m magnitudes sorted, over ``gauss``: of |x_2|, which curvature raises (a sphere
+    filling the frame) but fine detail does not reach where the scene is smooth; and of |x_4 - 4 x_2| /
+    ``fourth_rms``, a fourth difference in which curvature cancels but fine detail does not (the foliage of a
+    tree). Noise raises both; either kind of geometry only one. White noise of RMS rho reads rho in each, so in
+    their mean. Without the GIL."""
+    n = xs.shape[1]
+    s = (n + most - 1) // most
+    m = (n + s - 1) // s
+    second = np.empty(m)
+    fourth = np.empty(m)
+    for i in range(m):
+        j = i * s
+        second[i] = abs(xs[1, j])
+        fourth[i] = abs(xs[2, j] - 4.0 * xs[1, j]) / fourth_rms
+    k = int(share * (m - 1))
+    return math.sqrt(_select(second, k) * _select(fourth, k)) / gauss
+
+
+@ahead_of_time
+@njit
+def _median_in_place(a):
+    """np.median(a) (the same value: the mean of the two middle values when a.size is even), reordering ``a``."""
+    n = a.size
+    k = (n - 1) // 2
+    lower = _select(a, k)
+    if n % 2 == 1:
+        return lower
+    upper = a[k + 1]
+    for i in range(k + 2, n):
+        upper = min(upper, a[i])
+    return (lower + upper) / 2.0
+
+
+@ahead_of_time
+@njit
+def _median_abs(x):
+    """np.median(np.abs(x)) (the same value), without holding the GIL: another band's thread runs beside it."""
+    return np.median(np.abs(x))
+
+
+def _samples(z, valid, f):
+    """(zmin, zmax, the second differences (3, n), their depth bins (n), the terraces' jump heights, how many
+    stencils changed depth): see :func:`_second_differences`."""
+    zmin, zmax = depth_range(z, valid)
+    if not zmax > 0.0:
+        return zmin, zmax, np.empty((3, 0)), np.empty(0, np.int64), np.empty(0), 0
+    step = max(1, int(round(math.sqrt(z.size / _NOISE_SAMPLES))))
+    size = 2 * ((z.shape[0] + step - 1) // step) * ((z.shape[1] + step - 1) // step)
+    xs = np.empty((3, size))
+    bins = np.empty(size, np.int64)
+    jumps = np.empty(size)
+    n, changed, n_jumps = _second_differences(z, valid, float(f), zmin, zmax, N_BINS, step, xs, bins, jumps)
+    return zmin, zmax, xs[:, :n], bins[:n], jumps[:n_jumps], changed
+
+
+class NoiseProfile(NamedTuple):
+    """The frame's noise, measured by :func:`noise_profile`.
+
+    depths, rho : ndarray
+        rho (units of the point spacing z / f) at the centres of log-spaced depth bins.
+    floor : float
+        The median |second difference of inverse depth| at stride 1 in the same units, over
+        0.6745 (white Gaussian noise of rho gives rho). Depth rendered without noise has most
+        second differences at 0 (smooth surfaces between edges) however detailed the scene:
+        the 12 3F2N sample frames give 0.00-0.08. Sensor depth has a floor: 0.3-4 on the
+        PrimeSense, Kinect v1 (registered), RealSense D435 and LiDAR frames we measured; raw
+        structured light and stereo matchers often 0 (their depth lies on flat terraces: see
+        ``terraced``). NaN when too few pixels have valid neighbours.
+    terraced : float
+        Of the stencils found at gap 1 whose three central depths are not all equal, the share
+        that are a flat step beside a jump (one neighbour at exactly the centre's depth, the
+        other not): quantised depth on surfaces that are not fronto-parallel. The 12 3F2N sample
+        frames give 0.00-0.10 (exactly equal neighbours only on fronto-parallel surfaces); raw
+        Kinect v1 and Xtion frames (TUM RGB-D, NYU raw, SUN RGB-D), stereo matchers' depth and
+        millimetre-stored RealSense depth 0.4-0.9. 0 when fewer than ``MIN_SAMPLES`` changed.
+    step : float
+        The median height of those jumps, in point spacings (0 without any). For disparity in
+        1/8-pixel steps it is z / (8 B) at depth z and baseline B: about 4 for a Kinect at 2.5 m.
+    smooth : float
+        The noise at strides 2 and 4 in the quietest tenth of the samples: the geometric mean
+        of the 10 % quantiles of |x_2| and of the fourth difference |x_4 - 4 x_2| / sqrt(70 / 6),
+        each over 0.12566 (white noise of RMS rho gives rho). Error smooth over a few pixels
+        (a stereo network's float output) shows less at stride 1 than here; curvature raises
+        only the first (a sphere filling the frame), fine detail only the second (a tree's
+        foliage), noise both. The 12 3F2N sample frames give 0.000-0.012.
+    correlation : float
+        The clipped mean square of the second differences at stride 2 over that at stride 1: 1 for noise
+        independent from pixel to pixel, more where neighbours' errors go together (a matcher's window, a
+        spatial filter: 1.3 for the simulated raw Kinect v1, about 3 for SGBM, 11 for error smooth over 2
+        pixels), where a fitted slope moves more than its residual says. Curvature raises it too. 1 without
+        enough samples.
+    """
+
+    depths: np.ndarray
+    rho: np.ndarray
+    floor: float
+    terraced: float = 0.0
+    step: float = 0.0
+    smooth: float = 0.0
+    correlation: float = 1.0
+
+
+def _correlation(rms, starts, min_samples):
+    """:attr:`NoiseProfile.correlation` from the clipped RMS ``rms`` (3, nbins) of the second differences at
+    strides 1, 2 and 4 and the bins' ``starts``: the mean square at stride 2 over that at stride 1, over the bins
+    with at least ``min_samples`` samples (weighted by their samples); 1 without any."""
+    num = den = 0.0
+    for b in range(rms.shape[1]):
+        n = starts[b + 1] - starts[b]
+        if n >= min_samples and rms[0, b] > 0.0:
+            num += n * rms[1, b] * rms[1, b] / (rms[0, b] * rms[0, b])
+            den += n
+    return num / den if den > 0.0 else 1.0
+
+
+def terrace_statistics(jumps: np.ndarray, changed: int) -> tuple[float, float]:
+    """(terraced, step) of :class:`NoiseProfile` from the jump heights and the count of stencils that changed
+    depth (:func:`_second_differences`): the share of jumps among them (0 when fewer than ``MIN_SAMPLES``
+    changed), and the median height (0 without jumps)."""
+    if changed < MIN_SAMPLES or jumps.size == 0:
+        return 0.0, 0.0
+    return jumps.size / changed, float(_median_in_place(jumps))
+
+
+def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> NoiseProfile:
+    """The frame's noise against depth (see :class:`NoiseProfile`).
+
+    In each depth bin (log-spaced between the nearest and farthest valid depth),
+    the sigma-clipped mean squares v_1, v_2, v_4 of the second differences of
+    inverse depth at strides 1, 2 and 4 (see :func:`_second_differences`)
+    separate noise from shape: white noise adds rho^2 to each, smooth curvature
+    adds c, 16 c and 256 c, so rho^2 = (16 v_1 - v_2) / 15 (the curvature of
+    clean depth is not taken for noise). Noise correlated between neighbours
+    (stereo matchers aggregate over windows) shows less at stride 1 than at
+    stride 2 while it still moves a fitted slope, so rho is the larger of the
+    stride-1 estimate and (16 v_2 - v_4) / 15. Sampled on every step-th row and column (about
+    ``_NOISE_SAMPLES`` pixels). Bins with fewer than ``MIN_SAMPLES`` samples
+    take the value of the nearest bins that have enough; with none, rho is 0
+    (3x3 windows).
+
+    ``offers``: a :class:`surfnorm._bands.Offers` of the bands waiting for this profile, one of which may take
+    the floor's median while this thread sums the bins (the same value either way).
+    """
+    zmin, zmax, xs, bins, jumps, changed = _samples(z, valid, f)
+    n = xs.shape[1]
+    if n < MIN_SAMPLES:
+        return NoiseProfile(np.array([zmin if zmax > 0.0 else 1.0]), np.zeros(1), float("nan"))
+    # The floor (a median), the smooth noise and the terraces do not depend on the rest: another band's thread may
+    # take them (``offers``, see surfnorm._bands.Offers) while this one sums the bins.
+    median = Part(lambda: _median_abs(xs[0]))
+    smooth = Part(lambda: _quiet(xs, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))
+    terraces = Part(lambda: terrace_statistics(jumps, changed))
+    if offers is not None:
+        for part in (median, smooth, terraces):
+            offers.offer(part)
+    ms = np.empty((3, N_BINS))
+    grouped, starts = _by_bin(xs, bins, N_BINS)
+    _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
+    centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
+    terraced, step = terraces.result()
+    correlation = _correlation(ms, starts, MIN_SAMPLES)
+    return NoiseProfile(centres, rho, median.result() / 0.6745, terraced, step, smooth.result(), correlation)
+
+
+@ahead_of_time
+@njit
+def _by_depth(rms, starts, zmin, zmax, min_samples):
+    """The bins' centres and rho (see :func:`noise_profile`) from the clipped RMS ``rms`` (3, nbins) of the second
+    differences at strides 1, 2 and 4 and the bins' ``starts`` (nbins + 1): the centres are the geometric means of
+    log-spaced edges (np.geomspace's arithmetic), and a bin with fewer than ``min_samples`` samples takes rho
+    interpolated in log depth between the nearest that have enough (0 everywhere without any)."""
+    nbins = rms.shape[1]
+    rho = np.empty(nbins)
+    for b in range(nbins):
+        m0, m1, m2 = rms[0, b] * rms[0, b], rms[1, b] * rms[1, b], rms[2, b] * rms[2, b]
+        rho[b] = math.sqrt(max(max(16.0 * m0 - m1, 16.0 * m1 - m2), 0.0) / 15.0)
+    edges = np.full(nbins + 1, zmin)
+    if zmax > zmin:
+        lo, hi = math.log10(zmin), math.log10(zmax)
+        step = (hi - lo) / nbins
+        for i in range(1, nbins):
+            edges[i] = 10.0 ** (i * step + lo)
+        edges[nbins] = zmax
+    centres = np.empty(nbins)
+    for b in range(nbins):
+        centres[b] = math.sqrt(edges[b] * edges[b + 1])
+    ok = np.empty(nbins, np.bool_)
+    for b in range(nbins):
+        ok[b] = starts[b + 1] - starts[b] >= min_samples
+    if not ok.any():
+        return centres, np.zeros(nbins)
+    log_c = np.log(centres)
+    return centres, np.interp(log_c, log_c[ok], rho[ok])

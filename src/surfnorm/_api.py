@@ -77,37 +77,13 @@ UNCERTAIN = ("auto", "adaptive_fit", "d2nt_v3")
 
 def _run_uncertain(method, options, z, valid, cam, out, sigma_out, tie_tol=0.0, relative=0.0, bands=whole):
     """:func:`_run` of a method of ``UNCERTAIN``, and each normal's sigma into ``sigma_out``."""
-    import math
-
-    from .kernels import uncertainty as U
-    from .kernels._windows import radius_table
-    from .kernels.sensor_noise import noise_profile
+    from .kernels.uncertainty import sigma_map
 
     record: dict = {}
     if method.name != "d2nt_v3":
         options = dict(options, record=record)
     normals = _run(method, False, options, z, valid, cam, out, tie_tol, relative, bands)
-    fill = options.get("fill", 0.0)
-    t = 1.0 if method.name == "adaptive_fit" else record.get("weight", 0.0)
-    if t > 0.0:
-        fitted = U.sigma_from_fits(
-            valid,
-            normals,
-            record["variance"],
-            record["stride"],
-            fill=fill,
-            out=sigma_out if t == 1.0 else None,
-            bands=bands,
-        )
-    if t < 1.0:
-        profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
-        z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
-        d2nt = U.d2nt_sigma(
-            z, valid, cam, normals, (z0, inv_step, rho), fill=fill, out=sigma_out if t == 0.0 else None, bands=bands
-        )
-    if 0.0 < t < 1.0:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
-        both = np.sqrt((1.0 - t) * np.square(d2nt) + t * np.square(fitted))
-        sigma_out[...] = np.where(np.isnan(fitted), d2nt, np.where(np.isnan(d2nt), fitted, both))
+    sigma_map(method.name, record, z, valid, cam, normals, options.get("fill", 0.0), sigma_out, bands)
     return normals
 
 
@@ -147,6 +123,32 @@ def _workers(threads) -> int:
     if not isinstance(workers, numbers.Integral) or isinstance(workers, (bool, np.bool_)) or workers < 1:
         raise InputError(f"threads: expected a positive integer, got {threads!r}")
     return int(workers)  # (np.int64(2) as window= takes it)
+
+
+def _inputs(depth, mask, out, scale_invariant, disparity):
+    """:func:`estimate`'s arrays, validated.
+
+    Returns (z: float32 depth, rescaled to relative depth in the scale-invariant and disparity modes; src: the
+    caller's values; the mask; out; tie_tol and relative of those modes, else 0).
+    """
+    depth, unmasked = split_masked(depth)
+    z = as_depth(depth)
+    user_mask = as_mask(mask, z.shape)
+    if unmasked is not None:  # np.ma: masked pixels are invalid
+        user_mask = unmasked if user_mask is None else user_mask & unmasked
+    if out is not None:
+        out = as_output(out, z.shape + (3,), [("depth", z), ("mask", user_mask)])
+    src = np.asarray(depth)  # the caller's values before float32 (float64 keeps its digits when rescaled)
+    tie_tol = relative = 0.0
+    if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
+        from .units import REFERENCE_DEPTH, TIE_TOLERANCE, relative_depth
+
+        # Validity from the caller's values (float64 depth of 1e-60 is 0 in float32). Invalid pixels become 0 in
+        # the rescaled depth, and a value that over/underflows float32 when rescaled is not finite and positive,
+        # so the validity computed below from z covers both.
+        z = relative_depth(src, valid_pixels(src, user_mask), disparity=disparity)
+        tie_tol, relative = TIE_TOLERANCE, REFERENCE_DEPTH
+    return z, src, user_mask, out, tie_tol, relative
 
 
 def estimate(
@@ -199,8 +201,8 @@ def estimate(
         Write the normals into this C-contiguous array (and return it) instead
         of a new one, so that a stream of frames or batches reuses one buffer.
         A new output is memory that the system hands over and zeroes when it
-        is first written: about 0.5 ms per 480x640 frame on our 2-core test
-        machine, and it does not get faster with more threads.
+        is first written, a cost per frame that more threads do not lower
+        (``make bench`` measures it on a stack of frames).
     uncertainty : bool
         True: also return each normal's predicted RMS angular error in degrees
         (``sigma``), from the estimator's own fit: its residual, its support
@@ -248,23 +250,7 @@ def estimate(
         raise InputError(
             f"uncertainty: True is available for the methods {', '.join(UNCERTAIN)}, got method={method!r}"
         )
-    depth, unmasked = split_masked(depth)
-    z = as_depth(depth)
-    user_mask = as_mask(mask, z.shape)
-    if unmasked is not None:  # np.ma: masked pixels are invalid
-        user_mask = unmasked if user_mask is None else user_mask & unmasked
-    if out is not None:
-        out = as_output(out, z.shape + (3,), [("depth", z), ("mask", user_mask)])
-    src = np.asarray(depth)  # the caller's values before float32 (float64 keeps its digits when rescaled)
-    tie_tol = relative = 0.0
-    if check_bool("scale_invariant", scale_invariant) | check_bool("disparity", disparity):
-        from .units import REFERENCE_DEPTH, TIE_TOLERANCE, relative_depth
-
-        # Validity from the caller's values (float64 depth of 1e-60 is 0 in float32). Invalid pixels become 0 in
-        # the rescaled depth, and a value that over/underflows float32 when rescaled is not finite and positive,
-        # so the validity computed below from z covers both.
-        z = relative_depth(src, valid_pixels(src, user_mask), disparity=disparity)
-        tie_tol, relative = TIE_TOLERANCE, REFERENCE_DEPTH
+    z, src, user_mask, out, tie_tol, relative = _inputs(depth, mask, out, scale_invariant, disparity)
     workers = _workers(threads)
 
     def frame(i, bands=whole):

@@ -551,6 +551,14 @@ def convert(
         raise typer.Exit(1)
 
 
+def _stage_progress():
+    """The benchmarks' progress bar on stderr: a stage's name, its bar, frames done of all, time elapsed."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    return Progress(*columns, console=err_console, transient=True)
+
+
 @app.command()
 def bench(
     dataset: Optional[Path] = typer.Argument(
@@ -613,8 +621,6 @@ def bench(
     if sensor is not None:
         return _bench_sensor(sensor, dataset, out, methods_, peers, repeats)
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     from .bench import BenchConfig, run_bench, write_report
     from .bench.runner import TABLES
     from .io.threef2n import LEVELS, sample_root
@@ -640,14 +646,7 @@ def bench(
     t0 = time.perf_counter()
     try:
         out.mkdir(parents=True, exist_ok=True)
-        with Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=err_console,
-            transient=True,
-        ) as progress:
+        with _stage_progress() as progress:
             tasks = {}
 
             def report(stage, done, total):
@@ -673,8 +672,6 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
     """``surfnorm bench --sensor DIR``: see :func:`surfnorm.bench.sensor.sensor_bench`."""
     import time
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     from .bench.sensor import sensor_bench
 
     names = None if methods_ is None else [v.strip() for x in methods_ for v in x.split(",") if v.strip()]
@@ -689,14 +686,7 @@ def _bench_sensor(folder: Path, dataset, out: Path, methods_, peers, repeats: in
 
         find_sensor_frames(folder)
         calibration_frames(dataset)
-        with Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=err_console,
-            transient=True,
-        ) as progress:
+        with _stage_progress() as progress:
             task = progress.add_task("sensor frames", total=None)
             result, paths = sensor_bench(
                 folder,

@@ -1,8 +1,8 @@
 """Compile every kernel into Numba's cache ahead of the first call: ``python -m surfnorm.precompile``.
 
 The kernels are compiled on their first call and cached on disk (``cache=True``),
-so only the first process pays for it: about 20-40 s of CPU for ``d2nt_v3`` in a
-new environment, where a process that finds the cache starts in about 1 s. (A
+so only the first process pays for it: tens of seconds of CPU for ``d2nt_v3`` in a
+new environment, where a process that finds the cache starts in about a second. (A
 wheel holds the default method's kernels compiled ahead of time, see
 :mod:`surfnorm._aot`: its first call compiles nothing, precompiled or not.) Run
 this once where the package is installed, e.g. in a container image build::

@@ -26,13 +26,5 @@ from __future__ import annotations
 from .run import convert
 from .tasks import STATUSES, ConvertSettings, ConvertSummary, ConvertTask, FileResult, convert_file, plan_tasks
 
-__all__ = [
-    "ConvertTask",
-    "ConvertSettings",
-    "FileResult",
-    "ConvertSummary",
-    "plan_tasks",
-    "convert_file",
-    "convert",
-    "STATUSES",
-]
+__all__ = ["convert", "plan_tasks", "convert_file", "STATUSES"]  # the functions, then the types
+__all__ += ["ConvertTask", "ConvertSettings", "FileResult", "ConvertSummary"]

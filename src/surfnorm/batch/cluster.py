@@ -177,15 +177,8 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
                 suspects.extend(shard)
                 shard_results = []
             else:
-                shard_results = [
-                    FileResult(
-                        shard[0].input,
-                        shard[0].output,
-                        "error",
-                        f"{shard[0].input}: the worker process died each time it converted this "
-                        f"file (out of memory, or a crash in a native library?): {exc}",
-                    )
-                ]
+                why = "the worker process died each time it converted this file (out of memory, or a crash in a native library?)"
+                shard_results = [FileResult.error(shard[0], f"{why}: {exc}")]
         except Exception as exc:
             if future.status != "error":  # cancelled, or the client lost the scheduler: not the files' fault
                 raise
@@ -196,14 +189,7 @@ def run_on_dask(tasks, settings, client, on_result: Callable, *, shard_size: int
                     pending.add(submit([task]))
                 shard_results = []
             else:
-                shard_results = [
-                    FileResult(
-                        shard[0].input,
-                        shard[0].output,
-                        "error",
-                        f"{shard[0].input}: failed on a worker: {type(exc).__name__}: {exc}",
-                    )
-                ]
+                shard_results = [FileResult.error(shard[0], f"failed on a worker: {type(exc).__name__}: {exc}")]
         finally:
             future.release()
         for task, result in zip(shard, shard_results):

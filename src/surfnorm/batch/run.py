@@ -146,6 +146,40 @@ def _pool_context():
     return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
 
 
+def _run_in_processes(tasks, settings, jobs: int, done) -> None:
+    """:func:`convert`'s tasks on a pool of ``jobs`` processes.
+
+    ``done(i, result)`` for each as it finishes (a worker that died gives an error result). Ctrl-C or an error in
+    ``done`` stops the workers at once.
+    """
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pool = ProcessPoolExecutor(
+        max_workers=min(jobs, len(tasks)),
+        mp_context=_pool_context(),
+        initializer=_worker_init,
+        initargs=(os.getpid(),),
+    )
+    try:
+        futures = {pool.submit(convert_file, t, settings): i for i, t in enumerate(tasks)}
+        for fut in as_completed(futures):
+            i = futures[fut]
+            try:
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a worker that died (e.g. out of memory)
+                result = FileResult.error(tasks[i], f"worker failed ({type(exc).__name__}: {exc})")
+            done(i, result)
+    except BaseException:
+        # Ctrl-C or an error in a callback: stop now instead of finishing the queue. A file being
+        # written is left as a temporary that the next run removes; finished outputs are complete.
+        workers = list((getattr(pool, "_processes", None) or {}).values())  # (shutdown forgets them)
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in workers:
+            process.terminate()
+        raise
+    pool.shutdown(wait=True)
+
+
 def convert(
     inputs,
     output_dir,
@@ -264,38 +298,10 @@ def convert(
 
         run_on_dask(tasks, settings, client, on_result, shard_size=shard_size)
         for i, t in enumerate(tasks):  # a task the cluster never answered is an error, not a silent gap
-            results.setdefault(i, FileResult(t.input, t.output, "error", f"{t.input}: no result from the Dask cluster"))
+            results.setdefault(i, FileResult.error(t, "no result from the Dask cluster"))
     elif jobs == 1 or len(tasks) == 1:
         for i, t in enumerate(tasks):
             done(i, convert_file(t, settings))
     else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        pool = ProcessPoolExecutor(
-            max_workers=min(jobs, len(tasks)),
-            mp_context=_pool_context(),
-            initializer=_worker_init,
-            initargs=(os.getpid(),),
-        )
-        try:
-            futures = {pool.submit(convert_file, t, settings): i for i, t in enumerate(tasks)}
-            for fut in as_completed(futures):
-                i = futures[fut]
-                try:
-                    result = fut.result()
-                except Exception as exc:  # noqa: BLE001 - a worker that died (e.g. out of memory)
-                    t = tasks[i]
-                    result = FileResult(
-                        t.input, t.output, "error", f"{t.input}: worker failed ({type(exc).__name__}: {exc})"
-                    )
-                done(i, result)
-        except BaseException:
-            # Ctrl-C or an error in a callback: stop now instead of finishing the queue. A file being
-            # written is left as a temporary that the next run removes; finished outputs are complete.
-            workers = list((getattr(pool, "_processes", None) or {}).values())  # (shutdown forgets them)
-            pool.shutdown(wait=False, cancel_futures=True)
-            for process in workers:
-                process.terminate()
-            raise
-        pool.shutdown(wait=True)
+        _run_in_processes(tasks, settings, jobs, done)
     return ConvertSummary([results[i] for i in range(len(tasks))])

@@ -78,6 +78,11 @@ class FileResult:
     status: str
     message: str = ""
 
+    @classmethod
+    def error(cls, task: ConvertTask, why: str) -> FileResult:
+        """Status "error" for ``task``, the message ``why`` after the input's name."""
+        return cls(task.input, task.output, "error", f"{task.input}: {why}")
+
 
 @dataclass
 class ConvertSummary:
@@ -318,9 +323,7 @@ def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
     try:
         if task.output.exists() and not settings.overwrite:
             if task.output.is_dir():
-                return FileResult(
-                    task.input, task.output, "error", f"{task.input}: output {task.output} exists and is a folder"
-                )
+                return FileResult.error(task, f"output {task.output} exists and is a folder")
             return FileResult(task.input, task.output, "skipped", "output exists")
         return FileResult(task.input, task.output, "written", _convert(task, settings))
     except (SurfnormError, ValueError) as exc:
@@ -330,11 +333,9 @@ def convert_file(task: ConvertTask, settings: ConvertSettings) -> FileResult:
         return FileResult(task.input, task.output, "error", message)
     except OSError as exc:
         where = exc.filename if exc.filename else task.output
-        return FileResult(
-            task.input, task.output, "error", f"{task.input}: cannot write {where} ({exc.strerror or exc})"
-        )
+        return FileResult.error(task, f"cannot write {where} ({exc.strerror or exc})")
     except Exception as exc:  # noqa: BLE001 - a bad file must not stop the other thousand
-        return FileResult(task.input, task.output, "error", f"{task.input}: unexpected {type(exc).__name__}: {exc}")
+        return FileResult.error(task, f"unexpected {type(exc).__name__}: {exc}")
 
 
 # ---------------------------------------------------------------------------- many files

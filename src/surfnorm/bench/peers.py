@@ -30,7 +30,7 @@ class Peer:
     it raises ImportError (or OSError for a missing system library) when unavailable. With
     ``clean=False`` it returns the library's own output as is: the timing runs call it so, so
     that a peer's time is its own call, not our conversion to unit, camera-facing normals
-    (``_clean``, about 30 ms a frame in NumPy, applied for the accuracy runs).
+    (``_clean``, NumPy array work of its own, applied for the accuracy runs).
     """
 
     name: str

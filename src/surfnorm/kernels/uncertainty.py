@@ -39,7 +39,16 @@ import numpy as np
 from .._bands import whole
 from .._config import njit, pixel, select
 
-__all__ = ["sigma_from_fits", "d2nt_sigma", "fit_variance", "angle_variance", "FIT_GAIN", "D2NT_GAIN", "NO_FIT_DEG"]
+__all__ = [
+    "sigma_map",
+    "sigma_from_fits",
+    "d2nt_sigma",
+    "fit_variance",
+    "angle_variance",
+    "FIT_GAIN",
+    "D2NT_GAIN",
+    "NO_FIT_DEG",
+]
 
 #: Variance factor of the adaptive fit's slopes over the independent-noise formula (1), times the frame's
 #: ``NoiseProfile.correlation`` (at least 1, at most ``MAX_CORRELATION``): :func:`noise_gain`.
@@ -375,4 +384,32 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole
         float(FLOOR_DEG) ** 2,
     )
     bands(lambda a, b: _d2nt_sigma(*args, *gains, float(NO_FIT_DEG), out, a, b), z.shape[0])
+    return out
+
+
+def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, bands=whole) -> np.ndarray:
+    """Each normal's sigma (degrees) into ``out`` after ``method`` ("auto", "adaptive_fit" or "d2nt_v3") wrote
+    ``normals``; ``record``: what the fit recorded (see ``record`` of :func:`surfnorm.kernels.adaptive_fit.adaptive_fit`
+    and :func:`surfnorm.kernels.auto.auto`; empty for ``d2nt_v3``).
+
+    ``auto``'s blend weights the variances as it weights the normals; where only one of the two has a fit, its
+    sigma alone.
+    """
+    from ._windows import radius_table
+    from .sensor_noise import noise_profile
+
+    t = 1.0 if method == "adaptive_fit" else record.get("weight", 0.0)
+    if t > 0.0:
+        fitted = sigma_from_fits(
+            valid, normals, record["variance"], record["stride"], fill=fill, out=out if t == 1.0 else None, bands=bands
+        )
+    if t < 1.0:
+        profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
+        z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
+        d2nt = d2nt_sigma(
+            z, valid, cam, normals, (z0, inv_step, rho), fill=fill, out=out if t == 0.0 else None, bands=bands
+        )
+    if 0.0 < t < 1.0:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
+        both = np.sqrt((1.0 - t) * np.square(d2nt) + t * np.square(fitted))
+        out[...] = np.where(np.isnan(fitted), d2nt, np.where(np.isnan(d2nt), fitted, both))
     return out

@@ -135,6 +135,12 @@ def plane_svd_step(m, t_1, t_2, t_3, g_0, g_1, g_2, lam):
     return torch.where(ok, -f / torch.where(ok, f_prime, -torch.ones_like(f_prime)), torch.zeros_like(f))
 
 
+def _longer(a, b):
+    """(x, y, z, squared length) of ``a`` where it is longer than ``b`` (element-wise), else of ``b``."""
+    use_a = a[3] > b[3]
+    return tuple(torch.where(use_a, p, q) for p, q in zip(a, b))
+
+
 def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
     """``plane_fit.null_vector``: the longest cross product of two rows of B, unit; and whether B has rank 2."""
     x_a, y_a, z_a = b_01 * b_12 - b_02 * b_11, b_02 * b_01 - b_00 * b_12, b_00 * b_11 - b_01 * b_01  # row0 x row1
@@ -143,20 +149,8 @@ def null_vector(b_00, b_01, b_02, b_11, b_12, b_22):
     l_a = x_a * x_a + y_a * y_a + z_a * z_a
     l_b = x_b * x_b + y_b * y_b + z_b * z_b
     l_c = x_c * x_c + y_c * y_c + z_c * z_c
-    use_b = l_b > l_a
-    n_x, n_y, n_z, l = (
-        torch.where(use_b, x_b, x_a),
-        torch.where(use_b, y_b, y_a),
-        torch.where(use_b, z_b, z_a),
-        torch.where(use_b, l_b, l_a),
-    )
-    use_c = l_c > l
-    n_x, n_y, n_z, l = (
-        torch.where(use_c, x_c, n_x),
-        torch.where(use_c, y_c, n_y),
-        torch.where(use_c, z_c, n_z),
-        torch.where(use_c, l_c, l),
-    )
+    n_x, n_y, n_z, l = _longer((x_b, y_b, z_b, l_b), (x_a, y_a, z_a, l_a))
+    n_x, n_y, n_z, l = _longer((x_c, y_c, z_c, l_c), (n_x, n_y, n_z, l))
     ok = (l > 0.0) & (l < float("inf"))
     norm = torch.sqrt(torch.where(ok, l, torch.ones_like(l)))
     return n_x / norm, n_y / norm, n_z / norm, ok

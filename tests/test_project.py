@@ -17,32 +17,19 @@ SRC = ROOT / "src"
 def test_kernels_use_the_shared_constants():
     """surfnorm._constants is the one source: the kernels hold the same values (tests/test_torch.py: the torch side)."""
     from surfnorm import _constants as C
-    from surfnorm.kernels import adaptive_fit, auto, plane_fit, sda
+    from surfnorm.kernels import _schedule, _windows, adaptive_fit, auto, plane_fit, sda, sensor_noise
 
-    for name in (
-        "ALPHA",
-        "KAPPA",
-        "RHO_FLOOR",
-        "MAX_WINDOW",
-        "RADII",
-        "N_WIDEN",
-        "MIN_POINTS",
-        "N_BINS",
-        "MIN_SAMPLES",
-        "_NOISE_SAMPLES",
-        "_MAX_GAP",
-        "_MAX_SPREAD",
-        "_CLIP_SIGMAS",
-        "_CLIP_ROUNDS",
-        "TIE",
-        "SMOOTH_SHARE",
-        "_SMOOTH_GAUSS",
-        "_FOURTH_RMS",
-        "_SMOOTH_SAMPLES",
-        "MAX_UNREACHED",
-        "_TABLE",
-    ):
-        assert getattr(adaptive_fit, name) == getattr(C, name), name
+    # each constant in the module that uses it
+    homes = {
+        adaptive_fit: ("ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW", "N_WIDEN", "MIN_POINTS", "TIE"),
+        sensor_noise: ("N_BINS", "MIN_SAMPLES", "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS"),
+        _windows: ("RADII", "_TABLE"),
+        _schedule: ("MAX_UNREACHED",),
+    }
+    homes[sensor_noise] += ("_CLIP_ROUNDS", "SMOOTH_SHARE", "_SMOOTH_GAUSS", "_FOURTH_RMS", "_SMOOTH_SAMPLES")
+    for module, names in homes.items():
+        for name in names:
+            assert getattr(module, name) == getattr(C, name), (module.__name__, name)
     assert tuple(map(tuple, adaptive_fit._SHIFTS.tolist())) == C.SHIFTS
     for name in ("CLEAN_FLOOR", "NOISY_FLOOR", "TERRACED_LOW", "TERRACED_HIGH"):
         assert getattr(auto, name) == getattr(C, name), name

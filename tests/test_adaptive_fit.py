@@ -423,10 +423,12 @@ def test_depth_range_from_the_bits_is_the_plain_one():
 
 def test_noise_measured_by_one_band_while_the_others_make_their_rows():
     """The profile given, measured here, or measured by the first band that needs it (while the others make
-    the integral rows above their own) gives the same bits on one band and on several; ``use`` False writes
-    nothing and returns None."""
+    the integral rows above their own) gives the same bits on one band and on several; tables declined once the
+    noise is known (auto's decision) write nothing."""
     from surfnorm._bands import Part, on_threads
-    from surfnorm.kernels.adaptive_fit import adaptive_fit
+    from surfnorm._constants import ALPHA, KAPPA, MAX_WINDOW
+    from surfnorm.kernels._schedule import run_bands
+    from surfnorm.kernels.adaptive_fit import FitPlan, adaptive_fit
     from surfnorm.kernels.sensor_noise import noise_profile
 
     z, K = scene(4, H=120, W=96, holes=0.1)  # 120 rows: up to three bands of 40
@@ -439,8 +441,11 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
         for profile in (None, noise_profile(z, valid, f), Part(lambda: noise_profile(z, valid, f)).result):
             got = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), profile=profile, bands=bands)
             np.testing.assert_array_equal(got, ref)
+        # a frame decided against once its noise is known (auto on clean depth): nothing written
         out = np.full(z.shape + (3,), 7.0, np.float32)
-        assert adaptive_fit(z, valid, cam, out, use=lambda p: False, bands=bands) is None
+        frame = FitPlan(z, valid, cam, out, None, MAX_WINDOW, ALPHA, KAPPA, 0.0, None, None, None)
+        decline = lambda p: frame.tables(p, fit=False)  # noqa: E731
+        assert not run_bands(z, valid, frame.stride, frame.r_max, frame.measure, decline, frame.fit, bands, frame.key)
         assert (out == 7.0).all()
 
 

@@ -584,6 +584,68 @@ _NO_INFO = np.empty((0, 0))
 _NO_GAINS = np.zeros(3)
 
 
+class FitPlan:
+    """One frame's adaptive fit, in the three steps that :func:`surfnorm.kernels._schedule.run_bands` runs:
+    :meth:`measure` the noise, :meth:`tables` from it, :meth:`fit` a band of rows. :func:`adaptive_fit` runs them
+    as they are; ``auto`` decides between :meth:`tables` and nothing once the noise is known. The arguments are
+    :func:`adaptive_fit`'s."""
+
+    def __init__(self, z, valid, cam, out, window, max_window, alpha, kappa, fill, profile, stride, record):
+        self.z, self.valid, self.out, self.profile, self.record = z, valid, out, profile, record
+        self.window, self.max_window, self.alpha = window, max_window, alpha
+        self.f = math.sqrt(cam.fx * cam.fy)
+        self.r_max = (max_window - 1) // 2
+        self.stride = choose_stride(valid) if stride is None else stride
+        self.key = (z.shape, self.stride, max_window, window)  # the frame's kind, for the bands' balance
+        H, W = z.shape
+        if record is None:
+            self.info, self.gains = _NO_INFO, _NO_GAINS
+        else:  # every fitted row is written by a band
+            self.info = np.empty(((H + self.stride - 1) // self.stride, (W + self.stride - 1) // self.stride))
+            self.gains = np.zeros(
+                3
+            )  # the noise's variance factor, set once the profile is known; misfit's; significance
+            self.gains[1:] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
+            record.update(stride=self.stride, variance=self.info)
+        self.steps = (growth_table(self.r_max), widen_table(self.r_max))
+        self.cam = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+        self.options = (N_WIDEN, float(kappa), RHO_FLOOR, self.r_max, np.float32(fill))
+
+    def measure(self, offers) -> NoiseProfile:
+        """The frame's noise profile: ``profile`` as given (called, if a function), or :func:`noise_profile`."""
+        if self.profile is None:
+            return noise_profile(self.z, self.valid, self.f, offers)
+        return self.profile() if callable(self.profile) else self.profile
+
+    def tables(self, p: NoiseProfile, fit: bool = True):
+        """The radius and noise tables of profile ``p`` (:func:`radius_table`), or None where not ``fit``; either way
+        ``p`` is recorded (``record``)."""
+        if self.record is not None:
+            self.record["profile"] = p
+            self.gains[0] = noise_gain(p)
+        if not fit:
+            return None
+        return radius_table(p.depths, p.rho, alpha=self.alpha, window=self.window, max_window=self.max_window)
+
+    def fit(self, v0: int, v1: int, work, tables) -> None:
+        """Rows v0 .. v1 - 1 (:func:`_adaptive_fit_kernel`)."""
+        _adaptive_fit_kernel(
+            self.z,
+            self.valid,
+            tables,
+            self.steps,
+            self.cam,
+            self.options,
+            work,
+            self.out,
+            v0,
+            v1,
+            self.stride,
+            self.info,
+            self.gains,
+        )
+
+
 def adaptive_fit(
     z: np.ndarray,
     valid: np.ndarray,
@@ -596,11 +658,10 @@ def adaptive_fit(
     kappa: float = KAPPA,
     fill: float = 0.0,
     profile=None,
-    use=None,
     stride=None,
     bands=whole,
     record: dict | None = None,
-) -> np.ndarray | None:
+) -> np.ndarray:
     """Adaptive plane fit of inverse depth; fills ``out`` (H, W, 3) float32 and returns it.
 
     Parameters
@@ -630,9 +691,6 @@ def adaptive_fit(
         several bands, the one on the calling thread measures it while the others make the integral rows
         above their own rows, which do not depend on it, and then take the calling band's first integral rows
         and parts of its measuring (:class:`surfnorm._bands.Offers`).
-    use : callable, optional
-        ``use(profile)``: False when the frame is not for this method after all (``auto`` on clean depth);
-        then nothing is written and the result is None.
     stride : 1, 2 or None
         1: every pixel's own window. 2: windows on the pixels of the even rows and columns; every other
         pixel takes the planes of the fitted pixels next to it: the mean of those that pass through its
@@ -647,37 +705,6 @@ def adaptive_fit(
         :func:`_adaptive_fit_kernel`), with the gains ``FIT_GAIN`` and ``MISFIT_GAIN`` of that module.
         None (default): nothing recorded, nothing spent on it.
     """
-    f = math.sqrt(cam.fx * cam.fy)
-    r_max = (max_window - 1) // 2
-    stride = choose_stride(valid) if stride is None else stride
-    H = z.shape[0]
-    if record is None:
-        info, gains = _NO_INFO, _NO_GAINS
-    else:  # every fitted row is written by a band
-        info = np.empty(((H + stride - 1) // stride, (z.shape[1] + stride - 1) // stride))
-        gains = np.zeros(3)  # the noise's variance factor, set once the profile is known; misfit's; significance
-        gains[1:] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
-        record.update(stride=stride, variance=info)
-
-    def measure(offers):
-        if profile is None:
-            return noise_profile(z, valid, f, offers)
-        return profile() if callable(profile) else profile
-
-    def plan(p: NoiseProfile):
-        if record is not None:
-            record["profile"] = p
-            gains[0] = noise_gain(p)
-        if use is not None and not use(p):
-            return None
-        return radius_table(p.depths, p.rho, alpha=alpha, window=window, max_window=max_window)
-
-    steps = (growth_table(r_max), widen_table(r_max))
-    cam_t = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
-    options = (N_WIDEN, float(kappa), RHO_FLOOR, r_max, np.float32(fill))
-
-    def fit(v0, v1, work, tables):
-        _adaptive_fit_kernel(z, valid, tables, steps, cam_t, options, work, out, v0, v1, stride, info, gains)
-
-    key = (z.shape, stride, max_window, window)
-    return out if run_bands(z, valid, stride, r_max, measure, plan, fit, bands, key) else None
+    frame = FitPlan(z, valid, cam, out, window, max_window, alpha, kappa, fill, profile, stride, record)
+    run_bands(z, valid, frame.stride, frame.r_max, frame.measure, frame.tables, frame.fit, bands, frame.key)
+    return out

@@ -56,20 +56,25 @@ from typing import NamedTuple
 import numpy as np
 
 from .._aot import ahead_of_time
+from .._bands import whole
 from .._config import njit
 
 # The noise floors that surfnorm.torch._adaptive shares, with their meaning, and the registry's defaults of the
 # d2nt_v3 options that auto does not expose: surfnorm._constants (loads no Numba).
 from .._constants import (
+    ALPHA,
     CLEAN_FLOOR,
     DLF_DEFAULT,
+    KAPPA,
+    MAX_WINDOW,
     MNR_DLF_DEFAULT,
     NOISY_FLOOR,
     TERRACED_HIGH,
     TERRACED_LOW,
     TRUNCATE_DEFAULT,
 )
-from .adaptive_fit import adaptive_fit
+from ._schedule import run_bands
+from .adaptive_fit import FitPlan, adaptive_fit
 from .sensor_noise import NoiseProfile, noise_profile
 
 __all__ = [
@@ -243,19 +248,29 @@ def auto(
     """
     from .d2nt_v3 import d2nt_v3
 
-    # Sensor depth first: adaptive_fit's bands make their integral rows while the calling thread measures the noise,
-    # and write nothing where the frame is not sensor depth; ``use`` hands us the profile.
+    # Sensor depth first: adaptive_fit's bands make their integral rows while the calling thread measures the noise;
+    # the decision, once it is known: fit, or nothing written (d2nt_v3 or the blend below).
+    frame = FitPlan(z, valid, cam, out, None, MAX_WINDOW, ALPHA, KAPPA, fill, None, None, record)
     measured: list[NoiseProfile] = []
 
-    def sensor_depth(p: NoiseProfile) -> bool:
+    def sensor_depth(p: NoiseProfile):
         measured.append(p)
-        return adaptive_weight(p) == 1.0
+        return frame.tables(p, fit=adaptive_weight(p) == 1.0)
 
-    sensor = adaptive_fit(z, valid, cam, out, fill=fill, use=sensor_depth, record=record, **bands)
-    if sensor is not None:
+    if run_bands(
+        z,
+        valid,
+        frame.stride,
+        frame.r_max,
+        frame.measure,
+        sensor_depth,
+        frame.fit,
+        bands.get("bands", whole),
+        frame.key,
+    ):
         if record is not None:
             record["weight"] = 1.0
-        return sensor
+        return out
     profile = measured[0]
     t = adaptive_weight(profile)
     if record is not None:

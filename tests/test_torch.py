@@ -167,28 +167,19 @@ class TestParity:
 
         assert _sda.SDA_PENALTY == sda.SDA_PENALTY and _sda.MAX_ITERATIONS == sda.MAX_ITERATIONS
         assert (_plane_fit._NEWTON_STEPS, _plane_fit._NEWTON_TOL) == (plane_fit._NEWTON_STEPS, plane_fit._NEWTON_TOL)
-        from surfnorm.kernels import _windows, adaptive_fit, auto
+        from surfnorm.kernels import _schedule, _windows, adaptive_fit, auto, sensor_noise
         from surfnorm.torch import _adaptive
 
-        for name in (
-            "ALPHA",
-            "KAPPA",
-            "RHO_FLOOR",
-            "RADII",
-            "N_WIDEN",
-            "MIN_POINTS",
-            "N_BINS",
-            "MIN_SAMPLES",
-            "_NOISE_SAMPLES",
-            "_MAX_GAP",
-            "_MAX_SPREAD",
-            "_CLIP_SIGMAS",
-            "_CLIP_ROUNDS",
-            "_TABLE",
-            "TIE",
-            "MAX_UNREACHED",
-        ):
-            assert getattr(_adaptive, name) == getattr(adaptive_fit, name), name
+        homes = {  # each constant where the NumPy side uses it
+            adaptive_fit: ("ALPHA", "KAPPA", "RHO_FLOOR", "N_WIDEN", "MIN_POINTS", "TIE"),
+            sensor_noise: ("N_BINS", "MIN_SAMPLES", "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS"),
+            _windows: ("RADII", "_TABLE"),
+            _schedule: ("MAX_UNREACHED",),
+        }
+        homes[sensor_noise] += ("_CLIP_ROUNDS",)
+        for module, names in homes.items():
+            for name in names:
+                assert getattr(_adaptive, name) == getattr(module, name), (module.__name__, name)
         assert _adaptive._SHIFTS == tuple(map(tuple, adaptive_fit._SHIFTS.tolist()))
         assert (_adaptive.CLEAN_FLOOR, _adaptive.NOISY_FLOOR) == (auto.CLEAN_FLOOR, auto.NOISY_FLOOR)
         assert (

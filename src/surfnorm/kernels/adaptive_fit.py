@@ -105,7 +105,14 @@ from ._windows import (
     window_sums,
 )
 from .sensor_noise import NoiseProfile, noise_profile
-from .uncertainty import MISFIT_GAIN, MISFIT_SIGNIFICANCE, angle_variance, fit_variance, noise_gain
+from .uncertainty import (
+    MISFIT_GAIN,
+    MISFIT_SIGNIFICANCE,
+    angle_variance_cov,
+    correlated_share,
+    fit_covariance,
+    noise_gain,
+)
 
 __all__ = [
     "adaptive_fit",
@@ -206,12 +213,36 @@ def widened_row(
 
 
 @njit(noalias=True, _nrt=False)
-def variance_row(z_row, valid_row, v, stride, fit, r_row, shifted, rho_table, t_row, cam, gains, out_row):
+def window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments):
+    """The count and coordinate moments of each fitted pixel's window (where it has a fit: valid, ``dof`` > 0;
+    radius ``r_row``, centre ``shifted`` from the pixel) into ``moments`` (6, fitted pixels), read again from the
+    integral rows (``sums``); those of a full square (known, as in :func:`affine_fit`) are not read."""
+    ring, slot, H, stride, pos = sums
+    _, shift_u, shift_v = shifted
+    for i in range(moments.shape[1]):
+        if not (valid_row[i] and dof[i] > 0.0):
+            continue
+        u = stride * i
+        r = r_row[i]
+        du = int(shift_u[i])
+        dv = int(shift_v[i])
+        window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _COUNT, m)
+        moments[0, i] = m[0]
+        if m[0] != (2 * r + 1) * (2 * r + 1):
+            window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _COORDS, m)
+            for c in range(1, 6):
+                moments[c, i] = m[c]
+
+
+@njit(noalias=True, _nrt=False)
+def variance_row(
+    z_row, valid_row, v, stride, fit, r_row, shifted, rho_table, t_row, cam, gains, out_row, x_row, y, moments
+):
     """Each fitted pixel of row v: its normal's angular variance (radians^2) from the fit its plane came from
-    (:func:`surfnorm.kernels.uncertainty.fit_variance`, :func:`~surfnorm.kernels.uncertainty.angle_variance`:
-    ``fit``: (a, g_u, g_v, rss, dof); its residual per dof, points, radius, window offset (``shifted``: (record,
-    shift_u, shift_v) of :func:`_edge_row`), the noise at its depth, ``gains``); NaN where it has no fit.
-    Branch-free."""
+    (:func:`surfnorm.kernels.uncertainty.fit_covariance`, :func:`~surfnorm.kernels.uncertainty.angle_variance_cov`:
+    ``fit``: (a, g_u, g_v, rss, dof); its residual per dof, the points of its window (``moments`` of
+    :func:`window_moments`: count and coordinate moments; radius ``r_row``, centre ``shifted``: (record, shift_u,
+    shift_v) of :func:`_edge_row`), the noise at its depth, ``gains``); NaN where it has no fit. Branch-free."""
     a, g_u, g_v, rss, dof = fit
     _, shift_u, shift_v = shifted
     fx, fy, cx, cy = cam
@@ -221,12 +252,26 @@ def variance_row(z_row, valid_row, v, stride, fit, r_row, shifted, rho_table, t_
         d = select(ok, dof[i], 1.0)
         zp = select(ok, z_row[i], 1.0)
         noise = rho_table[t_row[i]] / (zp * f)
-        var_g, var_a, c_u, c_v = fit_variance(
-            rss[i] / d, d + 3.0, r_row[i], -shift_u[i], -shift_v[i], noise * noise, gains[0], gains[1], gains[2]
+        r = r_row[i]
+        n = select(ok, moments[0, i], 4.0)
+        full = n == (2 * r + 1) * (2 * r + 1)
+        inv_n = 1.0 / max(n, 1.0)
+        s_u = moments[1, i]
+        s_v = moments[2, i]
+        mu = select(full, x_row[i] + shift_u[i], s_u * inv_n)
+        mv = select(full, y + shift_v[i], s_v * inv_n)
+        c_full = n * (r * (r + 1)) * (1.0 / 3.0)
+        cuu = select(full, c_full, moments[3, i] - s_u * mu)
+        cuv = select(full, 0.0, moments[4, i] - s_u * mv)
+        cvv = select(full, c_full, moments[5, i] - s_v * mv)
+        g_uu, g_vv, g_uv, var_a, c_u, c_v = fit_covariance(
+            rss[i] / d, n, cuu, cuv, cvv, x_row[i] - mu, y - mv, noise * noise, gains[0], gains[1], gains[2], gains[3]
         )
         u = stride * i
         nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
-        out_row[i] = select(ok, angle_variance(nx, ny, nz, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v), np.nan)
+        out_row[i] = select(
+            ok, angle_variance_cov(nx, ny, nz, zp, u, v, fx, fy, cx, cy, g_uu, g_vv, g_uv, var_a, c_u, c_v), np.nan
+        )
 
 
 @pixel
@@ -474,6 +519,7 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     r_row, r_try, r_next, t_row = _ints(n_fit)
     record = info.shape[0] > 0
     shifted = (record, np.zeros(n_fit), np.zeros(n_fit))
+    moments = np.zeros((6, n_fit if record else 0))
     present = np.zeros(r_max + 2, np.bool_)
     widened = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)
@@ -559,6 +605,7 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
             sums, W, v, y, x_row, z_row, valid_row, (a, g_u, g_v, rss, dof), limit, r_row, m_row[0], kappa, m, shifted
         )
         if record:
+            window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments)
             variance_row(
                 z_row,
                 valid_row,
@@ -572,6 +619,9 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
                 cam,
                 gains,
                 info[v // stride],
+                x_row,
+                y,
+                moments,
             )
         row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
@@ -581,7 +631,7 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
 
 #: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded, and its ``gains`` then.
 _NO_INFO = np.empty((0, 0))
-_NO_GAINS = np.zeros(3)
+_NO_GAINS = np.zeros(4)
 
 
 class FitPlan:
@@ -602,10 +652,9 @@ class FitPlan:
             self.info, self.gains = _NO_INFO, _NO_GAINS
         else:  # every fitted row is written by a band
             self.info = np.empty(((H + self.stride - 1) // self.stride, (W + self.stride - 1) // self.stride))
-            self.gains = np.zeros(
-                3
-            )  # the noise's variance factor, set once the profile is known; misfit's; significance
-            self.gains[1:] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
+            # the noise's variance factor, set once the profile is known; misfit's; significance; the correlated share
+            self.gains = np.zeros(4)
+            self.gains[1:3] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
             record.update(stride=self.stride, variance=self.info)
         self.steps = (growth_table(self.r_max), widen_table(self.r_max))
         self.cam = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
@@ -623,6 +672,7 @@ class FitPlan:
         if self.record is not None:
             self.record["profile"] = p
             self.gains[0] = noise_gain(p)
+            self.gains[3] = correlated_share(p)
         if not fit:
             return None
         return radius_table(p.depths, p.rho, alpha=self.alpha, window=self.window, max_window=self.max_window)

@@ -22,6 +22,22 @@ noise is correlated between neighbours (a matcher's window, a spatial filter, qu
 a residual does not see and a slope does: ``FIT_GAIN`` (a variance factor, the one number set from data:
 the simulated sensors of :mod:`surfnorm.bench.simulate`) stands for it.
 
+Noise correlated over a few pixels also tilts a small window's plane as a whole, which the window's residual
+does not show at all (the plane takes it up). Taken as Gaussian-correlated over ``CORRELATION_WIDTH`` = l
+pixels (correlation exp(-d^2 / 4 l^2)) with variance s_c^2, it adds k_s s_c^2 to the mean square of the second
+differences at stride s (k_s = 6 - 8 exp(-s^2 / 4 l^2) + 2 exp(-s^2 / l^2); white noise adds 6 s^2 at every
+stride), so the profile's correlation c (stride 2 over stride 1) gives s_c^2 = 6 (c - 1) / (c (k_2 - k_1))
+times the noise, whose rho is the stride-2 estimate where the noise is correlated (``correlated_share``).
+Each slope then varies by that field's gradient, s_c^2 / (2 l^2), in a window narrower than l, and by its mean
+over the 4 pi l^2 pixels of a correlation, s_c^2 4 pi l^2 / C, in a wider one (C the points' scatter per
+axis); between them::
+
+    var_g += s_c^2 / (2 l^2 + C / (4 pi l^2))                                             (3)
+
+The scatter in (1) and (3) is the window's own (its count and coordinate moments): a window cut by a hole or
+the frame's border has fewer points on one side, a centroid off the pixel and slopes that are less certain
+and carried further (:func:`fit_covariance`).
+
 ``d2nt_v3`` takes the gradients of its DAG filter from one pixel's neighbours: its error is that of the 3x3
 neighbourhood's plane, the same formulas at r = 1 (a fit of every pixel's 3x3 window, its own residual;
 ``D2NT_GAIN``). On clean depth that residual is the surface's curvature or a discontinuity inside the window.
@@ -44,7 +60,11 @@ __all__ = [
     "sigma_from_fits",
     "d2nt_sigma",
     "fit_variance",
+    "fit_covariance",
     "angle_variance",
+    "angle_variance_cov",
+    "correlated_share",
+    "CORRELATION_WIDTH",
     "FIT_GAIN",
     "D2NT_GAIN",
     "NO_FIT_DEG",
@@ -55,6 +75,16 @@ __all__ = [
 FIT_GAIN = 1.0
 #: The most that a frame's noise correlation multiplies the slopes' variance by.
 MAX_CORRELATION = 16.0
+#: Width (pixels: the standard deviation of a Gaussian correlation exp(-d^2 / 4 l^2)) that a frame's correlated
+#: noise is taken to have: how its variance follows from ``NoiseProfile.correlation`` and how far a window must
+#: reach to average it (:func:`correlated_share`, eq. (3)).
+CORRELATION_WIDTH = 1.5
+#: How far above 1 ``NoiseProfile.correlation`` must be before it is read as correlated noise: white noise on a
+#: plane measures 0.985-1.004 (frames of 240 x 320); the simulated sensors without a correlated part (primesense,
+#: tof) 0.97-1.07 on the sample's smooth objects (quantisation, curvature).
+CORRELATION_SIGNIFICANCE = 0.05
+_L2 = 2.0 * CORRELATION_WIDTH**2  # the gradient's variance of unit correlated noise is 1 / _L2 per axis
+_AREA = 4.0 * math.pi * CORRELATION_WIDTH**2  # pixels per correlation (the correlation's integral)
 #: Variance factor of the 3x3 fits that stand for ``d2nt_v3``'s gradients.
 D2NT_GAIN = 1.0
 #: How far (in standard deviations of a residual per degree of freedom under noise alone) a fit's residual must
@@ -92,11 +122,60 @@ def fit_variance(s2, n, r, o_u, o_v, noise2, gain, misfit_gain, significance):
     return var_g, s / n + mis + (o_u * o_u + o_v * o_v) * var_g, o_u * var_g, o_v * var_g
 
 
+@pixel
+def fit_covariance(s2, n, cuu, cuv, cvv, o_u, o_v, noise2, gain, misfit_gain, significance, share):
+    """:func:`fit_variance` for a window of any shape: (var g_u, var g_v, cov(g_u, g_v), var_a, cov(a, g_u),
+    cov(a, g_v)) of a fit of n points whose coordinates scatter by (cuu, cuv; cuv, cvv) about their centroid,
+    carried to a pixel offset (o_u, o_v) from that centroid. The slopes' covariance is (noise / n + misfit)
+    times n (C)^-1: a window cut by a hole or the frame's border (fewer points on one side, a centroid off
+    the pixel) pins its slopes less, and carries them further, than the full square would. The noise's
+    correlated part (``share`` times ``noise2``, :func:`correlated_share`) adds eq. (3) to both slopes."""
+    s = gain * noise2
+    chance = noise2 * (1.0 + significance * math.sqrt(2.0 / max(n - 3.0, 1.0)))
+    mis = misfit_gain * max(s2 - chance, 0.0)
+    q = (s + n * mis) / max(cuu * cvv - cuv * cuv, 1e-12)
+    s_c = share * noise2
+    tilt = s_c / (_L2 + 0.5 * (cuu + cvv) / _AREA)
+    g_uu = q * cvv + tilt
+    g_vv = q * cuu + tilt
+    g_uv = -q * cuv
+    c_u = g_uu * o_u + g_uv * o_v
+    c_v = g_uv * o_u + g_vv * o_v
+    var_a = s / n + mis + s_c / (1.0 + n / _AREA) + o_u * c_u + o_v * c_v
+    return g_uu, g_vv, g_uv, var_a, c_u, c_v
+
+
+@pixel
+def angle_variance_cov(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g_uu, g_vv, g_uv, var_a, c_u, c_v):
+    """:func:`angle_variance` with the slopes' full covariance (:func:`fit_covariance`)."""
+    du = u - cx
+    dv = v - cy
+    facing = -(n0 * du / fx + n1 * dv / fy + n2)
+    zf = zp * facing  # 1 / |m|
+    trace = g_uu * (fx * fx + du * du) + g_vv * (fy * fy + dv * dv) + 2.0 * g_uv * du * dv
+    trace += var_a - 2.0 * (c_u * du + c_v * dv)
+    p_u = n0 * fx - n2 * du  # n . J_gu
+    p_v = n1 * fy - n2 * dv  # n . J_gv
+    along = g_uu * p_u * p_u + g_vv * p_v * p_v + 2.0 * g_uv * p_u * p_v
+    along += var_a * n2 * n2 + 2.0 * n2 * (c_u * p_u + c_v * p_v)
+    return select(facing > 1e-6, max(trace - along, 0.0) * zf * zf, np.inf)
+
+
 def noise_gain(profile) -> float:
     """The noise's variance factor of a frame's fits: ``FIT_GAIN`` times its noise correlation (1 to
     ``MAX_CORRELATION``; 1 for white noise, whose residual tells a slope's variance as it is)."""
     c = profile.correlation
     return FIT_GAIN * (min(max(c, 1.0), MAX_CORRELATION) if c == c else 1.0)
+
+
+def correlated_share(profile) -> float:
+    """The variance of a frame's correlated noise in units of its noise (s_c^2 / sigma_w^2, eq. (3)):
+    6 (c - 1 - d) / (c (k_2 - k_1)), c its ``NoiseProfile.correlation`` (1 to ``MAX_CORRELATION``), d
+    ``CORRELATION_SIGNIFICANCE``; 0 for white noise (c within d of 1)."""
+    c = profile.correlation
+    c = min(max(c, 1.0), MAX_CORRELATION) if c == c else 1.0
+    k1, k2 = (6.0 - 8.0 * math.exp(-(s * s) / (2.0 * _L2)) + 2.0 * math.exp(-2.0 * s * s / _L2) for s in (1.0, 2.0))
+    return 6.0 * max(c - 1.0 - CORRELATION_SIGNIFICANCE, 0.0) / (c * (k2 - k1))
 
 
 @pixel

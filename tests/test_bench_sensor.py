@@ -311,3 +311,17 @@ def test_entries_parse_options_as_the_command_line_does():
     assert entries[0].label == "plane_pca window=5 fill=nan"
     with pytest.raises(InputError, match=r"^method: expected NAME or NAME:option=value.*'plane_pca:window'"):
         make_entries(["plane_pca:window"])
+
+
+def test_peers_on_one_thread_after_open3d_loaded_its_tbb():
+    """Open3D loads a TBB older than Numba's threading layer accepts; limiting the peers to one thread must not
+    turn Numba's warning about it into an error (the CLI treats an unexpected warning as a bug). In a fresh
+    process: the layer starts once per process."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("open3d")
+    code = "import open3d; from surfnorm.bench.peers import single_thread; print(single_thread()['numba'])"
+    done = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "1"

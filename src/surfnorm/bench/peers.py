@@ -258,9 +258,15 @@ def single_thread() -> dict[str, str]:
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"  # read by libraries imported from now on (Open3D's OpenMP, torch)
     done["env"] = "OMP/MKL/OPENBLAS_NUM_THREADS=1"  # numba: set_num_threads below (its env variable is read once)
+    import warnings
+
     import numba
 
-    numba.set_num_threads(1)
+    with warnings.catch_warnings():
+        # Starting Numba's threading layer where Open3D has loaded an older TBB warns that TBB is unusable: no matter,
+        # since no kernel here runs on Numba's threads (surfnorm's bands are Python threads).
+        warnings.simplefilter("ignore", numba.NumbaWarning)
+        numba.set_num_threads(1)
     done["numba"] = str(numba.get_num_threads())
     import cv2
 

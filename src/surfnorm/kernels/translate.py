@@ -169,7 +169,7 @@ def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
 
 
 @row
-def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row, ok_row):
+def dag_row(z, valid, v, runs, n_runs, weights, cam, v_c, ratio, fill, out_row, ok_row):
     """Unit D2NT normals of row v with DAG gradients (eq. 9-14); ok_row[u] says whether (v, u) got one.
 
     Each gradient is lambda_b Delta_b z + lambda_f Delta_f z (eq. 10) with (lambda_b, lambda_f) the (truncated)
@@ -187,14 +187,12 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
         The row.
     runs, n_runs : ndarray of int64 (W // 2 + 1, 2), int
         The fast runs of row v (:func:`prepare_dag_row`).
-    p_h : ndarray of float32, shape (W,)
-        Softmin weights exp(-s / tau) of row v, with the horizontal smoothness (they weigh left and right).
-    p_up, p_dn : ndarray of float32, shape (W,)
-        Those of rows v - 1 and v + 1, with the vertical smoothness (they weigh up and down).
-    f_x, f_y : float32
-        Focal lengths (pixels).
-    u_c : ndarray of float32, shape (W,)
-        u - c_x of every column (:func:`surfnorm.kernels._rows.centred_columns`).
+    weights : (p_h, p_up, p_dn), ndarrays of float32, shape (W,)
+        Softmin weights exp(-s / tau) of row v, with the horizontal smoothness (they weigh left and right), and
+        those of rows v - 1 and v + 1, with the vertical smoothness (they weigh up and down).
+    cam : (f_x, f_y, u_c)
+        Focal lengths (pixels, float32), and u - c_x of every column (ndarray of float32, shape (W,):
+        :func:`surfnorm.kernels._rows.centred_columns`).
     v_c : float32
         v - c_y.
     ratio : float32
@@ -206,6 +204,8 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
     ok_row : ndarray of bool, shape (W,)
         Receives whether each pixel got a normal.
     """
+    p_h, p_up, p_dn = weights
+    f_x, f_y, u_c = cam
     H, W = z.shape
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
     out_flat = out_row.reshape(3 * W)
@@ -240,7 +240,7 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
     neighbourhood), so a band starting at v0 > 0 first prepares row v0 - 1.
     """
     H, W = z.shape
-    u_c = centred_columns(W, c_x)
+    cam = (f_x, f_y, centred_columns(W, c_x))
     col, ok_row = np.empty(W, np.bool_), np.empty(W, np.bool_)
     runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
     p_v = np.empty((3, W), np.float32)
@@ -260,24 +260,8 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
             softmin_weights_row(s, z[v], tau, rel, p_h)
         else:
             p_h[:] = p_v[v % 3]
-        dag_row(
-            z,
-            valid,
-            v,
-            runs[v % 3],
-            n_runs[v % 3],
-            p_h,
-            p_v[(v - 1) % 3],
-            p_v[(v + 1) % 3],
-            f_x,
-            f_y,
-            u_c,
-            np.float32(v - c_y),
-            ratio,
-            fill,
-            out[v],
-            ok_row,
-        )
+        weights = (p_h, p_v[(v - 1) % 3], p_v[(v + 1) % 3])
+        dag_row(z, valid, v, runs[v % 3], n_runs[v % 3], weights, cam, np.float32(v - c_y), ratio, fill, out[v], ok_row)
 
 
 def d2nt(

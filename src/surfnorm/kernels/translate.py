@@ -133,12 +133,10 @@ def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, 
 def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
     """Row data of row r for the DAG filter: its fast runs, and the softmin weights of its pixels.
 
+    ``z``, ``valid``: as in :func:`d2nt_fd_row`.
+
     Parameters
     ----------
-    z : ndarray of float32, shape (H, W)
-        Validated depth (never read where ``valid`` is False).
-    valid : ndarray of bool, shape (H, W)
-        Pixels whose depth may be used.
     r : int
         The row.
     dlf : int
@@ -177,14 +175,10 @@ def dag_row(z, valid, v, runs, n_runs, weights, cam, v_c, ratio, fill, out_row, 
     branch-free loop where the 3x3 neighbourhood is valid, by the per-pixel rule
     :func:`surfnorm.kernels.gradients.dag_gradient` (one-sided at gaps) elsewhere.
 
+    ``z``, ``valid``, ``v``, ``v_c``, ``fill``, ``out_row``: as in :func:`d2nt_fd_row`.
+
     Parameters
     ----------
-    z : ndarray of float32, shape (H, W)
-        Validated depth (never read where ``valid`` is False).
-    valid : ndarray of bool, shape (H, W)
-        Pixels whose depth may be used.
-    v : int
-        The row.
     runs, n_runs : ndarray of int64 (W // 2 + 1, 2), int
         The fast runs of row v (:func:`prepare_dag_row`).
     weights : (p_h, p_up, p_dn), ndarrays of float32, shape (W,)
@@ -193,14 +187,8 @@ def dag_row(z, valid, v, runs, n_runs, weights, cam, v_c, ratio, fill, out_row, 
     cam : (f_x, f_y, u_c)
         Focal lengths (pixels, float32), and u - c_x of every column (ndarray of float32, shape (W,):
         :func:`surfnorm.kernels._rows.centred_columns`).
-    v_c : float32
-        v - c_y.
     ratio : float32
         e^(1/tau): the truncation of eq. 14 (inf: none; :func:`surfnorm.kernels.gradients.softmin_ratio`).
-    fill : float32
-        Value written into all three components where there is no normal.
-    out_row : ndarray of float32, shape (W, 3)
-        Row v of the output.
     ok_row : ndarray of bool, shape (W,)
         Receives whether each pixel got a normal.
     """
@@ -327,28 +315,15 @@ def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
 def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out_row):
     """Row v of CP2TV: n = t_v x t_u of the finite-difference tangent vectors of the back-projected points.
 
+    ``z``, ``valid``, ``v``, ``f_x``, ``f_y``, ``reflect``, ``fill``, ``col``, ``runs``, ``out_row``: as in
+    :func:`d2nt_fd_row`.
+
     Parameters
     ----------
-    z : ndarray of float32, shape (H, W)
-        Validated depth (never read where ``valid`` is False).
-    valid : ndarray of bool, shape (H, W)
-        Pixels whose depth may be used.
-    v : int
-        The row.
-    f_x, f_y : float32
-        Focal lengths (pixels).
     c_x, c_y : float32
         Principal point (pixels, 0-based).
     u_c : ndarray of float64, shape (W,)
         u - c_x in float64, as :func:`back_project` computes it (the 3D points are float64).
-    reflect : bool
-        ``border="reflect"`` (OpenCV BORDER_REFLECT_101 at the image border).
-    fill : float32
-        Value written into all three components where there is no normal.
-    col, runs : ndarray
-        Scratch for :func:`surfnorm.kernels._rows.fast_row`: bool (W,), int64 (W // 2 + 1, 2).
-    out_row : ndarray of float32, shape (W, 3)
-        Row v of the output.
     """
     H, W = z.shape
     f_x64, f_y64 = np.float64(f_x), np.float64(f_y)

@@ -600,12 +600,15 @@ def _sne_kernel(z, valid, f_x, f_y, c_x, c_y, reflect, fill, out, v0, v1):
                     s_y = 0.0
                     s_z = 0.0
                     for k in range(8):
-                        n_z, use = neighbour_nz(z, valid, v, u, k, g_u, g_v, c_x, c_y, reflect, zx_p, zy_p, z_p)
-                        if use:  # sum of the unit candidates n_i / |n_i|
-                            norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
-                            s_x += n_x / norm
-                            s_y += n_y / norm
-                            s_z += n_z / norm
+                        dv, du = _NEIGHBOURS[k]
+                        q_v, q_u, use = neighbour_pixel(valid, v, u, dv, du, reflect)
+                        if use:
+                            n_z, use = candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p)
+                            if use:  # sum of the unit candidates n_i / |n_i|
+                                norm = math.sqrt(n_x * n_x + n_y * n_y + n_z * n_z)
+                                s_x += n_x / norm
+                                s_y += n_y / norm
+                                s_z += n_z / norm
                     theta = math.atan((s_x * cos_phi + s_y * sin_phi) / s_z)
                     m_x = math.sin(theta) * cos_phi
                     m_y = math.sin(theta) * sin_phi

@@ -506,6 +506,9 @@ def convert(
 
         cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
         method_name, method_options = parse_method(method)
+        # the options that go to convert_ as given: how each file is read and written, and how the run goes
+        reading = dict(fmt=fmt, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
+        running = dict(jobs=jobs, shard_size=shard_size, overwrite=overwrite)
         columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         if on_dask:
             from .batch.cluster import cluster_client
@@ -523,17 +526,12 @@ def convert(
                 inputs,
                 output_dir,
                 method=method_name,
-                fmt=fmt,
-                depth_scale=depth_scale,
-                intrinsics=cam,
-                jobs=jobs,
-                overwrite=overwrite,
-                progress=advance,
                 scale_invariant=scale_invariant,
+                intrinsics=cam,
+                progress=advance,
                 client=client,
-                shard_size=shard_size,
-                kinect_disparity=kinect_disparity,
-                byte_order=byte_order,
+                **reading,
+                **running,
                 **method_options,
             )
     except KeyboardInterrupt:

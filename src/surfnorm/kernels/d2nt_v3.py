@@ -25,32 +25,7 @@ __all__ = ["d2nt_v3"]
 
 
 @row
-def v3_estimate_row(
-    z,
-    valid,
-    q,
-    f_x,
-    f_y,
-    u_c,
-    c_y,
-    dlf,
-    tau,
-    rel,
-    ratio,
-    mnr_dlf,
-    fill,
-    fill_counts,
-    col,
-    runs,
-    n_runs,
-    p_v,
-    sm_v,
-    s,
-    p_h,
-    ok_row,
-    raw,
-    has,
-):
+def v3_estimate_row(z, valid, q, cam, c_y, dag, mnr_dlf, fill, fill_counts, slots, scratch):
     """d2nt_v3, step 1 for row q: the row data of row q + 1, then the unrefined normals of row q.
 
     Rows live in rolling slots: row data (fast runs, softmin weights, MNR smoothness) of row r in slot r % 4,
@@ -62,37 +37,29 @@ def v3_estimate_row(
         Validated depth (float32) and its validity (bool).
     q : int
         The row to estimate.
-    f_x, f_y : float32
-        Focal lengths.
-    u_c : ndarray of float32, shape (W,)
-        u - c_x of every column.
+    cam : (f_x, f_y, u_c)
+        Focal lengths (float32), and u - c_x of every column (ndarray of float32, shape (W,)).
     c_y : float32
         Principal point's row.
-    dlf, tau, rel, ratio
+    dag : (dlf, tau, rel, ratio)
         The DAG filter's DLF index, softness, relative mode and truncation ratio (see :func:`.translate.dag_row`).
     mnr_dlf : int
-        Index of MNR's DLF.
+        Index of MNR's DLF (0: the 1D filters, horizontal for left/right, vertical for up/down).
     fill : float32
         Value written where there is no normal.
     fill_counts : bool
         Whether a pixel holding ``fill`` counts as having a normal for MNR (``fill`` finite and non-zero).
-    col : ndarray of bool, shape (W,)
-        Scratch.
-    runs, n_runs : ndarray of int64 (4, W // 2 + 1, 2), ndarray of int64 (4,)
-        Slots of the rows' fast runs and their counts.
-    p_v : ndarray of float32, shape (4, W)
-        Slots of the rows' softmin weights with the vertical (or 3x3) smoothness.
-    sm_v : ndarray of float32, shape (4, W)
-        Slots of the rows' MNR smoothness (vertical, or 3x3).
-    s, p_h : ndarray of float32, shape (W,)
-        Scratch: smoothness, and row q's weights with the horizontal smoothness.
-    ok_row : ndarray of bool, shape (W,)
-        Scratch: which pixels of row q got a normal.
-    raw : ndarray of float32, shape (3, W, 3)
-        Slots of the unrefined normals.
-    has : ndarray of bool, shape (3, W)
-        Slots of whether each unrefined normal exists (for MNR).
+    slots : (runs, n_runs, p_v, sm_v, raw, has)
+        The rolling slots: the rows' fast runs and their counts (int64 (4, W // 2 + 1, 2), int64 (4,)); the rows'
+        softmin weights with the vertical (or 3x3) smoothness and their MNR smoothness (vertical, or 3x3), float32
+        (4, W) each; the unrefined normals, float32 (3, W, 3), and whether each exists (for MNR), bool (3, W).
+    scratch : (col, s, p_h, ok_row)
+        Scratch: bool (W,); the smoothness and row q's weights with the horizontal smoothness, float32 (W,) each;
+        which pixels of row q got a normal, bool (W,).
     """
+    dlf, tau, rel, ratio = dag
+    runs, n_runs, p_v, sm_v, raw, has = slots
+    col, s, p_h, ok_row = scratch
     H, W = z.shape
     if q + 1 < H:
         j = (q + 1) % 4
@@ -105,56 +72,35 @@ def v3_estimate_row(
             softmin_weights_row(s, z[q], tau, rel, p_h)
         else:
             copy_row(p_v[j], p_h)
-        dag_row(
-            z,
-            valid,
-            q,
-            runs[j],
-            n_runs[j],
-            p_h,
-            p_v[(q - 1) % 4],
-            p_v[(q + 1) % 4],
-            f_x,
-            f_y,
-            u_c,
-            np.float32(q - c_y),
-            ratio,
-            fill,
-            raw[q % 3],
-            ok_row,
-        )
+        weights = (p_h, p_v[(q - 1) % 4], p_v[(q + 1) % 4])
+        dag_row(z, valid, q, runs[j], n_runs[j], weights, cam, np.float32(q - c_y), ratio, fill, raw[q % 3], ok_row)
         has_q, valid_q = has[q % 3], valid[q]
         for u in range(W):
             has_q[u] = ok_row[u] | (valid_q[u] & fill_counts)
 
 
 @row
-def v3_refine_row(
-    z, valid, v, mnr_dlf, tie_tol, fill, runs, n_runs, sm_v, sm_h, s_self, raw, has, col, mruns, choice, out_row
-):
+def v3_refine_row(z, valid, v, mnr_dlf, tie_tol, fill, slots, scratch, out_row):
     """d2nt_v3, step 2 for row v: MNR of its unrefined normals into the output row.
+
+    ``z``, ``valid``, ``mnr_dlf``, ``fill``: as in :func:`v3_estimate_row`, which fills the ``slots``.
 
     Parameters
     ----------
-    z, valid : ndarray, shape (H, W)
-        Validated depth (float32) and its validity (bool).
     v : int
         The row to refine.
-    mnr_dlf : int
-        Index of MNR's DLF (0: the 1D filters, horizontal for left/right, vertical for up/down).
     tie_tol : float32
         MNR's relative near-tie tolerance (0: exact).
-    fill : float32
-        Value written where there is no normal.
-    runs, n_runs, sm_v, raw, has
-        The slots that :func:`v3_estimate_row` fills.
-    sm_h, s_self : ndarray of float32, shape (W,)
-        Scratch: row v's smoothness scoring left/right, and the score of p itself.
-    col, mruns, choice : ndarray
-        Scratch of :func:`surfnorm.kernels.mnr.mnr_row`.
+    slots : (runs, n_runs, p_v, sm_v, raw, has)
+        The slots of :func:`v3_estimate_row`.
+    scratch : (sm_h, s_self, col, mruns, choice)
+        Scratch: row v's smoothness scoring left/right and the score of p itself, float32 (W,) each; the scratch
+        of :func:`surfnorm.kernels.mnr.mnr_row`.
     out_row : ndarray of float32, shape (W, 3)
         Row v of the output.
     """
+    runs, n_runs, _, sm_v, raw, has = slots
+    sm_h, s_self, col, mruns, choice = scratch
     H = z.shape[0]
     j = v % 4
     if mnr_dlf == 0:
@@ -162,27 +108,10 @@ def v3_refine_row(
     else:
         copy_row(sm_v[j], sm_h)
     self_smoothness_row(sm_h, sm_v[j], mnr_dlf == 0, s_self)
-    mnr_row(
-        v,
-        H,
-        raw[(v - 1) % 3],
-        raw[v % 3],
-        raw[(v + 1) % 3],
-        has[(v - 1) % 3],
-        has[v % 3],
-        has[(v + 1) % 3],
-        sm_h,
-        sm_v[(v - 1) % 4],
-        sm_v[(v + 1) % 4],
-        s_self,
-        z[v],
-        tie_tol,
-        fill,
-        col,
-        mruns,
-        choice,
-        out_row,
-    )
+    rows = (raw[(v - 1) % 3], raw[v % 3], raw[(v + 1) % 3])
+    has_rows = (has[(v - 1) % 3], has[v % 3], has[(v + 1) % 3])
+    scores = (sm_h, sm_v[(v - 1) % 4], sm_v[(v + 1) % 4], s_self)
+    mnr_row(v, H, rows, has_rows, scores, z[v], tie_tol, fill, (col, mruns, choice), out_row)
 
 
 @ahead_of_time
@@ -214,6 +143,8 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf,
     # (as when MNR runs on a finished map): fill_counts.
     fill_sq = fill * fill + fill * fill + fill * fill
     fill_counts = (fill_sq > 0) & (fill_sq < np.inf)
+    cam, dag, slots = (f_x, f_y, u_c), (dlf, tau, rel, ratio), (runs, n_runs, p_v, sm_v, raw, has)
+    estimate_scratch, refine_scratch = (col, s, p_h, ok_row), (sm_h, s_self, col, mruns, choice)
     q0 = max(v0 - 1, 0)  # the first row estimated
     if q0 > 0:
         j = (q0 - 1) % 4
@@ -223,52 +154,9 @@ def _d2nt_v3_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, mnr_dlf,
     laplacian_row(z, valid, q0, runs[j], n_runs[j], mnr_dlf, np.int64(1), sm_v[j])
     for r in range(q0 - 1, v1):
         # estimate row q = r + 1 (needs the weights of rows q - 1 .. q + 1), then refine row v = r
-        v3_estimate_row(
-            z,
-            valid,
-            r + 1,
-            f_x,
-            f_y,
-            u_c,
-            c_y,
-            dlf,
-            tau,
-            rel,
-            ratio,
-            mnr_dlf,
-            fill,
-            fill_counts,
-            col,
-            runs,
-            n_runs,
-            p_v,
-            sm_v,
-            s,
-            p_h,
-            ok_row,
-            raw,
-            has,
-        )
+        v3_estimate_row(z, valid, r + 1, cam, c_y, dag, mnr_dlf, fill, fill_counts, slots, estimate_scratch)
         if r >= v0:
-            v3_refine_row(
-                z,
-                valid,
-                r,
-                mnr_dlf,
-                tie_tol,
-                fill,
-                runs,
-                n_runs,
-                sm_v,
-                sm_h,
-                s_self,
-                raw,
-                has,
-                col,
-                mruns,
-                choice,
-                out[r],
-            )
+            v3_refine_row(z, valid, r, mnr_dlf, tie_tol, fill, slots, refine_scratch, out[r])
 
 
 def d2nt_v3(

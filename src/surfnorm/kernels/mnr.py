@@ -60,17 +60,20 @@ def smoothest(s_l, s_r, s_a, s_b, s_c, ok_l, ok_r, ok_a, ok_b, tol):
 
 
 @pixel
-def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_dn, s_self, tol, fill, out_row):
+def mnr_pixel(v, H, x, normals, has, scores, tol, fill, out_row):
     """MNR at one pixel of row v, any neighbours missing: the normal of the smoothest of left, right, up, down, self.
 
-    Candidates are the 4-neighbours that have a normal, scored by their
-    precomputed smoothness (s_h for left/right, s_up/s_dn for up/down, s_self
+    ``normals``, ``has`` and ``scores`` are the rows of :func:`mnr_row`. Candidates are the 4-neighbours that have
+    a normal, scored by their precomputed smoothness (s_h for left/right, s_up/s_dn for up/down, s_self
     for p); ties keep the first in that order, as in the authors' code. A
     candidate replaces the best so far only if smoother by more than ``tol``
     (0: strictly smoother; see :func:`mnr_row`). Every candidate is read (at
     clamped columns) before the choice, which then only selects among values
     (see :func:`surfnorm.kernels._rows.clamp`).
     """
+    n_up, n_mid, n_dn = normals
+    has_up, has_mid, has_dn = has
+    s_h, s_up, s_dn, s_self = scores
     W = out_row.shape[0]
     x_l, x_r = max(x - 1, 0), min(x + 1, W - 1)
     ok_l = (x >= 1) & has_mid[x_l]
@@ -87,27 +90,7 @@ def mnr_pixel(v, H, x, n_up, n_mid, n_dn, has_up, has_mid, has_dn, s_h, s_up, s_
 
 
 @row
-def mnr_row(
-    v,
-    H,
-    n_up,
-    n_mid,
-    n_dn,
-    has_up,
-    has_mid,
-    has_dn,
-    s_h,
-    s_up,
-    s_dn,
-    s_self,
-    z_row,
-    tie_tol,
-    fill,
-    col,
-    runs,
-    choice,
-    out_row,
-):
+def mnr_row(v, H, normals, has, scores, z_row, tie_tol, fill, scratch, out_row):
     """MNR of row v (Sec. IV-A's rule): each pixel with a normal takes the normal of the smoothest of
     [left, right, up, down, itself].
 
@@ -121,29 +104,28 @@ def mnr_row(
     ----------
     v, H : int
         The row, and the number of rows.
-    n_up, n_mid, n_dn : ndarray of float32, shape (W, 3)
+    normals : (n_up, n_mid, n_dn), ndarrays of float32, shape (W, 3)
         Unrefined normals of rows v - 1, v, v + 1 (rows outside the image: any row, never chosen).
-    has_up, has_mid, has_dn : ndarray of bool, shape (W,)
+    has : (has_up, has_mid, has_dn), ndarrays of bool, shape (W,)
         Whether those pixels have a normal.
-    s_h : ndarray of float32, shape (W,)
-        Smoothness s_p (eq. 11) of row v that scores the left and right candidates.
-    s_up, s_dn : ndarray of float32, shape (W,)
-        Smoothness of rows v - 1 and v + 1 that scores the up and down candidates.
-    s_self : ndarray of float32, shape (W,)
-        The score of p itself (:func:`self_smoothness_row`).
+    scores : (s_h, s_up, s_dn, s_self), ndarrays of float32, shape (W,)
+        Smoothness s_p (eq. 11) of row v that scores the left and right candidates, that of rows v - 1 and
+        v + 1 that scores the up and down candidates, and the score of p itself (:func:`self_smoothness_row`).
     z_row : ndarray of float32, shape (W,)
         Depth of row v (for ``tie_tol``).
     tie_tol : float32
         Relative near-tie tolerance; 0 in the paper-faithful mode.
     fill : float32
         Value written where p has no normal.
-    col, runs : ndarray
-        Scratch: bool (W,), int64 (W // 2 + 1, 2).
-    choice : ndarray of int32, shape (3 W,)
-        Scratch: each pixel's choice, three times.
+    scratch : (col, runs, choice), ndarrays
+        Scratch: bool (W,), int64 (W // 2 + 1, 2), and int32 (3 W,) for each pixel's choice, three times.
     out_row : ndarray of float32, shape (W, 3)
         Row v of the refined output (must not alias ``n_mid``).
     """
+    n_up, n_mid, n_dn = normals
+    has_up, has_mid, has_dn = has
+    s_h, s_up, s_dn, s_self = scores
+    col, runs, choice = scratch
     W = out_row.shape[0]
     n_runs = box_row(has_up, has_mid, has_dn, v >= 1 and v < H - 1, col, runs)
     up_flat, mid_flat, dn_flat, out_flat = (
@@ -156,24 +138,7 @@ def mnr_row(
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
         for x in range(u, a):
-            mnr_pixel(
-                v,
-                H,
-                x,
-                n_up,
-                n_mid,
-                n_dn,
-                has_up,
-                has_mid,
-                has_dn,
-                s_h,
-                s_up,
-                s_dn,
-                s_self,
-                tie_tol * z_row[x],
-                fill,
-                out_row,
-            )
+            mnr_pixel(v, H, x, normals, has, scores, tie_tol * z_row[x], fill, out_row)
         if b > a:  # all four neighbours have normals: branch-free argmin (views start at a: see laplacian_row)
             s_l, s_r, s_a, s_b, s_c = s_h[a - 1 : b - 1], s_h[a + 1 : b + 1], s_up[a:b], s_dn[a:b], s_self[a:b]
             z_p = z_row[a:b]
@@ -224,27 +189,10 @@ def _mnr_kernel(z, valid, has_normal, normals, dlf, tie_tol, fill, out, v0, v1):
             s_h[:] = s_v[j]
         self_smoothness_row(s_h, s_v[j], dlf == 0, s_self)
         up, dn = max(v - 1, 0), min(v + 1, H - 1)
-        mnr_row(
-            v,
-            H,
-            normals[up],
-            normals[v],
-            normals[dn],
-            has_normal[up],
-            has_normal[v],
-            has_normal[dn],
-            s_h,
-            s_v[(v - 1) % 3],
-            s_v[(v + 1) % 3],
-            s_self,
-            z[v],
-            tie_tol,
-            fill,
-            col,
-            mruns,
-            choice,
-            out[v],
-        )
+        rows = (normals[up], normals[v], normals[dn])
+        has_rows = (has_normal[up], has_normal[v], has_normal[dn])
+        scores = (s_h, s_v[(v - 1) % 3], s_v[(v + 1) % 3], s_self)
+        mnr_row(v, H, rows, has_rows, scores, z[v], tie_tol, fill, (col, mruns, choice), out[v])
 
 
 def has_normal_map(normals: np.ndarray, valid: np.ndarray) -> np.ndarray:

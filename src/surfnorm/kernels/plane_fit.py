@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 
+import numba.extending
 import numpy as np
 
 from .. import _plane_svd
@@ -237,6 +238,9 @@ def scatter(m, s_x, s_y, s_z, s_xx, s_xy, s_xz, s_yy, s_yz, s_zz):
 
 #: (t_1, t_2, t_3, g_0, g_1, g_2) of det(M - l I) = (m - l) D(l) - m l G(l) (see :func:`plane_svd_lambda`): the
 #: arithmetic of :func:`surfnorm._plane_svd.plane_svd_characteristic`, which the PyTorch backend runs on tensors.
+#: Its helper quadratic_form is registered with Numba as it is (inlined where it is called), so that the compiled
+#: plane_svd_characteristic calls it and Python code still gets the plain function.
+numba.extending.register_jitable(inline="always")(_plane_svd.quadratic_form)
 plane_svd_characteristic = pixel(_plane_svd.plane_svd_characteristic)
 
 

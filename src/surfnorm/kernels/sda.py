@@ -70,9 +70,9 @@ from .._bands import whole
 from .._choices import SDA_BASES, SDA_MAX_ITERATIONS
 from .._config import njit, pixel, select
 from .._constants import SDA_PENALTY  # B, the weight of the state penalty (shared with surfnorm.torch)
-from ._rows import camera_facing, fill_pixel, store_unit_flat, write_unit
+from ._rows import fill_pixel, store_unit_flat
 from ._spare import Spares
-from .three_filters import fronto_parallel_fallback, third_nz
+from .three_filters import gradient_normal
 
 __all__ = ["sda_gradients", "sda_sne", "SDA_PENALTY", "MAX_ITERATIONS", "BASES"]
 
@@ -470,10 +470,7 @@ def _tf2n_base_kernel(z, valid, g_u, g_v, e_u, e_v, f_x, f_y, c_x, c_y, reflect,
             if e_u[v + _P, u + _P] < _INF and e_v[v + _P, u + _P] < _INF:
                 gu = g_u[v + _P, u + _P]
                 gv = g_v[v + _P, u + _P]
-                n_z, count = third_nz(z, valid, v, u, gu, gv, c_x, c_y, reflect, True, buf)
-                n_x, n_y, n_z = fronto_parallel_fallback(f_x * gu, f_y * gv, n_z, count)
-                n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
-                ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
+                ok = gradient_normal(z, valid, v, u, gu, gv, f_x, f_y, c_x, c_y, reflect, True, buf, fill, out)
             if not ok:
                 fill_pixel(out, v, u, fill)
 

@@ -136,6 +136,17 @@ def fronto_parallel_fallback(n_x, n_y, n_z, count):
 
 
 @pixel
+def neighbour_nz(z, valid, v, u, k, g_u, g_v, c_x, c_y, reflect, zx_p, zy_p, z_p):
+    """The candidate n_z,q of neighbour k of ``_NEIGHBOURS`` (:func:`candidate_nz`), and whether it exists:
+    the neighbour is usable (:func:`neighbour_pixel`) and dZ != 0."""
+    dv, du = _NEIGHBOURS[k]
+    q_v, q_u, ok = neighbour_pixel(valid, v, u, dv, du, reflect)
+    if not ok:
+        return 0.0, False
+    return candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p)
+
+
+@pixel
 def third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf):
     """n_z of eq. 11 from the candidates n_z,q of the usable neighbours, and their count.
 
@@ -148,17 +159,14 @@ def third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf):
     zy_p = (v - c_y) * z_p
     count = 0
     for k in range(8):
-        dv, du = _NEIGHBOURS[k]
-        q_v, q_u, ok = neighbour_pixel(valid, v, u, dv, du, reflect)
+        nz, ok = neighbour_nz(z, valid, v, u, k, g_u, g_v, c_x, c_y, reflect, zx_p, zy_p, z_p)
         if ok:
-            nz, ok = candidate_nz(z, v, u, q_v, q_u, g_u, g_v, c_x, c_y, zx_p, zy_p, z_p)
-            if ok:
-                j = count
-                while median and j > 0 and buf[j - 1] > nz:
-                    buf[j] = buf[j - 1]
-                    j -= 1
-                buf[j] = nz
-                count += 1
+            j = count
+            while median and j > 0 and buf[j - 1] > nz:
+                buf[j] = buf[j - 1]
+                j -= 1
+            buf[j] = nz
+            count += 1
     if not median:
         total = 0.0
         for i in range(count):
@@ -307,6 +315,17 @@ def finish(n_x, n_y, n_z, count, u_c, v_c, f_x, f_y):
 
 
 @pixel
+def interior_pixel(z, v, u, u_c, v_c):
+    """An interior pixel's (g_u, g_v) (:func:`interior_gradients`), its 8 candidates n_z,q
+    (:func:`interior_candidates`) and how many of them exist (:func:`count_finite8`)."""
+    g_u, g_v = interior_gradients(
+        np.float64(z[v, u - 1]), np.float64(z[v, u + 1]), np.float64(z[v - 1, u]), np.float64(z[v + 1, u])
+    )
+    a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
+    return g_u, g_v, (a0, a1, a2, a3, a4, a5, a6, a7), count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
+
+
+@pixel
 def store_run(out, v, u0, u1, rows):
     for u in range(u0, u1):
         out[v, u, 0] = rows[0, u]
@@ -320,11 +339,8 @@ def median_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
     v_c = v - c_y
     for u in range(u0, u1):
         u_c = u - c_x
-        g_u, g_v = interior_gradients(
-            np.float64(z[v, u - 1]), np.float64(z[v, u + 1]), np.float64(z[v - 1, u]), np.float64(z[v + 1, u])
-        )
-        a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
-        count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
+        g_u, g_v, candidates, count = interior_pixel(z, v, u, u_c, v_c)
+        a0, a1, a2, a3, a4, a5, a6, a7 = candidates
         s0, s1, s2, s3, s4, s5, s6, s7 = sort8(a0, a1, a2, a3, a4, a5, a6, a7)
         n_x, n_y, n_z = finish(
             f_x * g_u, f_y * g_v, median_of_sorted(s0, s1, s2, s3, s4, count), count, u_c, v_c, f_x, f_y
@@ -451,11 +467,8 @@ def mean_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
     inf = np.float32(np.inf)
     for u in range(u0, u1):
         u_c = u - c_x
-        g_u, g_v = interior_gradients(
-            np.float64(z[v, u - 1]), np.float64(z[v, u + 1]), np.float64(z[v - 1, u]), np.float64(z[v + 1, u])
-        )
-        a0, a1, a2, a3, a4, a5, a6, a7 = interior_candidates(z, v, u, g_u, g_v, u_c, v_c)
-        count = count_finite8(a0, a1, a2, a3, a4, a5, a6, a7)
+        g_u, g_v, candidates, count = interior_pixel(z, v, u, u_c, v_c)
+        a0, a1, a2, a3, a4, a5, a6, a7 = candidates
         total = (
             (np.float64(a0 if a0 != inf else zero) + np.float64(a1 if a1 != inf else zero))
             + (np.float64(a2 if a2 != inf else zero) + np.float64(a3 if a3 != inf else zero))
@@ -471,6 +484,17 @@ def mean_run(z, v, u0, u1, f_x, f_y, c_x, c_y, rows):
 
 
 @pixel
+def gradient_normal(z, valid, v, u, g_u, g_v, f_x, f_y, c_x, c_y, reflect, median, buf, fill, out):
+    """3F2N's unit normal at (v, u) from its gradients of inverse depth (g_u, g_v), any neighbours missing:
+    n_z by :func:`third_nz`, :func:`fronto_parallel_fallback`, the camera-facing sign, into ``out``.
+    Returns whether it got one (``out`` is left as it was where not)."""
+    n_z, count = third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf)
+    n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
+    n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
+    return write_unit(out, v, u, n_x, n_y, n_z, fill)
+
+
+@pixel
 def generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out):
     """3F2N at a pixel next to the image border or to invalid depth (checks every neighbour)."""
     ok = False
@@ -478,10 +502,7 @@ def generic_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, median, buf
         g_u, ok_u = inverse_depth_gradient(z, valid, v, u, 0, 1, reflect)
         g_v, ok_v = inverse_depth_gradient(z, valid, v, u, 1, 0, reflect)
         if ok_u and ok_v:
-            n_z, count = third_nz(z, valid, v, u, g_u, g_v, c_x, c_y, reflect, median, buf)
-            n_x, n_y, n_z = fronto_parallel_fallback(f_x * g_u, f_y * g_v, n_z, count)
-            n_x, n_y, n_z = camera_facing(n_x, n_y, n_z, u - c_x, v - c_y, f_x, f_y)
-            ok = write_unit(out, v, u, n_x, n_y, n_z, fill)
+            ok = gradient_normal(z, valid, v, u, g_u, g_v, f_x, f_y, c_x, c_y, reflect, median, buf, fill, out)
     if not ok:
         fill_pixel(out, v, u, fill)
 

@@ -133,12 +133,10 @@ def dag_pixel(z, valid, v, u, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, 
 def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
     """Row data of row r for the DAG filter: its fast runs, and the softmin weights of its pixels.
 
+    ``z``, ``valid``: as in :func:`d2nt_fd_row`.
+
     Parameters
     ----------
-    z : ndarray of float32, shape (H, W)
-        Validated depth (never read where ``valid`` is False).
-    valid : ndarray of bool, shape (H, W)
-        Pixels whose depth may be used.
     r : int
         The row.
     dlf : int
@@ -169,7 +167,7 @@ def prepare_dag_row(z, valid, r, dlf, tau, rel, col, runs_r, s, p_v_r):
 
 
 @row
-def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, ratio, fill, out_row, ok_row):
+def dag_row(z, valid, v, runs, n_runs, weights, cam, v_c, ratio, fill, out_row, ok_row):
     """Unit D2NT normals of row v with DAG gradients (eq. 9-14); ok_row[u] says whether (v, u) got one.
 
     Each gradient is lambda_b Delta_b z + lambda_f Delta_f z (eq. 10) with (lambda_b, lambda_f) the (truncated)
@@ -177,35 +175,25 @@ def dag_row(z, valid, v, runs, n_runs, p_h, p_up, p_dn, f_x, f_y, u_c, v_c, rati
     branch-free loop where the 3x3 neighbourhood is valid, by the per-pixel rule
     :func:`surfnorm.kernels.gradients.dag_gradient` (one-sided at gaps) elsewhere.
 
+    ``z``, ``valid``, ``v``, ``v_c``, ``fill``, ``out_row``: as in :func:`d2nt_fd_row`.
+
     Parameters
     ----------
-    z : ndarray of float32, shape (H, W)
-        Validated depth (never read where ``valid`` is False).
-    valid : ndarray of bool, shape (H, W)
-        Pixels whose depth may be used.
-    v : int
-        The row.
     runs, n_runs : ndarray of int64 (W // 2 + 1, 2), int
         The fast runs of row v (:func:`prepare_dag_row`).
-    p_h : ndarray of float32, shape (W,)
-        Softmin weights exp(-s / tau) of row v, with the horizontal smoothness (they weigh left and right).
-    p_up, p_dn : ndarray of float32, shape (W,)
-        Those of rows v - 1 and v + 1, with the vertical smoothness (they weigh up and down).
-    f_x, f_y : float32
-        Focal lengths (pixels).
-    u_c : ndarray of float32, shape (W,)
-        u - c_x of every column (:func:`surfnorm.kernels._rows.centred_columns`).
-    v_c : float32
-        v - c_y.
+    weights : (p_h, p_up, p_dn), ndarrays of float32, shape (W,)
+        Softmin weights exp(-s / tau) of row v, with the horizontal smoothness (they weigh left and right), and
+        those of rows v - 1 and v + 1, with the vertical smoothness (they weigh up and down).
+    cam : (f_x, f_y, u_c)
+        Focal lengths (pixels, float32), and u - c_x of every column (ndarray of float32, shape (W,):
+        :func:`surfnorm.kernels._rows.centred_columns`).
     ratio : float32
         e^(1/tau): the truncation of eq. 14 (inf: none; :func:`surfnorm.kernels.gradients.softmin_ratio`).
-    fill : float32
-        Value written into all three components where there is no normal.
-    out_row : ndarray of float32, shape (W, 3)
-        Row v of the output.
     ok_row : ndarray of bool, shape (W,)
         Receives whether each pixel got a normal.
     """
+    p_h, p_up, p_dn = weights
+    f_x, f_y, u_c = cam
     H, W = z.shape
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
     out_flat = out_row.reshape(3 * W)
@@ -240,7 +228,7 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
     neighbourhood), so a band starting at v0 > 0 first prepares row v0 - 1.
     """
     H, W = z.shape
-    u_c = centred_columns(W, c_x)
+    cam = (f_x, f_y, centred_columns(W, c_x))
     col, ok_row = np.empty(W, np.bool_), np.empty(W, np.bool_)
     runs, n_runs = np.empty((3, W // 2 + 1, 2), np.int64), np.zeros(3, np.int64)
     p_v = np.empty((3, W), np.float32)
@@ -260,24 +248,8 @@ def _d2nt_dag_kernel(z, valid, f_x, f_y, c_x, c_y, dlf, tau, rel, ratio, fill, o
             softmin_weights_row(s, z[v], tau, rel, p_h)
         else:
             p_h[:] = p_v[v % 3]
-        dag_row(
-            z,
-            valid,
-            v,
-            runs[v % 3],
-            n_runs[v % 3],
-            p_h,
-            p_v[(v - 1) % 3],
-            p_v[(v + 1) % 3],
-            f_x,
-            f_y,
-            u_c,
-            np.float32(v - c_y),
-            ratio,
-            fill,
-            out[v],
-            ok_row,
-        )
+        weights = (p_h, p_v[(v - 1) % 3], p_v[(v + 1) % 3])
+        dag_row(z, valid, v, runs[v % 3], n_runs[v % 3], weights, cam, np.float32(v - c_y), ratio, fill, out[v], ok_row)
 
 
 def d2nt(
@@ -343,28 +315,15 @@ def cp2tv_pixel(z, valid, v, u, f_x, f_y, c_x, c_y, reflect, fill, out_row):
 def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, out_row):
     """Row v of CP2TV: n = t_v x t_u of the finite-difference tangent vectors of the back-projected points.
 
+    ``z``, ``valid``, ``v``, ``f_x``, ``f_y``, ``reflect``, ``fill``, ``col``, ``runs``, ``out_row``: as in
+    :func:`d2nt_fd_row`.
+
     Parameters
     ----------
-    z : ndarray of float32, shape (H, W)
-        Validated depth (never read where ``valid`` is False).
-    valid : ndarray of bool, shape (H, W)
-        Pixels whose depth may be used.
-    v : int
-        The row.
-    f_x, f_y : float32
-        Focal lengths (pixels).
     c_x, c_y : float32
         Principal point (pixels, 0-based).
     u_c : ndarray of float64, shape (W,)
         u - c_x in float64, as :func:`back_project` computes it (the 3D points are float64).
-    reflect : bool
-        ``border="reflect"`` (OpenCV BORDER_REFLECT_101 at the image border).
-    fill : float32
-        Value written into all three components where there is no normal.
-    col, runs : ndarray
-        Scratch for :func:`surfnorm.kernels._rows.fast_row`: bool (W,), int64 (W // 2 + 1, 2).
-    out_row : ndarray of float32, shape (W, 3)
-        Row v of the output.
     """
     H, W = z.shape
     f_x64, f_y64 = np.float64(f_x), np.float64(f_y)

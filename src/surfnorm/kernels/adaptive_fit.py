@@ -214,24 +214,19 @@ def widened_row(
 
 @njit(noalias=True, _nrt=False)
 def window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments):
-    """The count and coordinate moments of each fitted pixel's window (where it has a fit: valid, ``dof`` > 0;
-    radius ``r_row``, centre ``shifted`` from the pixel) into ``moments`` (6, fitted pixels), read again from the
-    integral rows (``sums``); those of a full square (known, as in :func:`affine_fit`) are not read."""
+    """The coordinate moments (u', v', u'u', u'v', v'v') of each fitted pixel's window that is not the full square
+    (where it has a fit: valid, ``dof`` > 0; radius ``r_row``, centre ``shifted`` from the pixel) into
+    ``moments`` (5, fitted pixels), read again from the integral rows (``sums``). Its count is the fit's, dof + 3;
+    a full square's moments are known (as in :func:`affine_fit`), and most windows of dense depth are one."""
     ring, slot, H, stride, pos = sums
     _, shift_u, shift_v = shifted
     for i in range(moments.shape[1]):
-        if not (valid_row[i] and dof[i] > 0.0):
-            continue
-        u = stride * i
         r = r_row[i]
-        du = int(shift_u[i])
-        dv = int(shift_v[i])
-        window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _COUNT, m)
-        moments[0, i] = m[0]
-        if m[0] != (2 * r + 1) * (2 * r + 1):
-            window_sums(ring, slot, pos, H, W, v + dv, u + du, r, _COORDS, m)
-            for c in range(1, 6):
-                moments[c, i] = m[c]
+        if not (valid_row[i] and dof[i] > 0.0) or dof[i] + 3.0 == (2 * r + 1) * (2 * r + 1):
+            continue
+        window_sums(ring, slot, pos, H, W, v + int(shift_v[i]), stride * i + int(shift_u[i]), r, _COORDS, m)
+        for c in range(5):
+            moments[c, i] = m[c + 1]
 
 
 @njit(noalias=True, _nrt=False)
@@ -241,7 +236,7 @@ def variance_row(
     """Each fitted pixel of row v: its normal's angular variance (radians^2) from the fit its plane came from
     (:func:`surfnorm.kernels.uncertainty.fit_covariance`, :func:`~surfnorm.kernels.uncertainty.angle_variance_cov`:
     ``fit``: (a, g_u, g_v, rss, dof); its residual per dof, the points of its window (``moments`` of
-    :func:`window_moments`: count and coordinate moments; radius ``r_row``, centre ``shifted``: (record, shift_u,
+    :func:`window_moments`: its coordinate moments, its count dof + 3; radius ``r_row``, centre ``shifted``: (record, shift_u,
     shift_v) of :func:`_edge_row`), the noise at its depth, ``gains``); NaN where it has no fit. Branch-free."""
     a, g_u, g_v, rss, dof = fit
     _, shift_u, shift_v = shifted
@@ -253,17 +248,17 @@ def variance_row(
         zp = select(ok, z_row[i], 1.0)
         noise = rho_table[t_row[i]] / (zp * f)
         r = r_row[i]
-        n = select(ok, moments[0, i], 4.0)
+        n = d + 3.0  # the fit's count (4 where it has none)
         full = n == (2 * r + 1) * (2 * r + 1)
         inv_n = 1.0 / max(n, 1.0)
-        s_u = moments[1, i]
-        s_v = moments[2, i]
+        s_u = moments[0, i]
+        s_v = moments[1, i]
         mu = select(full, x_row[i] + shift_u[i], s_u * inv_n)
         mv = select(full, y + shift_v[i], s_v * inv_n)
         c_full = n * (r * (r + 1)) * (1.0 / 3.0)
-        cuu = select(full, c_full, moments[3, i] - s_u * mu)
-        cuv = select(full, 0.0, moments[4, i] - s_u * mv)
-        cvv = select(full, c_full, moments[5, i] - s_v * mv)
+        cuu = select(full, c_full, moments[2, i] - s_u * mu)
+        cuv = select(full, 0.0, moments[3, i] - s_u * mv)
+        cvv = select(full, c_full, moments[4, i] - s_v * mv)
         g_uu, g_vv, g_uv, var_a, c_u, c_v = fit_covariance(
             rss[i] / d, n, cuu, cuv, cvv, x_row[i] - mu, y - mv, noise * noise, gains[0], gains[1], gains[2], gains[3]
         )
@@ -519,7 +514,7 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     r_row, r_try, r_next, t_row = _ints(n_fit)
     record = info.shape[0] > 0
     shifted = (record, np.zeros(n_fit), np.zeros(n_fit))
-    moments = np.zeros((6, n_fit if record else 0))
+    moments = np.zeros((5, n_fit if record else 0))
     present = np.zeros(r_max + 2, np.bool_)
     widened = np.zeros(r_max + 2, np.bool_)
     f = math.sqrt(fx * fy)

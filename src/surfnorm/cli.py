@@ -15,7 +15,7 @@ import re
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import typer
 from rich.console import Console
@@ -507,8 +507,10 @@ def convert(
         cam = resolve_intrinsics(intrinsics, fx=fx, fy=fy, cx=cx, cy=cy)
         method_name, method_options = parse_method(method)
         # the options that go to convert_ as given: how each file is read and written, and how the run goes
-        reading = dict(fmt=fmt, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
-        running = dict(jobs=jobs, shard_size=shard_size, overwrite=overwrite)
+        reading: dict[str, Any] = dict(
+            fmt=fmt, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order
+        )
+        running: dict[str, Any] = dict(jobs=jobs, shard_size=shard_size, overwrite=overwrite)
         columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         if on_dask:
             from .batch.cluster import cluster_client

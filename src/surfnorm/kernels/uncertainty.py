@@ -19,8 +19,9 @@ with J = d m / d(g_u, g_v, a). For s^2 the fit's own residual per degree of free
 noise (``rho``, :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`, as sigma_w = rho / (z f)) where that is
 larger: a window whose few points happen to fit well is not trusted beyond the noise the frame shows. Sensor
 noise is correlated between neighbours (a matcher's window, a spatial filter, quantisation terraces), which
-a residual does not see and a slope does: ``FIT_GAIN`` (a variance factor, the one number set from data:
-the simulated sensors of :mod:`surfnorm.bench.simulate`) stands for it.
+a residual does not see and a slope does: the frame's noise correlation (:func:`noise_gain`, ``FIT_GAIN`` times
+``NoiseProfile.correlation``) multiplies the noise for it. The numbers set from data are ``CORRELATION_WIDTH``
+(on the simulated sensors of :mod:`surfnorm.bench.simulate`) and ``CORRELATION_SIGNIFICANCE`` (white noise).
 
 Noise correlated over a few pixels also tilts a small window's plane as a whole, which the window's residual
 does not show at all (the plane takes it up). Taken as Gaussian-correlated over ``CORRELATION_WIDTH`` = l

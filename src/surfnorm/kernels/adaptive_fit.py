@@ -230,14 +230,20 @@ def window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments):
 
 
 @njit(noalias=True, _nrt=False)
-def variance_row(
-    z_row, valid_row, v, stride, fit, r_row, shifted, rho_table, t_row, cam, gains, out_row, x_row, y, moments
-):
-    """Each fitted pixel of row v: its normal's angular variance (radians^2) from the fit its plane came from
-    (:func:`surfnorm.kernels.uncertainty.fit_covariance`, :func:`~surfnorm.kernels.uncertainty.angle_variance_cov`:
-    ``fit``: (a, g_u, g_v, rss, dof); its residual per dof, the points of its window (``moments`` of
-    :func:`window_moments`: its coordinate moments, its count dof + 3; radius ``r_row``, centre ``shifted``: (record, shift_u,
-    shift_v) of :func:`_edge_row`), the noise at its depth, ``gains``); NaN where it has no fit. Branch-free."""
+def variance_row(row, fit, window, noise, cam, gains, out_row):
+    """Each fitted pixel of a row: its normal's angular variance (radians^2) from the fit its plane came from
+    (:func:`surfnorm.kernels.uncertainty.fit_covariance`, :func:`~surfnorm.kernels.uncertainty.angle_variance_cov`),
+    NaN where it has no fit. Branch-free.
+
+    ``row``: (z_row, valid_row, x_row, v, y, stride), the fitted pixels' depth, validity and centred abscissae,
+    the row and its centred ordinate; ``fit``: (a, g_u, g_v, rss, dof); ``window``: (r_row, shifted, moments),
+    the radius, the centre's offset (``shifted``: (record, shift_u, shift_v) of :func:`_edge_row`) and the
+    coordinate moments (:func:`window_moments`; the count is dof + 3); ``noise``: (rho_table, t_row), the noise at
+    each pixel's depth; ``gains`` as in :func:`_adaptive_fit_kernel`.
+    """
+    z_row, valid_row, x_row, v, y, stride = row
+    r_row, shifted, moments = window
+    rho_table, t_row = noise
     a, g_u, g_v, rss, dof = fit
     _, shift_u, shift_v = shifted
     fx, fy, cx, cy = cam
@@ -489,8 +495,9 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
 
     ``info``: (0, 0) for nothing, or (fitted rows, fitted columns) float64, where fitted pixel (v, stride i) gets its
     normal's angular variance (radians^2, :mod:`surfnorm.kernels.uncertainty`) from the fit its plane came from
-    (its residual, points, radius and window offset; the noise at its depth; ``gains``: the noise's and the
-    misfit's variance factors), NaN where it has no fit. Only written (it changes no normal).
+    (its residual, its window's points and offset; the noise at its depth; ``gains``: the noise's variance factor,
+    the misfit's, the misfit's significance and the noise's correlated share, :mod:`surfnorm.kernels.uncertainty`),
+    NaN where it has no fit. Only written (it changes no normal).
     """
     H, W = z.shape
     rho_table = tables[3]
@@ -601,23 +608,9 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
         )
         if record:
             window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments)
-            variance_row(
-                z_row,
-                valid_row,
-                v,
-                stride,
-                (a, g_u, g_v, rss, dof),
-                r_row,
-                shifted,
-                rho_table,
-                t_row,
-                cam,
-                gains,
-                info[v // stride],
-                x_row,
-                y,
-                moments,
-            )
+            row = (z_row, valid_row, x_row, v, y, stride)
+            window = (r_row, shifted, moments)
+            variance_row(row, (a, g_u, g_v, rss, dof), window, (rho_table, t_row), cam, gains, info[v // stride])
         row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:

@@ -2,9 +2,9 @@
 surfnorm, from surfnorm filtered or weighted by its uncertainty, from Open3D and from OpenCV.
 
     # build the data folder once from the raw files (see "Layout" below), then run the benchmark
-    PYTHONPATH=src python benchmarks/icp.py /work/data/icp/redwood5 --prepare redwood \\
-        --raw /work/data/icp/raw/open3d_redwood
-    PYTHONPATH=src python benchmarks/icp.py /work/data/icp/redwood5 --out bench-output/icp
+    PYTHONPATH=src python benchmarks/icp.py DATA --prepare redwood \\
+        --raw RAW
+    PYTHONPATH=src python benchmarks/icp.py DATA --out bench-output/icp
 
 Writes OUT/icp.md (the table), OUT/icp.json (every pair, every variant, the settings and versions) and OUT/icp.png
 (translation and rotation error per pair and variant).

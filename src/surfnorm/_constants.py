@@ -104,3 +104,10 @@ NEWTON_TOL = 1e-14
 
 #: B, the weight of the state penalty in the energies of candidates 0 and 1 (authors' code: 1e10).
 SDA_PENALTY = 1e10
+
+# --- sigma (surfnorm.kernels.uncertainty, surfnorm.kernels.sensor_noise) -------------------------------
+
+#: Width (pixels: the standard deviation of a Gaussian correlation exp(-d^2 / 4 l^2)) that a frame's correlated
+#: noise is taken to have: how its share follows from ``NoiseProfile.correlation``, how far a window must reach to
+#: average it (eq. (3) of surfnorm.kernels.uncertainty), and how the profile tells it from curvature.
+CORRELATION_WIDTH = 1.5

@@ -30,12 +30,13 @@ from .._constants import (
     _NOISE_SAMPLES,
     _SMOOTH_GAUSS,
     _SMOOTH_SAMPLES,
+    CORRELATION_WIDTH,
     MIN_SAMPLES,
     N_BINS,
     SMOOTH_SHARE,
 )
 
-__all__ = ["NoiseProfile", "noise_profile", "depth_range", "terrace_statistics"]
+__all__ = ["NoiseProfile", "noise_profile", "depth_range", "terrace_statistics", "stride_gain"]
 
 
 @ahead_of_time
@@ -373,11 +374,12 @@ class NoiseProfile(NamedTuple):
         only the first (a sphere filling the frame), fine detail only the second (a tree's
         foliage), noise both. The 12 3F2N sample frames give 0.000-0.012.
     correlation : float
-        The clipped mean square of the second differences at stride 2 over that at stride 1: 1 for noise
-        independent from pixel to pixel, more where neighbours' errors go together (a matcher's window, a
-        spatial filter: 1.3 for the simulated raw Kinect v1, about 3 for SGBM, 11 for error smooth over 2
-        pixels), where a fitted slope moves more than its residual says. Curvature raises it too. 1 without
-        enough samples.
+        The clipped mean square of the second differences at stride 2 over that at stride 1, the curvature's
+        part taken out (the three strides tell white noise, noise correlated over ``CORRELATION_WIDTH`` pixels
+        and curvature apart: :func:`_correlation`): 1 for noise independent from pixel to pixel, more where
+        neighbours' errors go together (a matcher's window, a spatial filter: about 1.3 for the simulated raw
+        Kinect v1, 3 for SGBM, 10 for error smooth over 2 pixels), where a fitted slope moves more than its
+        residual says. 1 without enough samples.
     """
 
     depths: np.ndarray
@@ -389,15 +391,33 @@ class NoiseProfile(NamedTuple):
     correlation: float = 1.0
 
 
+def stride_gain(s: float) -> float:
+    """k_s: the mean square of the second difference at stride s of noise of unit variance correlated over
+    ``CORRELATION_WIDTH`` = l pixels (correlation exp(-d^2 / 4 l^2)), 6 - 8 exp(-s^2 / 4 l^2) + 2 exp(-s^2 / l^2);
+    white noise gives 6 at every stride."""
+    l2 = CORRELATION_WIDTH * CORRELATION_WIDTH
+    return 6.0 - 8.0 * math.exp(-s * s / (4.0 * l2)) + 2.0 * math.exp(-s * s / l2)
+
+
+#: Per bin, the mean squares m_1, m_2, m_4 of the second differences at strides 1, 2, 4 (white noise of rho gives
+#: rho^2 at each) are white noise a, correlated noise b and curvature C: m_s = a + b k_s / 6 + C s^4; this solves
+#: for (a, b, C).
+_STRIDES_SOLVE = np.linalg.inv(np.array([[1.0, stride_gain(s) / 6.0, s**4] for s in (1.0, 2.0, 4.0)]))
+
+
 def _correlation(rms, starts, min_samples):
     """:attr:`NoiseProfile.correlation` from the clipped RMS ``rms`` (3, nbins) of the second differences at
-    strides 1, 2 and 4 and the bins' ``starts``: the mean square at stride 2 over that at stride 1, over the bins
-    with at least ``min_samples`` samples (weighted by their samples); 1 without any."""
+    strides 1, 2 and 4 and the bins' ``starts``: per bin, the mean square at stride 2 over that at stride 1 with
+    the curvature's part taken out (``_STRIDES_SOLVE``; none where it solves to less than nothing), averaged over
+    the bins with at least ``min_samples`` samples (weighted by their samples); 1 without any."""
     num = den = 0.0
     for b in range(rms.shape[1]):
         n = starts[b + 1] - starts[b]
         if n >= min_samples and rms[0, b] > 0.0:
-            num += n * rms[1, b] * rms[1, b] / (rms[0, b] * rms[0, b])
+            m = rms[:, b] * rms[:, b]
+            curvature = max(float(_STRIDES_SOLVE[2] @ m), 0.0)
+            m_1, m_2 = m[0] - curvature, m[1] - 16.0 * curvature
+            num += n * (m_2 / m_1 if m_1 > 0.0 and m_2 > 0.0 else m[1] / m[0])
             den += n
     return num / den if den > 0.0 else 1.0
 

@@ -55,6 +55,8 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, select
+from .._constants import CORRELATION_WIDTH
+from .sensor_noise import stride_gain
 
 __all__ = [
     "sigma_map",
@@ -76,10 +78,6 @@ __all__ = [
 FIT_GAIN = 1.0
 #: The most that a frame's noise correlation multiplies the slopes' variance by.
 MAX_CORRELATION = 16.0
-#: Width (pixels: the standard deviation of a Gaussian correlation exp(-d^2 / 4 l^2)) that a frame's correlated
-#: noise is taken to have: how its variance follows from ``NoiseProfile.correlation`` and how far a window must
-#: reach to average it (:func:`correlated_share`, eq. (3)).
-CORRELATION_WIDTH = 1.5
 #: How far above 1 ``NoiseProfile.correlation`` must be before it is read as correlated noise: white noise on a
 #: plane measures 0.985-1.004 (frames of 240 x 320); the simulated sensors without a correlated part (primesense,
 #: tof) 0.97-1.07 on the sample's smooth objects (quantisation, curvature).
@@ -175,7 +173,7 @@ def correlated_share(profile) -> float:
     ``CORRELATION_SIGNIFICANCE``; 0 for white noise (c within d of 1)."""
     c = profile.correlation
     c = min(max(c, 1.0), MAX_CORRELATION) if c == c else 1.0
-    k1, k2 = (6.0 - 8.0 * math.exp(-(s * s) / (2.0 * _L2)) + 2.0 * math.exp(-2.0 * s * s / _L2) for s in (1.0, 2.0))
+    k1, k2 = stride_gain(1.0), stride_gain(2.0)
     return 6.0 * max(c - 1.0 - CORRELATION_SIGNIFICANCE, 0.0) / (c * (k2 - k1))
 
 

@@ -346,3 +346,28 @@ def test_cli_refuses_an_existing_sigma_file_without_overwrite(tmp_path):
     )
     assert res.exit_code == 0, res.output
     assert np.load(tmp_path / "n.sigma.npy").shape == z.shape
+
+
+def test_the_noise_correlation_leaves_the_curvature_out():
+    """White noise on a strongly curved surface: the stride-2 over stride-1 mean square alone reads curvature as
+    correlation (well above 1); NoiseProfile.correlation, with the curvature solved for from the three strides,
+    stays near 1. Noise smoothed over a few pixels on a plane reads well above 1 either way."""
+    import cv2
+
+    from surfnorm.kernels import sensor_noise as S
+
+    rng = np.random.default_rng(3)
+    H, W, f = 240, 320, 300.0
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    r2 = ((u - W / 2) ** 2 + (v - H / 2) ** 2) / (W / 2) ** 2
+    w_bowl = 0.5 + 0.25 * r2  # inverse depth, curved
+    noise = 2e-5 * rng.standard_normal((H, W))
+    z = (1.0 / (w_bowl + noise)).astype(np.float32)
+    valid = np.ones_like(z, bool)
+    _, _, xs, _, _, _ = S._samples(z, valid, f)
+    raw = float(np.mean(xs[1] ** 2) / np.mean(xs[0] ** 2))
+    got = S.noise_profile(z, valid, f).correlation
+    assert raw > 1.5 and abs(got - 1.0) < 0.15, (raw, got)
+    smooth = cv2.GaussianBlur(rng.standard_normal((H, W)), (0, 0), 1.5) * 1e-4
+    z = (1.0 / (0.5 + smooth)).astype(np.float32)
+    assert S.noise_profile(z, valid, f).correlation > 2.0

@@ -481,16 +481,16 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     ``tables``: (z0, inv_step, radius, rho) of :func:`radius_table`; ``steps``: (grow, widen) of
     :func:`growth_table` and :func:`widen_table`; ``cam``: (fx, fy, cx, cy); ``options``: (n_widen, kappa,
     rho_floor, r_max, fill); ``work``: (ring, cols, pos, w_scratch, made), the ``ring`` that holds the integral
-    rows up to ``made`` and ``cols`` the column sums after it (:func:`prime`), ``pos``:
-    :func:`integral_positions`, ``w_scratch``: (W,).
+    rows up to ``made`` and ``cols`` the column sums after it (:func:`surfnorm.kernels._windows.prime`), ``pos``:
+    :func:`surfnorm.kernels._windows.integral_positions`, ``w_scratch``: (W,).
 
     The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
     pixel takes its plane from the fitted pixels around it (:mod:`surfnorm.kernels._assembly`), so a band fits
     the rows up to two beyond its own.
 
-    Integral rows are sums from row 0 down, so a band starting at v0 first sums the columns of the rows
-    above the ones it reads, then makes the integral rows it reads (no fits: :func:`prime`): the same
-    additions in the same order as one sweep, so the same bits; the price is that pass over rows
+    Integral rows are sums from row 0 down, so a band starting at v0 first sums the columns of the rows above the
+    ones it reads, then makes the integral rows it reads (no fits: :func:`~surfnorm.kernels._windows.prime`): the
+    same additions in the same order as one sweep, so the same bits; the price is that pass over rows
     0 .. v0 + 2 ``r_max``, mostly column sums (vectorised).
 
     ``info``: (0, 0) for nothing, or (fitted rows, fitted columns) float64, where fitted pixel (v, stride i) gets its

@@ -109,24 +109,23 @@ MAX_DEG = 60.0
 @pixel
 def fit_variance(s2, n, r, o_u, o_v, noise2, gain, misfit_gain, significance):
     """(var_g, var_a, cov(a, g_u), cov(a, g_v)) of a fit (residual per dof s2, n points, radius r) carried to a
-    pixel offset (o_u, o_v) from its window's centre: the frame's noise at its depth (``noise2``, times ``gain``)
-    averaged over the n points, and the misfit (the residual beyond what noise alone gives in
-    ``significance`` standard deviations of a residual of n - 3 degrees of freedom, times ``misfit_gain``),
-    which the points do not average away."""
-    s = gain * noise2
-    chance = noise2 * (1.0 + significance * math.sqrt(2.0 / max(n - 3.0, 1.0)))
-    mis = misfit_gain * max(s2 - chance, 0.0)
-    spread = r * (r + 1.0) / 3.0
-    var_g = s / (n * spread) + mis / spread
-    return var_g, s / n + mis + (o_u * o_u + o_v * o_v) * var_g, o_u * var_g, o_v * var_g
+    pixel offset (o_u, o_v) from its window's centre, its points scattered as the full square's (n r (r + 1) / 3
+    per axis, no cross term) and its noise white: :func:`fit_covariance` of eq. (1)."""
+    spread = n * (r * (r + 1.0) / 3.0)
+    var_g, _, _, var_a, c_u, c_v = fit_covariance(
+        s2, n, spread, 0.0, spread, o_u, o_v, noise2, gain, misfit_gain, significance, 0.0
+    )
+    return var_g, var_a, c_u, c_v
 
 
 @pixel
 def fit_covariance(s2, n, cuu, cuv, cvv, o_u, o_v, noise2, gain, misfit_gain, significance, share):
-    """:func:`fit_variance` for a window of any shape: (var g_u, var g_v, cov(g_u, g_v), var_a, cov(a, g_u),
-    cov(a, g_v)) of a fit of n points whose coordinates scatter by (cuu, cuv; cuv, cvv) about their centroid,
-    carried to a pixel offset (o_u, o_v) from that centroid. The slopes' covariance is (noise / n + misfit)
-    times n (C)^-1: a window cut by a hole or the frame's border (fewer points on one side, a centroid off
+    """(var g_u, var g_v, cov(g_u, g_v), var_a, cov(a, g_u), cov(a, g_v)) of a fit (residual per dof s2) of n points
+    whose coordinates scatter by (cuu, cuv; cuv, cvv) about their centroid, carried to a pixel offset (o_u, o_v)
+    from that centroid: the frame's noise at its depth (``noise2``, times ``gain``) averaged over the n points,
+    and the misfit (the residual beyond what noise alone gives in ``significance`` standard deviations of a
+    residual of n - 3 degrees of freedom, times ``misfit_gain``), which the points do not average away. The
+    slopes' covariance is (noise / n + misfit) times n (C)^-1 (eq. (1) for the full square): a window cut by a hole or the frame's border (fewer points on one side, a centroid off
     the pixel) pins its slopes less, and carries them further, than the full square would. The noise's
     correlated part (``share`` times ``noise2``, :func:`correlated_share`) adds eq. (3) to both slopes."""
     s = gain * noise2
@@ -146,7 +145,9 @@ def fit_covariance(s2, n, cuu, cuv, cvv, o_u, o_v, noise2, gain, misfit_gain, si
 
 @pixel
 def angle_variance_cov(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g_uu, g_vv, g_uv, var_a, c_u, c_v):
-    """:func:`angle_variance` with the slopes' full covariance (:func:`fit_covariance`)."""
+    """Eq. (2): the normal's angular variance (radians^2) at pixel (u, v) with unit normal (n0, n1, n2) and
+    depth ``zp``, from the slopes' full covariance (:func:`fit_covariance`); inf where the normal does not face
+    the camera."""
     du = u - cx
     dv = v - cy
     facing = -(n0 * du / fx + n1 * dv / fy + n2)
@@ -180,16 +181,9 @@ def correlated_share(profile) -> float:
 @pixel
 def angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v):
     """Eq. (2): the normal's angular variance (radians^2) at pixel (u, v) with unit normal (n0, n1, n2) and
-    depth ``zp``; inf where the normal does not face the camera."""
-    du = u - cx
-    dv = v - cy
-    facing = -(n0 * du / fx + n1 * dv / fy + n2)
-    zf = zp * facing  # 1 / |m|
-    trace = var_g * (fx * fx + du * du + fy * fy + dv * dv) + var_a - 2.0 * (c_u * du + c_v * dv)
-    p_u = n0 * fx - n2 * du  # n . J_gu
-    p_v = n1 * fy - n2 * dv  # n . J_gv
-    along = var_g * (p_u * p_u + p_v * p_v) + var_a * n2 * n2 + 2.0 * n2 * (c_u * p_u + c_v * p_v)
-    return select(facing > 1e-6, max(trace - along, 0.0) * zf * zf, np.inf)
+    depth ``zp``, both slopes of variance ``var_g`` and uncorrelated; inf where the normal does not face the
+    camera (:func:`angle_variance_cov`)."""
+    return angle_variance_cov(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_g, 0.0, var_a, c_u, c_v)
 
 
 @pixel

@@ -209,11 +209,11 @@ def read_data(data: Path):
 
 
 def back_project(depth: np.ndarray, K: dict) -> np.ndarray:
-    """(H, W, 3) points of a depth image in metres (0-based pixel centres); z = 0 where there is no depth."""
-    H, W = depth.shape
-    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
-    z = depth.astype(np.float64)
-    return np.stack([(u - K["cx"]) * z / K["fx"], (v - K["cy"]) * z / K["fy"], z], axis=-1)
+    """(H, W, 3) float64 points of a depth image in metres (0-based pixel centres; :func:`surfnorm.points`), zeros
+    where there is no depth."""
+    import surfnorm
+
+    return surfnorm.points(depth, [[K["fx"], 0.0, K["cx"]], [0.0, K["fy"], K["cy"]], [0.0, 0.0, 1.0]])
 
 
 def voxel_pick(points: np.ndarray, valid: np.ndarray, voxel: float) -> np.ndarray:

@@ -426,7 +426,6 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
     the integral rows above their own) gives the same bits on one band and on several; tables declined once the
     noise is known (auto's decision) write nothing."""
     from surfnorm._bands import Part, on_threads
-    from surfnorm._constants import ALPHA, KAPPA, MAX_WINDOW
     from surfnorm.kernels._schedule import run_bands
     from surfnorm.kernels.adaptive_fit import FitPlan, adaptive_fit
     from surfnorm.kernels.sensor_noise import noise_profile
@@ -443,7 +442,7 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
             np.testing.assert_array_equal(got, ref)
         # a frame decided against once its noise is known (auto on clean depth): nothing written
         out = np.full(z.shape + (3,), 7.0, np.float32)
-        frame = FitPlan(z, valid, cam, out, None, MAX_WINDOW, ALPHA, KAPPA, 0.0, None, None, None)
+        frame = FitPlan(z, valid, cam, out)
         decline = lambda p: frame.tables(p, fit=False)  # noqa: E731
         assert not run_bands(z, valid, frame.stride, frame.r_max, frame.measure, decline, frame.fit, bands, frame.key)
         assert (out == 7.0).all()

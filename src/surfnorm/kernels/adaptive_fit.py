@@ -628,7 +628,22 @@ class FitPlan:
     as they are; ``auto`` decides between :meth:`tables` and nothing once the noise is known. The arguments are
     :func:`adaptive_fit`'s."""
 
-    def __init__(self, z, valid, cam, out, window, max_window, alpha, kappa, fill, profile, stride, record):
+    def __init__(
+        self,
+        z,
+        valid,
+        cam,
+        out,
+        *,
+        window=None,
+        max_window: int = MAX_WINDOW,
+        alpha: float = ALPHA,
+        kappa: float = KAPPA,
+        fill: float = 0.0,
+        profile=None,
+        stride=None,
+        record: dict | None = None,
+    ):
         self.z, self.valid, self.out, self.profile, self.record = z, valid, out, profile, record
         self.window, self.max_window, self.alpha = window, max_window, alpha
         self.f = math.sqrt(cam.fx * cam.fy)
@@ -743,6 +758,19 @@ def adaptive_fit(
         :func:`_adaptive_fit_kernel`), with the gains ``FIT_GAIN`` and ``MISFIT_GAIN`` of that module.
         None (default): nothing recorded, nothing spent on it.
     """
-    frame = FitPlan(z, valid, cam, out, window, max_window, alpha, kappa, fill, profile, stride, record)
+    frame = FitPlan(
+        z,
+        valid,
+        cam,
+        out,
+        window=window,
+        max_window=max_window,
+        alpha=alpha,
+        kappa=kappa,
+        fill=fill,
+        profile=profile,
+        stride=stride,
+        record=record,
+    )
     run_bands(z, valid, frame.stride, frame.r_max, frame.measure, frame.tables, frame.fit, bands, frame.key)
     return out

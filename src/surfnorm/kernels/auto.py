@@ -62,11 +62,8 @@ from .._config import njit
 # The noise floors that surfnorm.torch._adaptive shares, with their meaning, and the registry's defaults of the
 # d2nt_v3 options that auto does not expose: surfnorm._constants (loads no Numba).
 from .._constants import (
-    ALPHA,
     CLEAN_FLOOR,
     DLF_DEFAULT,
-    KAPPA,
-    MAX_WINDOW,
     MNR_DLF_DEFAULT,
     NOISY_FLOOR,
     TERRACED_HIGH,
@@ -250,7 +247,7 @@ def auto(
 
     # Sensor depth first: adaptive_fit's bands make their integral rows while the calling thread measures the noise;
     # the decision, once it is known: fit, or nothing written (d2nt_v3 or the blend below).
-    frame = FitPlan(z, valid, cam, out, None, MAX_WINDOW, ALPHA, KAPPA, fill, None, None, record)
+    frame = FitPlan(z, valid, cam, out, fill=fill, record=record)
     measured: list[NoiseProfile] = []
 
     def sensor_depth(p: NoiseProfile):

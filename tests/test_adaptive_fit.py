@@ -444,7 +444,7 @@ def test_noise_measured_by_one_band_while_the_others_make_their_rows():
         out = np.full(z.shape + (3,), 7.0, np.float32)
         frame = FitPlan(z, valid, cam, out)
         decline = lambda p: frame.tables(p, fit=False)  # noqa: E731
-        assert not run_bands(z, valid, frame.stride, frame.r_max, frame.measure, decline, frame.fit, bands, frame.key)
+        assert not run_bands(frame, bands, tables=decline)
         assert (out == 7.0).all()
 
 

@@ -172,17 +172,20 @@ class Balance:
 _balance = Balance()
 
 
-def run_bands(z, valid, stride: int, r_max: int, measure, plan, fit, bands, key) -> bool:
+def run_bands(frame, bands, tables=None) -> bool:
     """The rows of a frame on ``bands`` (:mod:`surfnorm._bands`); True when every band ran.
 
-    ``measure(offers)`` returns the frame's noise profile and ``plan(profile)`` the tables a band's ``fit`` needs
-    (None: the frame is not for this method, and nothing is fitted); the band on the calling thread runs them once,
-    while the others make the integral rows above their own rows, which do not depend on them, and then take its
-    first integral rows and parts of its measuring (``offers``: :class:`surfnorm._bands.Offers`). ``fit(v0, v1,
-    work, tables)`` fits rows v0 .. v1 - 1 with ``work`` = (ring, cols, pos, w_scratch, made): a ring of
-    4 r_max + 3 integral rows primed up to row ``made`` (:func:`surfnorm.kernels._windows.prime`). ``key``: the
-    frame's kind for :class:`Balance`.
+    ``frame`` is a :class:`surfnorm.kernels.adaptive_fit.FitPlan`: its depth ``z`` and ``valid``, ``stride``,
+    ``r_max`` and ``key`` (the frame's kind for :class:`Balance`), and its three steps. ``frame.measure(offers)``
+    returns the frame's noise profile and ``tables(profile)`` (default ``frame.tables``) the tables a band's fit
+    needs (None: the frame is not for this method, and nothing is fitted); the band on the calling thread runs
+    them once, while the others make the integral rows above their own rows, which do not depend on them, and
+    then take its first integral rows and parts of its measuring (``offers``: :class:`surfnorm._bands.Offers`).
+    ``frame.fit(v0, v1, work, tables)`` fits rows v0 .. v1 - 1 with ``work`` = (ring, cols, pos, w_scratch, made):
+    a ring of 4 r_max + 3 integral rows primed up to row ``made`` (:func:`surfnorm.kernels._windows.prime`).
     """
+    z, valid, stride, r_max, key = frame.z, frame.valid, frame.stride, frame.r_max, frame.key
+    measure, plan, fit = frame.measure, frame.tables if tables is None else tables, frame.fit
     H, W = z.shape
     # bands waiting for the noise take parts of its measuring (Offers.help) until it is done
     offers = None if bands is whole else Offers()

@@ -772,5 +772,5 @@ def adaptive_fit(
         stride=stride,
         record=record,
     )
-    run_bands(z, valid, frame.stride, frame.r_max, frame.measure, frame.tables, frame.fit, bands, frame.key)
+    run_bands(frame, bands)
     return out

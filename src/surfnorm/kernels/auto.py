@@ -254,17 +254,7 @@ def auto(
         measured.append(p)
         return frame.tables(p, fit=adaptive_weight(p) == 1.0)
 
-    if run_bands(
-        z,
-        valid,
-        frame.stride,
-        frame.r_max,
-        frame.measure,
-        sensor_depth,
-        frame.fit,
-        bands.get("bands", whole),
-        frame.key,
-    ):
+    if run_bands(frame, bands.get("bands", whole), tables=sensor_depth):
         if record is not None:
             record["weight"] = 1.0
         return out

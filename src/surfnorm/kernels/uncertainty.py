@@ -56,7 +56,8 @@ import numpy as np
 from .._bands import whole
 from .._config import njit, pixel, select
 from .._constants import CORRELATION_WIDTH
-from .sensor_noise import stride_gain
+from ._windows import radius_table
+from .sensor_noise import noise_profile, stride_gain
 
 __all__ = [
     "sigma_map",
@@ -467,9 +468,6 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
     ``auto``'s blend weights the variances as it weights the normals; where only one of the two has a fit, its
     sigma alone.
     """
-    from ._windows import radius_table
-    from .sensor_noise import noise_profile
-
     t = 1.0 if method == "adaptive_fit" else record.get("weight", 0.0)
     if t > 0.0:
         fitted = sigma_from_fits(

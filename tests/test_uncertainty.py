@@ -306,8 +306,11 @@ def test_centred_3x3_fits_against_least_squares():
     H, W = 8, 9
     z = rng.uniform(1.0, 2.0, (H, W))
     valid = rng.random((H, W)) < 0.75
-    fits = np.empty((H, W, 5))
-    U._centred_fits3(z, valid, fits, 0, H)
+    cam = (FX, FY, CX, CY)
+    fits = np.zeros((H, 8, W))
+    col = np.empty((6, W + 2))
+    for v in range(H):
+        U._fits3_row(z, valid, v, col, cam, fits[v])
     for v in range(H):
         for u in range(W):
             pts = [
@@ -318,13 +321,84 @@ def test_centred_3x3_fits_against_least_squares():
             ]
             X = np.array([[1.0, dx, dy] for dx, dy, _ in pts]).reshape(-1, 3)
             if len(pts) < 4 or np.linalg.matrix_rank(X) < 3:
-                assert fits[v, u, 0] == np.inf
+                assert fits[v, 0, u] == np.inf
                 continue
             w = np.array([p[2] for p in pts])
             coef, *_ = np.linalg.lstsq(X, w, rcond=None)
             rss = float(np.sum((X @ coef - w) ** 2))
-            np.testing.assert_allclose(fits[v, u, 1:], [len(pts), coef[1], coef[2], coef[0]], rtol=1e-9, atol=1e-12)
-            assert fits[v, u, 0] == pytest.approx(rss / (len(pts) - 3), rel=1e-6, abs=1e-15)
+            np.testing.assert_allclose(fits[v, 1:5, u], [len(pts), coef[1], coef[2], coef[0]], rtol=1e-9, atol=1e-12)
+            assert fits[v, 0, u] == pytest.approx(rss / (len(pts) - 3), rel=1e-6, abs=1e-15)
+            # the plane's unit normal at the window's centre, eq. (2) up to its sign
+            m = np.array([FX * coef[1], FY * coef[2], coef[0] - coef[1] * (u - CX) - coef[2] * (v - CY)])
+            np.testing.assert_allclose(fits[v, 5:, u], m / np.linalg.norm(m), rtol=1e-9, atol=1e-12)
+    # rows outside the frame have no fit
+    U._fits3_row(z, valid, -1, col, cam, fits[0])
+    assert np.all(fits[0, 0] == np.inf)
+
+
+def test_turn_row_against_a_naive_reference():
+    rng = np.random.default_rng(3)
+    W = 23
+    fits = np.zeros((3, 8, W))
+    fits[:, 0] = np.where(rng.random((3, W)) < 0.8, rng.uniform(0.0, 1.0, (3, W)), np.inf)
+    n = rng.normal(size=(3, 3, W))
+    fits[:, 5:] = n / np.linalg.norm(n, axis=1, keepdims=True)
+    m = rng.normal(size=(3, W))
+    m /= np.linalg.norm(m, axis=0)
+    limit = np.where(rng.random(W) < 0.9, rng.uniform(0.0, 1.0, W), -1.0)
+    v = 7  # rows 6, 7, 8 at 6 % 3, 7 % 3, 8 % 3
+    lo, hi = 2, W - 1
+    total, count = np.full(W, -5.0), np.full(W, -5.0)
+    U._turn_row(fits, v, m, limit, total, count, lo, hi)
+    for u in range(lo, hi):
+        t, k = 0.0, 0
+        for y in (v - 1, v, v + 1):
+            for x in (u - 1, u, u + 1):
+                if (y, x) == (v, u) or not 0 <= x < W:
+                    continue
+                if fits[y % 3, 0, x] <= limit[u]:
+                    t += 1.0 - float(m[:, u] @ fits[y % 3, 5:, x]) ** 2
+                    k += 1
+        assert total[u] == pytest.approx(t, abs=1e-12) and count[u] == k
+    assert total[0] == -5.0 and count[W - 1] == -5.0  # outside lo .. hi - 1: untouched
+
+
+def _roof(tilt_deg, shape=(60, 80)):
+    """Depth of two planes meeting at a ridge down the middle column, each tilted ``tilt_deg`` about the vertical
+    axis (towards and away from the camera), 2 m away."""
+    H, W = shape
+    K = np.array([[FX, 0, CX], [0, FY, CY], [0, 0, 1.0]])
+    u = np.arange(W, dtype=float)[None, :].repeat(H, 0)
+    x = (u - CX) / FX  # the ray's slope; the planes z = 2 + k |X - X_ridge| through the ridge at u = W / 2
+    k = math.tan(math.radians(tilt_deg))
+    x0 = (W / 2 - CX) / FX * 2.0
+    z = np.where(u < W / 2, (2.0 + k * x0) / (1.0 + k * x), (2.0 - k * x0) / (1.0 - k * x))
+    return z.astype(np.float32), K
+
+
+def test_d2nt_sigma_grows_where_clean_planes_turn():
+    # a clean roof: the faces' pixels are judged by their own 3x3 planes alone (sigma the floor); the pixels
+    # beside the ridge see their neighbours' planes turn, by more on a sharper ridge
+    soft, K = _roof(5.0)
+    sharp, _ = _roof(20.0)
+    s_soft = surfnorm.estimate(soft, K, method="d2nt_v3", uncertainty=True)[1]
+    s_sharp = surfnorm.estimate(sharp, K, method="d2nt_v3", uncertainty=True)[1]
+    face = np.s_[10:50, 10:30]
+    ridge = np.s_[10:50, 39:41]
+    assert np.allclose(s_soft[face], U.FLOOR_DEG, atol=0.05)
+    assert np.nanmedian(s_soft[ridge]) > U.FLOOR_DEG + 0.3
+    assert np.nanmedian(s_sharp[ridge]) > np.nanmedian(s_soft[ridge]) + 1.0
+
+
+def test_clean_sigma_is_capped_and_noisy_sigma_is_not():
+    z, K = _noisy_plane(0.0)
+    z = z.copy()
+    z[:, ::2] *= 1.3  # every window of every pixel straddles a discontinuity: the largest misfit there is
+    clean = surfnorm.estimate(z, K, method="d2nt_v3", uncertainty=True)[1]
+    assert np.nanmax(clean) == pytest.approx(U.CLEAN_MAX_DEG)
+    loud, _ = _noisy_plane(3e-2)
+    noisy = surfnorm.estimate(loud, K, method="d2nt_v3", uncertainty=True)[1]
+    assert np.nanmax(noisy) > U.CLEAN_MAX_DEG
 
 
 def test_cli_refuses_an_existing_sigma_file_without_overwrite(tmp_path):

@@ -72,7 +72,9 @@ from .._constants import (
 )
 from ._schedule import run_bands
 from .adaptive_fit import FitPlan, adaptive_fit
-from .sensor_noise import NoiseProfile, noise_profile
+
+# the decision from a measured profile lives beside the profile (the uncertainty needs it too)
+from .sensor_noise import NoiseProfile, adaptive_weight, noise_profile, quantisation, reading
 
 __all__ = [
     "auto",
@@ -87,33 +89,6 @@ __all__ = [
     "TERRACED_LOW",
     "TERRACED_HIGH",
 ]
-
-
-def quantisation(profile: NoiseProfile) -> float:
-    """The quantisation noise of the frame's terraces in point spacings: ``step`` / sqrt(12) (the RMS of
-    rounding to steps of that height), times the share in which the frame counts as terraced (0 at or below
-    ``TERRACED_LOW``, 1 at or above ``TERRACED_HIGH``, linear between)."""
-    share = min(max((profile.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW), 0.0), 1.0)
-    return share * profile.step / math.sqrt(12.0)
-
-
-def reading(profile: NoiseProfile) -> float:
-    """The noise level ``auto`` decides on: the largest of the floor, the smooth noise and :func:`quantisation`
-    (NaN with the floor)."""
-    if not profile.floor == profile.floor:
-        return float("nan")
-    return max(profile.floor, profile.smooth, quantisation(profile))
-
-
-def adaptive_weight(profile: NoiseProfile) -> float:
-    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth), from :func:`reading`.
-
-    A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
-    """
-    r = reading(profile)
-    if not r == r:
-        return 1.0
-    return min(max((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)
 
 
 class Decision(NamedTuple):

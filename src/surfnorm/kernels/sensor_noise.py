@@ -30,13 +30,26 @@ from .._constants import (
     _NOISE_SAMPLES,
     _SMOOTH_GAUSS,
     _SMOOTH_SAMPLES,
+    CLEAN_FLOOR,
     CORRELATION_WIDTH,
     MIN_SAMPLES,
     N_BINS,
+    NOISY_FLOOR,
     SMOOTH_SHARE,
+    TERRACED_HIGH,
+    TERRACED_LOW,
 )
 
-__all__ = ["NoiseProfile", "noise_profile", "depth_range", "terrace_statistics", "stride_gain"]
+__all__ = [
+    "NoiseProfile",
+    "noise_profile",
+    "depth_range",
+    "terrace_statistics",
+    "stride_gain",
+    "adaptive_weight",
+    "reading",
+    "quantisation",
+]
 
 
 @ahead_of_time
@@ -500,3 +513,33 @@ def _by_depth(rms, starts, zmin, zmax, min_samples):
         return centres, np.zeros(nbins)
     log_c = np.log(centres)
     return centres, np.interp(log_c, log_c[ok], rho[ok])
+
+
+# --- what the frame is, from its profile (``auto``'s decision) ---------------------------------------------
+
+
+def quantisation(profile: NoiseProfile) -> float:
+    """The quantisation noise of the frame's terraces in point spacings: ``step`` / sqrt(12) (the RMS of
+    rounding to steps of that height), times the share in which the frame counts as terraced (0 at or below
+    ``TERRACED_LOW``, 1 at or above ``TERRACED_HIGH``, linear between)."""
+    share = min(max((profile.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW), 0.0), 1.0)
+    return share * profile.step / math.sqrt(12.0)
+
+
+def reading(profile: NoiseProfile) -> float:
+    """The noise level ``auto`` decides on: the largest of the floor, the smooth noise and :func:`quantisation`
+    (NaN with the floor)."""
+    if not profile.floor == profile.floor:
+        return float("nan")
+    return max(profile.floor, profile.smooth, quantisation(profile))
+
+
+def adaptive_weight(profile: NoiseProfile) -> float:
+    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth), from :func:`reading`.
+
+    A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
+    """
+    r = reading(profile)
+    if not r == r:
+        return 1.0
+    return min(max((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)

@@ -42,6 +42,18 @@ and carried further (:func:`fit_covariance`).
 ``d2nt_v3`` takes the gradients of its DAG filter from one pixel's neighbours: its error is that of the 3x3
 neighbourhood's plane, the same formulas at r = 1 (a fit of every pixel's 3x3 window, its own residual;
 ``D2NT_GAIN``). On clean depth that residual is the surface's curvature or a discontinuity inside the window.
+Two more terms are for clean depth, where the noise says little:
+
+- A surface that turns between pixels (a mesh's facets, a crease) is not where any one pixel's plane says: the
+  mean squared sine of the angles between the pixel's plane and those of its eight neighbours' windows that fit
+  within the noise (the adaptive fit's noise test), times ``D2NT_TURN``, is added to the variance. Planes give 0.
+- Where every window beside a pixel spans a discontinuity (a thin part, detail finer than a pixel), the misfit
+  says tens of degrees, but DAG takes its gradients from the smoother side and errs by less: on a frame whose
+  noise reading is clean (``adaptive_weight`` 0) sigma is at most ``CLEAN_MAX_DEG``.
+
+Both were set on the simulator's clean preset (``exact``: the 12 3F2N frames), whose error is mostly the ground
+truth's own (smooth-shaded normals of faceted meshes); on sensor depth the default runs the adaptive fit, and
+neither term applies to it.
 
 A pixel that has a normal always gets a sigma (a normal whose window says nothing, for lack of points, gets
 ``NO_FIT_DEG``); NaN exactly where the normal is fill.
@@ -55,9 +67,9 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, select
-from .._constants import CORRELATION_WIDTH
+from .._constants import CORRELATION_WIDTH, KAPPA, RHO_FLOOR
 from ._windows import radius_table
-from .sensor_noise import noise_profile, stride_gain
+from .sensor_noise import adaptive_weight, noise_profile, stride_gain
 
 __all__ = [
     "sigma_map",
@@ -97,6 +109,13 @@ MISFIT_GAIN = 1.0
 D2NT_MISFIT_GAIN = 0.3
 #: Weight (on the variance) of the angle between ``d2nt_v3``'s normal and its pixel's best 3x3 plane.
 D2NT_DISAGREEMENT = 0.3
+#: Weight (on the variance) of how far the planes of the pixel's neighbours' 3x3 windows turn from its own, for
+#: ``d2nt_v3`` (:func:`_d2nt_sigma`).
+D2NT_TURN = 1.0
+#: The largest ``d2nt_v3`` sigma (degrees) on a frame whose noise reading is clean (``adaptive_weight`` 0): a
+#: window's misfit there is an edge or detail finer than a pixel, not noise, and DAG's one-sided gradients err
+#: by about this much (RMS) where every window beside a pixel has it.
+CLEAN_MAX_DEG = 25.0
 #: Added in quadrature to every sigma (degrees).
 FLOOR_DEG = 3.0
 #: Sigma (degrees) of a normal without a fit to judge it by.
@@ -305,27 +324,27 @@ def sigma_from_fits(valid, normals, variance, stride, *, floor=None, fill=0.0, o
 def _fit3_row(z, valid, v, col, dst):
     """Row v: the least-squares plane of w = 1/z over the valid pixels of each pixel's 3x3 window (the pixel
     itself valid or not), offsets from the centre as coordinates: (rss / dof, n, g_u, g_v, w at the centre) into
-    ``dst`` (W, 5); rss / dof inf where fewer than 4 points or points on a line, or v outside the frame. The sums
+    ``dst`` (5, W); rss / dof inf where fewer than 4 points or points on a line, or v outside the frame. The sums
     come from column sums of three rows, then three columns (separable); ``col`` is scratch (6, W + 2)."""
     H, W = z.shape
-    dst[:, 0] = np.inf
+    dst[0, :] = np.inf
     if v < 0 or v >= H:
         return
-    # per column of the window's three rows: count, sum dy, sum dy^2, sum w, sum dy w, sum w^2
+    # per column of the window's three rows: count, sum dy, sum dy^2, sum w, sum dy w, sum w^2 (branch-free, so
+    # that the loops vectorise)
     col[:, :] = 0.0
-    for dy in range(-1, 2):
+    for dy in range(max(-1, -v), min(2, H - v)):
         y = v + dy
-        if y < 0 or y >= H:
-            continue
         for u in range(W):
-            if valid[y, u]:
-                w = 1.0 / z[y, u]
-                col[0, u + 1] += 1.0
-                col[1, u + 1] += dy
-                col[2, u + 1] += dy * dy
-                col[3, u + 1] += w
-                col[4, u + 1] += dy * w
-                col[5, u + 1] += w * w
+            ok = valid[y, u]
+            c = select(ok, 1.0, 0.0)
+            w = select(ok, 1.0 / z[y, u], 0.0)
+            col[0, u + 1] += c
+            col[1, u + 1] += dy * c
+            col[2, u + 1] += dy * dy * c
+            col[3, u + 1] += w
+            col[4, u + 1] += dy * w
+            col[5, u + 1] += w * w
     for u in range(W):
         # columns u - 1, u, u + 1 at col[:, u], col[:, u + 1], col[:, u + 2]: dx = -1, 0, +1
         n = col[0, u] + col[0, u + 1] + col[0, u + 2]
@@ -338,9 +357,7 @@ def _fit3_row(z, valid, v, col, dst):
         s_xw = col[3, u + 2] - col[3, u]
         s_yw = col[4, u] + col[4, u + 1] + col[4, u + 2]
         s_ww = col[5, u] + col[5, u + 1] + col[5, u + 2]
-        if n < 4.0:
-            continue
-        inv_n = 1.0 / n
+        inv_n = 1.0 / max(n, 1.0)
         mx, my, mw = s_x * inv_n, s_y * inv_n, s_w * inv_n
         cxx = s_xx - s_x * mx
         cxy = s_xy - s_x * my
@@ -349,104 +366,163 @@ def _fit3_row(z, valid, v, col, dst):
         cyw = s_yw - s_y * mw
         cww = s_ww - s_w * mw
         det = cxx * cyy - cxy * cxy
-        if not det > 1e-6 * cxx * cyy:
+        ok = (n >= 4.0) & (det > 1e-6 * cxx * cyy)
+        inv_det = 1.0 / select(ok, det, 1.0)
+        g_x = (cyy * cxw - cxy * cyw) * inv_det
+        g_y = (cxx * cyw - cxy * cxw) * inv_det
+        rss = cww - g_x * cxw - g_y * cyw
+        dst[0, u] = select(ok, select(rss > 0.0, rss, 0.0) / max(n - 3.0, 1.0), np.inf)
+        dst[1, u] = n
+        dst[2, u] = g_x
+        dst[3, u] = g_y
+        dst[4, u] = mw - g_x * mx - g_y * my
+
+
+@njit(nogil=True)
+def _fits3_row(z, valid, v, col, cam, dst):
+    """:func:`_fit3_row` of row v into ``dst[:5]`` (8, W), and each plane's unit normal at its own centre
+    (eq. (2); ``cam``: (fx, fy, cx, cy)) into ``dst[5:]`` (left as they were where the fit is not finite)."""
+    fx, fy, cx, cy = cam
+    _fit3_row(z, valid, v, col, dst)
+    for u in range(dst.shape[1]):
+        if not dst[0, u] < np.inf:
             continue
-        g_x = (cyy * cxw - cxy * cyw) / det
-        g_y = (cxx * cyw - cxy * cxw) / det
-        dst[u, 0] = max(cww - g_x * cxw - g_y * cyw, 0.0) / (n - 3.0)
-        dst[u, 1] = n
-        dst[u, 2] = g_x
-        dst[u, 3] = g_y
-        dst[u, 4] = mw - g_x * mx - g_y * my
+        g_u, g_v = dst[2, u], dst[3, u]
+        k0 = fx * g_u
+        k1 = fy * g_v
+        k2 = dst[4, u] - g_u * (u - cx) - g_v * (v - cy)
+        inv = 1.0 / math.sqrt(max(k0 * k0 + k1 * k1 + k2 * k2, 1e-300))
+        dst[5, u] = k0 * inv
+        dst[6, u] = k1 * inv
+        dst[7, u] = k2 * inv
+
+
+@njit(nogil=True, noalias=True, _nrt=False)
+def _turned(q, n0, n1, n2, m0, m1, m2, limit, total, count):
+    """Per pixel i: to ``total[i]`` the squared sine of the angle between the unit normals (m0, m1, m2)[i] and
+    (n0, n1, n2)[i] where q[i] (a residual per dof) is at most limit[i], and 1 to ``count[i]`` there. One
+    neighbour's planes, already aligned with the pixels (so that the loop vectorises)."""
+    for i in range(total.shape[0]):
+        ok = q[i] <= limit[i]
+        d = m0[i] * n0[i] + m1[i] * n1[i] + m2[i] * n2[i]
+        t = 1.0 - d * d
+        total[i] += select(ok & (t > 0.0), t, 0.0)
+        count[i] += select(ok, 1.0, 0.0)
+
+
+@njit(nogil=True, _nrt=False)
+def _turn_row(fits, v, m, limit, total, count, lo, hi):
+    """Per pixel u of row v in lo .. hi - 1: the sum (``total``) and number (``count``) of the squared sines of
+    the angles between the unit normal m[:, u] and those of the planes of the 3x3 windows centred on its eight
+    neighbours that fit within ``limit[u]`` (residual per dof; -1: none), each at its own centre (``fits`` of
+    :func:`_fits3_row`, row y at y % 3)."""
+    W = total.shape[0]
+    total[lo:hi] = 0.0
+    count[lo:hi] = 0.0
+    for dy in range(-1, 2):
+        row = fits[(v + dy) % 3]
+        for dx in range(-1, 2):
+            if dy == 0 and dx == 0:
+                continue
+            a, b = max(lo, -dx), min(hi, W - dx)  # pixels a .. b - 1, their neighbours a + dx .. b - 1 + dx
+            if a >= b:
+                continue
+            p = slice(a + dx, b + dx)
+            _turned(
+                row[0, p],
+                row[5, p],
+                row[6, p],
+                row[7, p],
+                m[0, a:b],
+                m[1, a:b],
+                m[2, a:b],
+                limit[a:b],
+                total[a:b],
+                count[a:b],
+            )
 
 
 @njit(nogil=True)
-def _centred_fits3(z, valid, out, v0, v1):
-    """Rows v0 .. v1 - 1 of :func:`_fit3_row` into ``out`` (H, W, 5)."""
-    col = np.empty((6, z.shape[1] + 2))
-    for v in range(v0, v1):
-        _fit3_row(z, valid, v, col, out[v])
-
-
-@njit(nogil=True)
-def _d2nt_sigma(
-    z,
-    valid,
-    normals,
-    fill,
-    cam,
-    noise,
-    gain,
-    misfit_gain,
-    significance,
-    disagreement,
-    floor2,
-    no_fit,
-    out,
-    v0,
-    v1,
-):
+def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_deg, out, v0, v1):
     """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma: of the 3x3 windows centred on the pixel and with it at a corner
-    (``fits`` of :func:`_centred_fits3`), the one with the smallest residual per dof (a pixel beside a
+    (``fits`` of :func:`_fits3_row`), the one with the smallest residual per dof (a pixel beside a
     discontinuity is judged by its own side, as DAG takes its gradient from the smoother side): its plane's
     variance at the pixel (:func:`fit_variance` at r = 1), plus ``disagreement`` times the squared sine of the angle
-    between the normal and that plane's."""
+    between the normal and that plane's, plus ``turn`` times the mean squared sine of the angles to the planes of
+    its neighbours' windows that fit within the noise (:func:`_turn_row`: a surface that turns between pixels, as
+    a mesh's facets do, is not where its pixels' planes say); at most ``max_deg``. ``gains``: (gain,
+    misfit_gain, significance, disagreement, turn)."""
     H, W = z.shape
     fx, fy, cx, cy = cam
     f = math.sqrt(fx * fy)
     rho_z0, rho_inv_step, rho_t = noise
-    # the 3x3 fits of rows v - 1, v, v + 1, row y at y % 3 (:func:`_fit3_row`)
-    fits = np.empty((3, W, 5))
+    gain, misfit_gain, significance, disagreement, turn = gains
+    # the 3x3 fits of rows v - 1, v, v + 1, row y at y % 3 (:func:`_fits3_row`)
+    fits = np.zeros((3, 8, W))
     col = np.empty((6, W + 2))
-    _fit3_row(z, valid, v0 - 1, col, fits[(v0 - 1) % 3])
-    _fit3_row(z, valid, v0, col, fits[v0 % 3])
+    # per pixel of the row: its variance before the turn (NaN: sigma written already), its plane's unit normal,
+    # the noise test's limit (-1: no turn), the turn's sum and count
+    var_row = np.empty(W)
+    m = np.zeros((3, W))
+    limit = np.empty(W)
+    total = np.empty(W)
+    count = np.empty(W)
+    _fits3_row(z, valid, v0 - 1, col, cam, fits[(v0 - 1) % 3])
+    _fits3_row(z, valid, v0, col, cam, fits[v0 % 3])
     for v in range(v0, v1):
-        _fit3_row(z, valid, v + 1, col, fits[(v + 1) % 3])
+        _fits3_row(z, valid, v + 1, col, cam, fits[(v + 1) % 3])
+        lo, hi = W, 0  # the span of the row's pixels whose sigma is still to write
         for u in range(W):
+            var_row[u] = np.nan
+            limit[u] = -1.0
             if not (valid[v, u] and _has_normal(normals, v, u, fill)):
                 out[v, u] = np.nan
                 continue
-            best = fits[v % 3, u, 0]
+            best = fits[v % 3, 0, u]
             bv, bu = v, u
             for dv in (-1, 1):
                 for du in (-1, 1):
                     y, x = v + dv, u + du
-                    if 0 <= x < W and fits[y % 3, x, 0] < best:
-                        best, bv, bu = fits[y % 3, x, 0], y, x
+                    if 0 <= x < W and fits[y % 3, 0, x] < best:
+                        best, bv, bu = fits[y % 3, 0, x], y, x
             if not best < np.inf:
                 out[v, u] = no_fit
                 continue
             zp = z[v, u]
             o_u, o_v = float(u - bu), float(v - bv)
+            noise2 = _noise2(zp, f, rho_z0, rho_inv_step, rho_t)
             g, a, c_u, c_v = fit_variance(
-                best,
-                fits[bv % 3, bu, 1],
-                1.0,
-                o_u,
-                o_v,
-                _noise2(zp, f, rho_z0, rho_inv_step, rho_t),
-                gain,
-                misfit_gain,
-                significance,
+                best, fits[bv % 3, 1, bu], 1.0, o_u, o_v, noise2, gain, misfit_gain, significance
             )
             n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
             var = angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g, a, c_u, c_v)
             # the plane's own normal at the pixel, and the sine of its angle to d2nt_v3's
-            g_u, g_v = fits[bv % 3, bu, 2], fits[bv % 3, bu, 3]
+            g_u, g_v = fits[bv % 3, 2, bu], fits[bv % 3, 3, bu]
             m0 = fx * g_u
             m1 = fy * g_v
-            m2 = fits[bv % 3, bu, 4] + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
+            m2 = fits[bv % 3, 4, bu] + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
             m2n = m0 * m0 + m1 * m1 + m2 * m2
             if m2n > 0.0:
                 dot = n0 * m0 + n1 * m1 + n2 * m2
                 var += disagreement * max(1.0 - dot * dot / m2n, 0.0)
-            out[v, u] = _degrees(var, floor2)
+                inv = 1.0 / math.sqrt(m2n)
+                m[0, u], m[1, u], m[2, u] = m0 * inv, m1 * inv, m2 * inv
+                # the adaptive fit's noise test (KAPPA sigma_w, rho at least RHO_FLOOR) picks the neighbours' planes
+                limit[u] = KAPPA * KAPPA * max(noise2, (RHO_FLOOR / (zp * f)) ** 2)
+            var_row[u] = var
+            lo, hi = min(lo, u), u + 1
+        _turn_row(fits, v, m, limit, total, count, lo, hi)
+        for u in range(lo, hi):
+            x = var_row[u]
+            if x == x:
+                out[v, u] = min(_degrees(x + turn * total[u] / max(count[u], 1.0), floor2), max_deg)
 
 
-def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole) -> np.ndarray:
+def d2nt_sigma(z, valid, cam, normals, noise, *, clean=False, fill=0.0, out=None, bands=whole) -> np.ndarray:
     """``d2nt_v3``'s sigma (degrees; NaN where the normal is ``fill``), see :func:`_d2nt_sigma`, with ``D2NT_GAIN``,
-    ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT`` and ``FLOOR_DEG``; ``noise``: the frame's rho against depth as
-    (z0, inv_step, table) of :func:`surfnorm.kernels._windows.radius_table`."""
+    ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT``, ``D2NT_TURN`` and ``FLOOR_DEG``, at most ``CLEAN_MAX_DEG`` on a
+    ``clean`` frame; ``noise``: the frame's rho against depth as (z0, inv_step, table) of
+    :func:`surfnorm.kernels._windows.radius_table`."""
     out = np.empty(z.shape, np.float32) if out is None else out
     args = (z, valid, normals, np.float32(fill), _cam(cam), noise)
     gains = (
@@ -454,9 +530,10 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, fill=0.0, out=None, bands=whole
         float(D2NT_MISFIT_GAIN),
         float(MISFIT_SIGNIFICANCE),
         float(D2NT_DISAGREEMENT),
-        float(FLOOR_DEG) ** 2,
+        float(D2NT_TURN),
     )
-    bands(lambda a, b: _d2nt_sigma(*args, *gains, float(NO_FIT_DEG), out, a, b), z.shape[0])
+    tail = (float(FLOOR_DEG) ** 2, float(NO_FIT_DEG), float(CLEAN_MAX_DEG if clean else MAX_DEG))
+    bands(lambda a, b: _d2nt_sigma(*args, gains, *tail, out, a, b), z.shape[0])
     return out
 
 
@@ -477,7 +554,15 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
         profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
         z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
         d2nt = d2nt_sigma(
-            z, valid, cam, normals, (z0, inv_step, rho), fill=fill, out=out if t == 0.0 else None, bands=bands
+            z,
+            valid,
+            cam,
+            normals,
+            (z0, inv_step, rho),
+            clean=adaptive_weight(profile) == 0.0,
+            fill=fill,
+            out=out if t == 0.0 else None,
+            bands=bands,
         )
     if 0.0 < t < 1.0:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
         both = np.sqrt((1.0 - t) * np.square(d2nt) + t * np.square(fitted))

@@ -445,3 +445,28 @@ def test_the_noise_correlation_leaves_the_curvature_out():
     smooth = cv2.GaussianBlur(rng.standard_normal((H, W)), (0, 0), 1.5) * 1e-4
     z = (1.0 / (0.5 + smooth)).astype(np.float32)
     assert S.noise_profile(z, valid, f).correlation > 2.0
+
+
+@pytest.mark.parametrize("stride", [1, 2])
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("fill", [0.0, np.nan])
+def test_the_fit_records_which_pixels_hold_a_normal(stride, threads, fill):
+    from surfnorm._bands import on_threads
+    from surfnorm.camera import Intrinsics
+    from surfnorm.kernels.adaptive_fit import adaptive_fit
+
+    z, K = _noisy_plane(1e-2)
+    z = _with_holes(z)
+    z[60:, 100:] *= 1.5  # a step
+    z[40:44, :] = 0.0  # rows without depth
+    z[::3, 5] = 0.0
+    valid = np.isfinite(z) & (z > 0)
+    z = np.where(valid, z, 0.0).astype(np.float32)
+    out = np.full(z.shape + (3,), 7.0, np.float32)
+    record: dict = {}
+    adaptive_fit(
+        z, valid, Intrinsics.from_matrix(K), out, fill=fill, stride=stride, record=record, bands=on_threads(threads)
+    )
+    is_fill = np.isnan(out).all(-1) if np.isnan(fill) else (out == fill).all(-1)
+    assert is_fill.any() and (~is_fill).any()
+    np.testing.assert_array_equal(record["has"], valid & ~is_fill & np.isfinite(out).all(-1))

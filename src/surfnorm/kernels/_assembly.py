@@ -16,7 +16,7 @@ import numpy as np
 from .._config import njit, pixel, select
 from .._constants import TIE
 
-__all__ = ["unit_normal", "normal_row", "assembled_row", "emit_row", "row_done", "first_fitted_row"]
+__all__ = ["unit_normal", "normal_row", "assembled_row", "emit_row", "mark_row", "row_done", "first_fitted_row"]
 
 
 @pixel
@@ -188,10 +188,29 @@ def _fitted_row(fitted, none, v, stride, first, last):
 
 
 @njit(noalias=True, _nrt=False)
-def emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, out_flat):
+def mark_row(valid_row, out_row, fill, has_row):
+    """``has_row[u]``: whether pixel u holds a normal in ``out_row`` (3 W): valid, finite, and not ``fill`` in all
+    three components (where the uncertainty writes NaN). Branch-free."""
+    for u in range(has_row.shape[0]):
+        n0, n1, n2 = out_row[3 * u], out_row[3 * u + 1], out_row[3 * u + 2]
+        has = valid_row[u] & ~((n0 == fill) & (n1 == fill) & (n2 == fill))
+        has_row[u] = has & (n0 - n0 == 0.0) & (n1 - n1 == 0.0) & (n2 - n2 == 0.0)
+
+
+@njit(noalias=True, _nrt=False)
+def emit_row(z, valid, o, stride, fitted, first, last, none, cam, fill, got, out_flat, has):
     """The normals of row ``o`` from the planes of the fitted rows ``first`` .. ``last`` held in ``fitted``
     (a ring of three: fitted row v at (v // stride) % 3; ``none`` for a row outside them); ``cam`` is
-    (fx, fy, cx, cy); ``got`` is scratch (W,)."""
+    (fx, fy, cx, cy); ``got`` is scratch (W,). Where ``has`` has rows (H, W; else (0, 0)), which pixels got a
+    normal (:func:`mark_row`), while the row is in cache."""
+    _emit(z, valid, o, stride, fitted, first, last, none, cam, fill, got, out_flat)
+    if has.shape[0] > 0:
+        mark_row(valid[o], out_flat[o], fill, has[o])
+
+
+@njit(noalias=True, _nrt=False)
+def _emit(z, valid, o, stride, fitted, first, last, none, cam, fill, got, out_flat):
+    """:func:`emit_row`'s normals."""
     if stride == 1:
         rows = fitted[o % 3]
         fx, fy, cx, cy = cam
@@ -218,8 +237,8 @@ def row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band):
     """Fitted row v's planes (a, g_u, g_v where valid_row and dof > 0) into the ring ``fitted``, then the normals
     of the band's rows (``v0`` .. ``v1`` - 1) whose planes are all known now: row v (stride 1), or the two
     before it (stride 2; :func:`emit_row`). ``band``: what stays the same from row to row, (z, valid, v0, v1,
-    stride, v_first, fitted, none, cam, fill, got, out_flat) as in :func:`_adaptive_fit_kernel`."""
-    z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat = band
+    stride, v_first, fitted, none, cam, fill, got, out_flat, has) as in :func:`_adaptive_fit_kernel`."""
+    z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat, has = band
     W = z.shape[1]
     reach = stride - 1
     rows = fitted[(v // stride) % 3]
@@ -235,7 +254,7 @@ def row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band):
         expand_row(a, g_u, g_v, ok_row, limit, rows)
     for o in range(v - 2 * reach, v + 1 - reach):
         if v0 <= o < v1:
-            emit_row(z, valid, o, stride, fitted, v_first, v, none, cam, fill, got, out_flat)
+            emit_row(z, valid, o, stride, fitted, v_first, v, none, cam, fill, got, out_flat, has)
 
 
 @pixel

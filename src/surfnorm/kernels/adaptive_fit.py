@@ -475,7 +475,7 @@ def _ints(n):
 
 @ahead_of_time
 @njit(noalias=True)
-def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v1, stride, info, gains):
+def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v1, stride, info, gains, has):
     """Rows v0 .. v1 - 1 of the normals (a row band: see :mod:`surfnorm._bands`).
 
     ``tables``: (z0, inv_step, radius, rho) of :func:`radius_table`; ``steps``: (grow, widen) of
@@ -497,7 +497,8 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     normal's angular variance (radians^2, :mod:`surfnorm.kernels.uncertainty`) from the fit its plane came from
     (its residual, its window's points and offset; the noise at its depth; ``gains``: the noise's variance factor,
     the misfit's, the misfit's significance and the noise's correlated share, :mod:`surfnorm.kernels.uncertainty`),
-    NaN where it has no fit. Only written (it changes no normal).
+    NaN where it has no fit. Only written (it changes no normal). ``has``: (0, 0), or (H, W) bool, where each
+    pixel of the band's rows gets whether it holds a normal (:func:`surfnorm.kernels._assembly.mark_row`).
     """
     H, W = z.shape
     rho_table = tables[3]
@@ -538,7 +539,7 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     v_last -= v_last % stride
     got = np.zeros(W, np.bool_)
     out_flat = out.reshape(H, 3 * W)
-    band = (z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat)
+    band = (z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat, has)
     for v in range(v_first, v_last + 1, stride):
         if made < min(H, v + 2 * r_max + 1):  # the integral rows of this row's windows (``made``: the last one)
             made = make_rows(z, valid, ring, cols, pos, w_scratch, made, min(H, v + 2 * r_max + 1), 0)
@@ -614,12 +615,13 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
         row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:
-            emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat)
+            emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat, has)
 
 
-#: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded, and its ``gains`` then.
+#: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded, its ``gains`` and ``has`` then.
 _NO_INFO = np.empty((0, 0))
 _NO_GAINS = np.zeros(4)
+_NO_HAS = np.empty((0, 0), np.bool_)
 
 
 class FitPlan:
@@ -652,13 +654,14 @@ class FitPlan:
         self.key = (z.shape, self.stride, max_window, window)  # the frame's kind, for the bands' balance
         H, W = z.shape
         if record is None:
-            self.info, self.gains = _NO_INFO, _NO_GAINS
-        else:  # every fitted row is written by a band
+            self.info, self.gains, self.has = _NO_INFO, _NO_GAINS, _NO_HAS
+        else:  # every fitted row, and every row, is written by a band
             self.info = np.empty(((H + self.stride - 1) // self.stride, (W + self.stride - 1) // self.stride))
             # the noise's variance factor, set once the profile is known; misfit's; significance; the correlated share
             self.gains = np.zeros(4)
             self.gains[1:3] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
-            record.update(stride=self.stride, variance=self.info)
+            self.has = np.empty((H, W), np.bool_)
+            record.update(stride=self.stride, variance=self.info, has=self.has)
         self.steps = (growth_table(self.r_max), widen_table(self.r_max))
         self.cam = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
         self.options = (N_WIDEN, float(kappa), RHO_FLOOR, self.r_max, np.float32(fill))
@@ -696,6 +699,7 @@ class FitPlan:
             self.stride,
             self.info,
             self.gains,
+            self.has,
         )
 
 
@@ -755,7 +759,8 @@ def adaptive_fit(
     record : dict, optional
         Filled with what :mod:`surfnorm.kernels.uncertainty` needs: ``"profile"`` (the noise profile),
         ``"stride"`` and ``"variance"`` (each fitted pixel's angular variance: see ``info`` of
-        :func:`_adaptive_fit_kernel`), with the gains ``FIT_GAIN`` and ``MISFIT_GAIN`` of that module.
+        :func:`_adaptive_fit_kernel`), with the gains ``FIT_GAIN`` and ``MISFIT_GAIN`` of that module, and
+        ``"has"``: (H, W) bool, which pixels hold a normal.
         None (default): nothing recorded, nothing spent on it.
     """
     frame = FitPlan(

@@ -68,6 +68,7 @@ import numpy as np
 from .._bands import whole
 from .._config import njit, pixel, select
 from .._constants import CORRELATION_WIDTH, KAPPA, RHO_FLOOR
+from ._assembly import mark_row
 from ._windows import radius_table
 from .sensor_noise import adaptive_weight, noise_profile, stride_gain
 
@@ -242,19 +243,18 @@ def _pair_sums(var, i, W, total, count):
 
 
 @njit(nogil=True)
-def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
+def _spread(has, var, stride, floor2, no_fit, out, v0, v1):
     """Rows v0 .. v1 - 1 of sigma: a fitted pixel's own variance; every other pixel with a normal the mean of those
     of the fitted pixels whose planes it may have taken (with ``stride`` 2: left and right, above and below, or
     the four diagonal ones; else those of its 5x5 neighbourhood), as the adaptive fit assembles it; ``no_fit``
-    (degrees) where none has one; NaN where there is no normal."""
+    (degrees) where none has one; NaN where there is no normal (not ``has``: :func:`_assembly.mark_row`)."""
     Hf, Wf = var.shape
-    W = valid.shape[1]
+    W = has.shape[1]
     if stride == 1:
         for v in range(v0, v1):
             for u in range(W):
                 x = var[v, u]
-                has = valid[v, u] and _has_normal(normals, v, u, fill)
-                out[v, u] = np.nan if not has else _degrees(x, floor2) if x == x else no_fit
+                out[v, u] = np.nan if not has[v, u] else _degrees(x, floor2) if x == x else no_fit
         return
     up_t = np.empty(W)
     up_c = np.empty(W)
@@ -286,7 +286,7 @@ def _spread(valid, normals, fill, var, stride, floor2, no_fit, out, v0, v1):
             up_c, dn_c = dn_c, up_c
             made = i + 1
         for u in range(W):
-            if not (valid[v, u] and _has_normal(normals, v, u, fill)):
+            if not has[v, u]:
                 row[u] = np.nan
             elif row[u] == np.inf:  # the few without a neighbour's fit: those of the 5x5 neighbourhood
                 total = 0.0
@@ -304,15 +304,29 @@ def _cam(cam):
     return float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)
 
 
-def sigma_from_fits(valid, normals, variance, stride, *, floor=None, fill=0.0, out=None, bands=whole) -> np.ndarray:
+@njit(nogil=True)
+def _marks(valid, normals, fill, has, v0, v1):
+    """Rows v0 .. v1 - 1 of :func:`_assembly.mark_row`."""
+    for v in range(v0, v1):
+        mark_row(valid[v], normals[v].reshape(-1), fill, has[v])
+
+
+def sigma_from_fits(
+    valid, normals, variance, stride, *, has=None, floor=None, fill=0.0, out=None, bands=whole
+) -> np.ndarray:
     """Each normal's sigma (degrees; NaN where it is ``fill`` or not finite) from the angular variances of the fits
     its plane came from: ``variance`` (H / stride, W / stride), radians^2, NaN where a fitted pixel has no fit (as
-    the adaptive fit's kernel records it); ``floor`` (degrees, default ``FLOOR_DEG``) added in quadrature.
-    ``bands``: rows on several threads (:mod:`surfnorm._bands`), the same result.
+    the adaptive fit's kernel records it); ``has``: which pixels hold a normal, as the kernel records it (default:
+    read from ``normals``); ``floor`` (degrees, default ``FLOOR_DEG``) added in quadrature. ``bands``: rows on
+    several threads (:mod:`surfnorm._bands`), the same result.
     """
     out = np.empty(valid.shape, np.float32) if out is None else out
+    if has is None:
+        has = np.empty(valid.shape, np.bool_)
+        normals = np.ascontiguousarray(normals, np.float32)
+        bands(lambda a, b: _marks(valid, normals, np.float32(fill), has, a, b), valid.shape[0])
     floor2 = float(FLOOR_DEG if floor is None else floor) ** 2
-    args = (valid, normals, np.float32(fill), variance, int(stride), floor2, float(NO_FIT_DEG), out)
+    args = (has, variance, int(stride), floor2, float(NO_FIT_DEG), out)
     bands(lambda a, b: _spread(*args, a, b), valid.shape[0])
     return out
 
@@ -547,8 +561,17 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
     """
     t = 1.0 if method == "adaptive_fit" else record.get("weight", 0.0)
     if t > 0.0:
+        # the kernel's own record of which pixels hold a normal, unless the blend below changes the normals
+        has = record["has"] if t == 1.0 else None
         fitted = sigma_from_fits(
-            valid, normals, record["variance"], record["stride"], fill=fill, out=out if t == 1.0 else None, bands=bands
+            valid,
+            normals,
+            record["variance"],
+            record["stride"],
+            has=has,
+            fill=fill,
+            out=out if t == 1.0 else None,
+            bands=bands,
         )
     if t < 1.0:
         profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))

@@ -56,7 +56,7 @@ truth's own (smooth-shaded normals of faceted meshes); on sensor depth the defau
 neither term applies to it.
 
 A pixel that has a normal always gets a sigma (a normal whose window says nothing, for lack of points, gets
-``NO_FIT_DEG``); NaN exactly where the normal is fill.
+``NO_FIT_DEG``, or ``CLEAN_MAX_DEG`` where that is less); NaN exactly where the normal is fill.
 """
 
 from __future__ import annotations
@@ -500,7 +500,7 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
                     if 0 <= x < W and fits[y % 3, 0, x] < best:
                         best, bv, bu = fits[y % 3, 0, x], y, x
             if not best < np.inf:
-                out[v, u] = no_fit
+                out[v, u] = min(no_fit, max_deg)
                 continue
             zp = z[v, u]
             o_u, o_v = float(u - bu), float(v - bv)

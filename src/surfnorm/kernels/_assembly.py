@@ -16,7 +16,16 @@ import numpy as np
 from .._config import njit, pixel, select
 from .._constants import TIE
 
-__all__ = ["unit_normal", "normal_row", "assembled_row", "emit_row", "mark_row", "row_done", "first_fitted_row"]
+__all__ = [
+    "unit_normal",
+    "normal_row",
+    "assembled_row",
+    "emit_row",
+    "holds_normal",
+    "mark_row",
+    "row_done",
+    "first_fitted_row",
+]
 
 
 @pixel
@@ -187,14 +196,19 @@ def _fitted_row(fitted, none, v, stride, first, last):
     return fitted[(v // stride) % 3] if v % stride == 0 and first <= v <= last else none
 
 
+@pixel
+def holds_normal(n0, n1, n2, fill):
+    """Whether (n0, n1, n2) is a normal: finite, and not ``fill`` in all three components (where the uncertainty
+    writes NaN). Branch-free."""
+    finite = (n0 - n0 == 0.0) & (n1 - n1 == 0.0) & (n2 - n2 == 0.0)
+    return finite & ~((n0 == fill) & (n1 == fill) & (n2 == fill))
+
+
 @njit(noalias=True, _nrt=False)
 def mark_row(valid_row, out_row, fill, has_row):
-    """``has_row[u]``: whether pixel u holds a normal in ``out_row`` (3 W): valid, finite, and not ``fill`` in all
-    three components (where the uncertainty writes NaN). Branch-free."""
+    """``has_row[u]``: whether pixel u is valid and holds a normal in ``out_row`` (3 W) (:func:`holds_normal`)."""
     for u in range(has_row.shape[0]):
-        n0, n1, n2 = out_row[3 * u], out_row[3 * u + 1], out_row[3 * u + 2]
-        has = valid_row[u] & ~((n0 == fill) & (n1 == fill) & (n2 == fill))
-        has_row[u] = has & (n0 - n0 == 0.0) & (n1 - n1 == 0.0) & (n2 - n2 == 0.0)
+        has_row[u] = valid_row[u] & holds_normal(out_row[3 * u], out_row[3 * u + 1], out_row[3 * u + 2], fill)
 
 
 @njit(noalias=True, _nrt=False)

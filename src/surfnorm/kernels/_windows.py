@@ -18,7 +18,17 @@ from .._aot import ahead_of_time
 from .._config import njit, pixel, select
 from .._constants import _TABLE, ALPHA, MAX_WINDOW, RADII
 
-__all__ = ["radius_table", "allowed_radii", "widen_table", "growth_table", "integral_positions", "make_rows", "prime"]
+__all__ = [
+    "radius_table",
+    "table_entry",
+    "noise_limit",
+    "allowed_radii",
+    "widen_table",
+    "growth_table",
+    "integral_positions",
+    "make_rows",
+    "prime",
+]
 
 #: The moments of a window: count, u', v', u'u', u'v', v'v', w, u'w, v'w, ww.
 _N_MOMENTS = 10
@@ -90,6 +100,21 @@ def _tables(r_max: int) -> tuple[np.ndarray, np.ndarray]:
     grow = np.where(r > 0, allowed_radii(np.ceil(1.5 * r), r_max), 1).astype(np.int64)
     widen.flags.writeable = grow.flags.writeable = False  # cached: shared by every call
     return widen, grow
+
+
+@pixel
+def table_entry(zp, z0, inv_step, n_table):
+    """The entry of the depth table (:func:`radius_table`) for depth ``zp``."""
+    return min(max(int((zp - z0) * inv_step), 0), n_table - 1)
+
+
+@pixel
+def noise_limit(zp, rho, f, kappa, rho_floor):
+    """The noise test's limit at depth ``zp``: (kappa sigma_w)^2, sigma_w = sigma_z / z^2 = rho / (z f) the noise
+    of w (rho at least ``rho_floor``). A fit passes when its residual per degree of freedom is at most that."""
+    zf = zp * f
+    s_w = kappa * max(rho, rho_floor)
+    return (s_w * s_w) / (zf * zf)
 
 
 def widen_table(r_max: int) -> np.ndarray:

@@ -99,8 +99,10 @@ from ._windows import (
     _W_SUMS,
     growth_table,
     make_rows,
+    noise_limit,
     picked_sums,
     radius_table,
+    table_entry,
     widen_table,
     window_sums,
 )
@@ -273,21 +275,6 @@ def variance_row(row, fit, window, noise, cam, gains, out_row):
         out_row[i] = select(
             ok, angle_variance_cov(nx, ny, nz, zp, u, v, fx, fy, cx, cy, g_uu, g_vv, g_uv, var_a, c_u, c_v), np.nan
         )
-
-
-@pixel
-def table_entry(zp, z0, inv_step, n_table):
-    """The entry of the depth table (:func:`radius_table`) for depth ``zp``."""
-    return min(max(int((zp - z0) * inv_step), 0), n_table - 1)
-
-
-@pixel
-def noise_limit(zp, rho, f, kappa, rho_floor):
-    """The noise test's limit at depth ``zp``: (kappa sigma_w)^2, sigma_w = sigma_z / z^2 = rho / (z f) the noise
-    of w (rho at least ``rho_floor``). A fit passes when its residual per degree of freedom is at most that."""
-    zf = zp * f
-    s_w = kappa * max(rho, rho_floor)
-    return (s_w * s_w) / (zf * zf)
 
 
 #: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner.

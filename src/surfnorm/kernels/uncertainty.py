@@ -68,8 +68,8 @@ import numpy as np
 from .._bands import whole
 from .._config import njit, pixel, select
 from .._constants import CORRELATION_WIDTH, KAPPA, RHO_FLOOR
-from ._assembly import mark_row
-from ._windows import radius_table
+from ._assembly import holds_normal, mark_row
+from ._windows import noise_limit, radius_table, table_entry
 from .sensor_noise import adaptive_weight, noise_profile, stride_gain
 
 __all__ = [
@@ -208,24 +208,9 @@ def angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v)
 
 
 @pixel
-def _has_normal(normals, v, u, fill):
-    """Whether pixel (v, u) holds a normal: finite and not ``fill`` in all three components."""
-    n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
-    return not (n0 == fill and n1 == fill and n2 == fill) and (n0 - n0 == 0.0 and n1 - n1 == 0.0 and n2 - n2 == 0.0)
-
-
-@pixel
 def _degrees(var, floor2):
     """sigma in degrees from an angular variance (radians^2), ``floor2`` (degrees^2) added, at most ``MAX_DEG``."""
     return min(math.sqrt(_DEG2 * var + floor2), MAX_DEG)
-
-
-@pixel
-def _noise2(zp, f, rho_z0, rho_inv_step, rho_t):
-    """The frame's noise variance of w = 1/z at depth ``zp``: (rho / (z f))^2, rho from the profile's table."""
-    t = min(max(int((zp - rho_z0) * rho_inv_step), 0), rho_t.shape[0] - 1)
-    s = rho_t[t] / (zp * f)
-    return s * s
 
 
 @njit(nogil=True)
@@ -489,7 +474,7 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
         for u in range(W):
             var_row[u] = np.nan
             limit[u] = -1.0
-            if not (valid[v, u] and _has_normal(normals, v, u, fill)):
+            if not (valid[v, u] and holds_normal(normals[v, u, 0], normals[v, u, 1], normals[v, u, 2], fill)):
                 out[v, u] = np.nan
                 continue
             best = fits[v % 3, 0, u]
@@ -504,7 +489,9 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
                 continue
             zp = z[v, u]
             o_u, o_v = float(u - bu), float(v - bv)
-            noise2 = _noise2(zp, f, rho_z0, rho_inv_step, rho_t)
+            rho = rho_t[table_entry(zp, rho_z0, rho_inv_step, rho_t.shape[0])]  # the frame's noise at this depth
+            s_w = rho / (zp * f)  # ... as the noise of w = 1/z
+            noise2 = s_w * s_w
             g, a, c_u, c_v = fit_variance(
                 best, fits[bv % 3, 1, bu], 1.0, o_u, o_v, noise2, gain, misfit_gain, significance
             )
@@ -521,8 +508,8 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
                 var += disagreement * max(1.0 - dot * dot / m2n, 0.0)
                 inv = 1.0 / math.sqrt(m2n)
                 m[0, u], m[1, u], m[2, u] = m0 * inv, m1 * inv, m2 * inv
-                # the adaptive fit's noise test (KAPPA sigma_w, rho at least RHO_FLOOR) picks the neighbours' planes
-                limit[u] = KAPPA * KAPPA * max(noise2, (RHO_FLOOR / (zp * f)) ** 2)
+                # the adaptive fit's noise test picks the neighbours' planes
+                limit[u] = noise_limit(zp, rho, f, KAPPA, RHO_FLOOR)
             var_row[u] = var
             lo, hi = min(lo, u), u + 1
         _turn_row(fits, v, m, limit, total, count, lo, hi)

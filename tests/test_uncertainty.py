@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import surfnorm
+from surfnorm._constants import KAPPA, RHO_FLOOR
 from surfnorm.errors import InputError
 from surfnorm.kernels import uncertainty as U
 from tests.surfaces import camera
@@ -301,66 +302,150 @@ def test_spread_against_a_naive_reference(shape):
     np.testing.assert_array_equal(out, out_bands)
 
 
+def _lstsq_fit3(z, valid, v, u, cam):
+    """The least-squares plane of w = 1/z over the valid pixels of the 3x3 window centred on (v, u), offsets as
+    coordinates: (rss / dof, n, g_u, g_v, a, unit normal at the centre), or None (fewer than 4 points, a line, or
+    a centre outside the frame)."""
+    fx, fy, cx, cy = cam
+    H, W = z.shape
+    if not (0 <= v < H and 0 <= u < W):
+        return None
+    pts = [
+        (dx, dy, 1.0 / float(z[v + dy, u + dx]))
+        for dy in (-1, 0, 1)
+        for dx in (-1, 0, 1)
+        if 0 <= v + dy < H and 0 <= u + dx < W and valid[v + dy, u + dx]
+    ]
+    X = np.array([[1.0, dx, dy] for dx, dy, _ in pts]).reshape(-1, 3)
+    if len(pts) < 4 or np.linalg.matrix_rank(X) < 3:
+        return None
+    w = np.array([p[2] for p in pts])
+    (a, g_u, g_v), *_ = np.linalg.lstsq(X, w, rcond=None)
+    rss = float(np.sum((X @ (a, g_u, g_v) - w) ** 2))
+    m = np.array([fx * g_u, fy * g_v, a - g_u * (u - cx) - g_v * (v - cy)])  # eq. (2), up to its sign
+    return rss / (len(pts) - 3), len(pts), g_u, g_v, a, m / np.linalg.norm(m)
+
+
+def _fit_rows(z, valid, cam, c0=None, c1=None):
+    """Every row's :func:`U._fits3_row` (H, 8, W + 2), each from a ring of three input rows, as the kernel runs them."""
+    H, W = z.shape
+    c0, c1 = (0, W) if c0 is None else (c0, c1)
+    inputs = np.zeros((3, 3, W + 2))
+    col = np.empty((6, W + 2))
+    fits = np.zeros((H, 8, W + 2))
+    U._inputs_row(z, valid, -1, inputs[2])
+    U._inputs_row(z, valid, 0, inputs[0])
+    for v in range(H):
+        U._inputs_row(z, valid, v + 1, inputs[(v + 1) % 3])
+        U._fits3_row(inputs, v, H, (FX, FY, CX, CY), c0, c1, col, fits[v])
+    return fits
+
+
 def test_centred_3x3_fits_against_least_squares():
     rng = np.random.default_rng(7)
     H, W = 8, 9
     z = rng.uniform(1.0, 2.0, (H, W))
     valid = rng.random((H, W)) < 0.75
-    cam = (FX, FY, CX, CY)
-    fits = np.zeros((H, 8, W))
-    col = np.empty((6, W + 2))
-    for v in range(H):
-        U._fits3_row(z, valid, v, col, cam, fits[v])
+    fits = _fit_rows(z, valid, (FX, FY, CX, CY))
     for v in range(H):
         for u in range(W):
-            pts = [
-                (dx, dy, 1.0 / z[v + dy, u + dx])
-                for dy in (-1, 0, 1)
-                for dx in (-1, 0, 1)
-                if 0 <= v + dy < H and 0 <= u + dx < W and valid[v + dy, u + dx]
-            ]
-            X = np.array([[1.0, dx, dy] for dx, dy, _ in pts]).reshape(-1, 3)
-            if len(pts) < 4 or np.linalg.matrix_rank(X) < 3:
-                assert fits[v, 0, u] == np.inf
+            want = _lstsq_fit3(z, valid, v, u, (FX, FY, CX, CY))
+            if want is None:
+                assert fits[v, 0, u + 1] == np.inf
                 continue
-            w = np.array([p[2] for p in pts])
-            coef, *_ = np.linalg.lstsq(X, w, rcond=None)
-            rss = float(np.sum((X @ coef - w) ** 2))
-            np.testing.assert_allclose(fits[v, 1:5, u], [len(pts), coef[1], coef[2], coef[0]], rtol=1e-9, atol=1e-12)
-            assert fits[v, 0, u] == pytest.approx(rss / (len(pts) - 3), rel=1e-6, abs=1e-15)
-            # the plane's unit normal at the window's centre, eq. (2) up to its sign
-            m = np.array([FX * coef[1], FY * coef[2], coef[0] - coef[1] * (u - CX) - coef[2] * (v - CY)])
-            np.testing.assert_allclose(fits[v, 5:, u], m / np.linalg.norm(m), rtol=1e-9, atol=1e-12)
-    # rows outside the frame have no fit
-    U._fits3_row(z, valid, -1, col, cam, fits[0])
-    assert np.all(fits[0, 0] == np.inf)
+            q, n, g_u, g_v, a, m = want
+            np.testing.assert_allclose(fits[v, 1:5, u + 1], [n, g_u, g_v, a], rtol=1e-9, atol=1e-12)
+            assert fits[v, 0, u + 1] == pytest.approx(q, rel=1e-6, abs=1e-15)
+            np.testing.assert_allclose(fits[v, 5:, u + 1], m, rtol=1e-9, atol=1e-12)
+    # the pad columns have no fit, nor the columns outside those asked for
+    assert np.all(fits[:, 0, [0, W + 1]] == np.inf)
+    part = _fit_rows(z, valid, (FX, FY, CX, CY), 2, 6)
+    np.testing.assert_array_equal(part[:, :, 3:7], fits[:, :, 3:7])
+    assert np.all(part[:, 0, :3] == np.inf) and np.all(part[:, 0, 7:] == np.inf)
 
 
-def test_turn_row_against_a_naive_reference():
-    rng = np.random.default_rng(3)
-    W = 23
-    fits = np.zeros((3, 8, W))
-    fits[:, 0] = np.where(rng.random((3, W)) < 0.8, rng.uniform(0.0, 1.0, (3, W)), np.inf)
-    n = rng.normal(size=(3, 3, W))
-    fits[:, 5:] = n / np.linalg.norm(n, axis=1, keepdims=True)
-    m = rng.normal(size=(3, W))
-    m /= np.linalg.norm(m, axis=0)
-    limit = np.where(rng.random(W) < 0.9, rng.uniform(0.0, 1.0, W), -1.0)
-    v = 7  # rows 6, 7, 8 at 6 % 3, 7 % 3, 8 % 3
-    lo, hi = 2, W - 1
-    total, count = np.full(W, -5.0), np.full(W, -5.0)
-    U._turn_row(fits, v, m, limit, total, count, lo, hi)
-    for u in range(lo, hi):
-        t, k = 0.0, 0
-        for y in (v - 1, v, v + 1):
-            for x in (u - 1, u, u + 1):
-                if (y, x) == (v, u) or not 0 <= x < W:
-                    continue
-                if fits[y % 3, 0, x] <= limit[u]:
-                    t += 1.0 - float(m[:, u] @ fits[y % 3, 5:, x]) ** 2
-                    k += 1
-        assert total[u] == pytest.approx(t, abs=1e-12) and count[u] == k
-    assert total[0] == -5.0 and count[W - 1] == -5.0  # outside lo .. hi - 1: untouched
+def _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill):
+    """d2nt_v3's sigma pixel by pixel, as the module's docstring says, from least-squares fits (the variance
+    formulas themselves are checked against the analytic ones above)."""
+    fx, fy, cx, cy = cam
+    f = math.sqrt(fx * fy)
+    z0, inv_step, rho_t = noise
+    H, W = z.shape
+    fit = {}
+    for v in range(-1, H + 1):
+        for u in range(-1, W + 1):
+            fit[v, u] = _lstsq_fit3(z, valid, v, u, cam)
+    out = np.full((H, W), np.nan)
+    for v in range(H):
+        for u in range(W):
+            n = normals[v, u].astype(float)
+            if not valid[v, u] or not np.all(np.isfinite(n)) or np.all(n == fill):
+                continue
+            # the window centred on the pixel, or one with it at a corner: the smallest residual, the first of equals
+            best = None
+            for dv, du in ((0, 0), (-1, -1), (-1, 1), (1, -1), (1, 1)):
+                got = fit[v + dv, u + du]
+                if got is not None and (best is None or got[0] < best[0][0]):
+                    best = (got, v + dv, u + du)
+            if best is None:
+                out[v, u] = min(U.NO_FIT_DEG, max_deg)
+                continue
+            (q, count, g_u, g_v, a, _), bv, bu = best
+            o_u, o_v = float(u - bu), float(v - bv)
+            zp = float(z[v, u])
+            rho = rho_t[min(max(int((zp - z0) * inv_step), 0), len(rho_t) - 1)]
+            noise2 = (rho / (zp * f)) ** 2
+            gains = (U.D2NT_GAIN, U.D2NT_MISFIT_GAIN, U.MISFIT_SIGNIFICANCE)
+            var_g, var_a, c_u, c_v = U.fit_variance(q, count, 1.0, o_u, o_v, noise2, *gains)
+            var = U.angle_variance(*n, zp, u, v, fx, fy, cx, cy, var_g, var_a, c_u, c_v)
+            # the best plane's own normal at the pixel, against d2nt_v3's
+            m = np.array([fx * g_u, fy * g_v, a + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)])
+            m /= np.linalg.norm(m)
+            var += U.D2NT_DISAGREEMENT * max(1.0 - float(n @ m) ** 2, 0.0)
+            # the turn to the planes of the neighbours' windows that pass the noise test
+            limit = (KAPPA * max(rho, RHO_FLOOR)) ** 2 / (zp * f) ** 2
+            turns = [
+                max(1.0 - float(m @ fit[y, x][5]) ** 2, 0.0)
+                for y in (v - 1, v, v + 1)
+                for x in (u - 1, u, u + 1)
+                if (y, x) != (v, u) and fit[y, x] is not None and fit[y, x][0] <= limit
+            ]
+            var += U.D2NT_TURN * (np.mean(turns) if turns else 0.0)
+            out[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * var + U.FLOOR_DEG**2), U.MAX_DEG, max_deg)
+    return out
+
+
+@pytest.mark.parametrize("clean", [False, True])
+@pytest.mark.parametrize("fill", [0.0, np.nan])
+def test_d2nt_sigma_against_a_naive_reference(clean, fill):
+    rng = np.random.default_rng(11)
+    H, W = 12, 15
+    # a tilted plane with noise, holes, an empty row, and a row whose depth starts and ends inside the frame
+    u, v = np.meshgrid(np.arange(W), np.arange(H))
+    z = (1.5 + 0.01 * u + 0.004 * v + rng.normal(0.0, 2e-3, (H, W))) * (rng.random((H, W)) < 0.85)
+    z[4] = 0.0
+    z[7, :3] = z[7, 11:] = 0.0
+    z[9:, 9:] *= 1.2  # a step
+    z = z.astype(np.float32)
+    valid = z > 0
+    K = np.array([[FX, 0, CX], [0, FY, CY], [0, 0, 1.0]])
+    normals = surfnorm.estimate(z, K, method="d2nt_v3", fill=fill)
+    normals[2, 5] = fill  # a valid pixel without a normal
+    noise = (1.4, 20.0, rng.uniform(1e-4, 3e-3, 8))  # the frame's rho at 1.4 + k / 20 m
+    cam = (FX, FY, CX, CY)
+    max_deg = U.CLEAN_MAX_DEG if clean else U.MAX_DEG
+    want = _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill)
+    got = U.d2nt_sigma(z, valid, surfnorm.Intrinsics.from_matrix(K), normals, noise, clean=clean, fill=fill)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    has = valid & np.isfinite(normals).all(-1) & ~(normals == fill).all(-1)
+    assert has.sum() > 100 and not has[2, 5]
+    np.testing.assert_array_equal(np.isnan(got), ~has)
+    # rows on two threads, split anywhere: the same bits
+    banded = U.d2nt_sigma(
+        z, valid, surfnorm.Intrinsics.from_matrix(K), normals, noise, clean=clean, fill=fill,
+        bands=lambda stage, n: [stage(0, 5), stage(5, n)],
+    )
+    np.testing.assert_array_equal(banded, got)
 
 
 def _roof(tilt_deg, shape=(60, 80)):

@@ -317,45 +317,69 @@ def sigma_from_fits(
 
 
 # --- d2nt_v3: each pixel's best 3x3 plane ------------------------------------------------------------------------
+#
+# The kernels below index columns with unsigned integers: Numba then adds no wraparound of negative indices, and
+# LLVM loads neighbouring columns as vectors (with signed indices it gathered them one element at a time, and the
+# per-pixel pass ran 2.5x slower).
 
 
-@njit(nogil=True)
-def _fit3_row(z, valid, v, col, dst):
-    """Row v: the least-squares plane of w = 1/z over the valid pixels of each pixel's 3x3 window (the pixel
-    itself valid or not), offsets from the centre as coordinates: (rss / dof, n, g_u, g_v, w at the centre) into
-    ``dst`` (5, W); rss / dof inf where fewer than 4 points or points on a line, or v outside the frame. The sums
-    come from column sums of three rows, then three columns (separable); ``col`` is scratch (6, W + 2)."""
+@njit(nogil=True, noalias=True, _nrt=False)
+def _inputs_row(z, valid, y, dst):
+    """Input row y's points per column, for the 3x3 fits: (1, w = 1/z, w^2) where valid, else 0, into ``dst``
+    (3, W + 2) at columns 1 .. W (column u at u + 1; the pad columns 0 and W + 1, and a row y outside the frame,
+    0). Each row is read once for the three fitted rows that use it. Branch-free."""
     H, W = z.shape
-    dst[0, :] = np.inf
-    if v < 0 or v >= H:
+    dst[:, :] = 0.0
+    if y < 0 or y >= H:
         return
-    # per column of the window's three rows: count, sum dy, sum dy^2, sum w, sum dy w, sum w^2 (branch-free, so
-    # that the loops vectorise)
-    col[:, :] = 0.0
-    for dy in range(max(-1, -v), min(2, H - v)):
-        y = v + dy
-        for u in range(W):
-            ok = valid[y, u]
-            c = select(ok, 1.0, 0.0)
-            w = select(ok, 1.0 / z[y, u], 0.0)
-            col[0, u + 1] += c
-            col[1, u + 1] += dy * c
-            col[2, u + 1] += dy * dy * c
-            col[3, u + 1] += w
-            col[4, u + 1] += dy * w
-            col[5, u + 1] += w * w
-    for u in range(W):
+    zr = z[y]
+    ok_r = valid[y]
+    c, s, ss = dst[0], dst[1], dst[2]
+    one = np.uint64(1)
+    for u in range(np.uint64(W)):
+        ok = ok_r[u]
+        w = select(ok, 1.0 / zr[u], 0.0)
+        c[u + one] = select(ok, 1.0, 0.0)
+        s[u + one] = w
+        ss[u + one] = w * w
+
+
+@njit(nogil=True, noalias=True, _nrt=False)
+def _fits3_row(inputs, v, H, cam, c0, c1, col, dst):
+    """Row v of the least-squares planes of w = 1/z over the valid pixels of each pixel's 3x3 window (the pixel
+    itself valid or not), offsets from the centre as coordinates, for the columns c0 .. c1 - 1, into ``dst``
+    (8, W + 2), column u at u + 1: rss / dof, n, g_u, g_v, w at the centre, and the plane's unit normal there
+    (eq. (2); ``cam``: (fx, fy, cx, cy)). rss / dof is inf where fewer than 4 points or points on a line, in
+    every other column (the pads included), and for v outside the frame (0 .. H - 1). ``inputs``:
+    :func:`_inputs_row` of rows v - 1, v, v + 1, row y at y % 3; ``col`` is scratch (6, W + 2). The sums come
+    from column sums of the three rows, then of three columns (separable). Branch-free."""
+    fx, fy, cx, cy = cam
+    dst[0, :] = np.inf
+    if v < 0 or v >= H or c0 >= c1:
+        return
+    up, mid, dn = inputs[(v - 1) % 3], inputs[v % 3], inputs[(v + 1) % 3]
+    one, two = np.uint64(1), np.uint64(2)
+    # per column of the window's three rows (dy = -1, 0, +1): count, sum dy, sum dy^2, sum w, sum dy w, sum w^2
+    for p in range(np.uint64(c0), np.uint64(c1 + 2)):
+        col[0, p] = up[0, p] + mid[0, p] + dn[0, p]
+        col[1, p] = dn[0, p] - up[0, p]
+        col[2, p] = up[0, p] + dn[0, p]
+        col[3, p] = up[1, p] + mid[1, p] + dn[1, p]
+        col[4, p] = dn[1, p] - up[1, p]
+        col[5, p] = up[2, p] + mid[2, p] + dn[2, p]
+    for u in range(np.uint64(c0), np.uint64(c1)):
         # columns u - 1, u, u + 1 at col[:, u], col[:, u + 1], col[:, u + 2]: dx = -1, 0, +1
-        n = col[0, u] + col[0, u + 1] + col[0, u + 2]
-        s_x = col[0, u + 2] - col[0, u]
-        s_xx = col[0, u + 2] + col[0, u]
-        s_y = col[1, u] + col[1, u + 1] + col[1, u + 2]
-        s_xy = col[1, u + 2] - col[1, u]
-        s_yy = col[2, u] + col[2, u + 1] + col[2, u + 2]
-        s_w = col[3, u] + col[3, u + 1] + col[3, u + 2]
-        s_xw = col[3, u + 2] - col[3, u]
-        s_yw = col[4, u] + col[4, u + 1] + col[4, u + 2]
-        s_ww = col[5, u] + col[5, u + 1] + col[5, u + 2]
+        l, c, r = u, u + one, u + two
+        n = col[0, l] + col[0, c] + col[0, r]
+        s_x = col[0, r] - col[0, l]
+        s_xx = col[0, r] + col[0, l]
+        s_y = col[1, l] + col[1, c] + col[1, r]
+        s_xy = col[1, r] - col[1, l]
+        s_yy = col[2, l] + col[2, c] + col[2, r]
+        s_w = col[3, l] + col[3, c] + col[3, r]
+        s_xw = col[3, r] - col[3, l]
+        s_yw = col[4, l] + col[4, c] + col[4, r]
+        s_ww = col[5, l] + col[5, c] + col[5, r]
         inv_n = 1.0 / max(n, 1.0)
         mx, my, mw = s_x * inv_n, s_y * inv_n, s_w * inv_n
         cxx = s_xx - s_x * mx
@@ -367,78 +391,127 @@ def _fit3_row(z, valid, v, col, dst):
         det = cxx * cyy - cxy * cxy
         ok = (n >= 4.0) & (det > 1e-6 * cxx * cyy)
         inv_det = 1.0 / select(ok, det, 1.0)
-        g_x = (cyy * cxw - cxy * cyw) * inv_det
-        g_y = (cxx * cyw - cxy * cxw) * inv_det
-        rss = cww - g_x * cxw - g_y * cyw
-        dst[0, u] = select(ok, select(rss > 0.0, rss, 0.0) / max(n - 3.0, 1.0), np.inf)
-        dst[1, u] = n
-        dst[2, u] = g_x
-        dst[3, u] = g_y
-        dst[4, u] = mw - g_x * mx - g_y * my
-
-
-@njit(nogil=True)
-def _fits3_row(z, valid, v, col, cam, dst):
-    """:func:`_fit3_row` of row v into ``dst[:5]`` (8, W), and each plane's unit normal at its own centre
-    (eq. (2); ``cam``: (fx, fy, cx, cy)) into ``dst[5:]`` (left as they were where the fit is not finite)."""
-    fx, fy, cx, cy = cam
-    _fit3_row(z, valid, v, col, dst)
-    for u in range(dst.shape[1]):
-        if not dst[0, u] < np.inf:
-            continue
-        g_u, g_v = dst[2, u], dst[3, u]
+        g_u = (cyy * cxw - cxy * cyw) * inv_det
+        g_v = (cxx * cyw - cxy * cxw) * inv_det
+        rss = cww - g_u * cxw - g_v * cyw
+        a = mw - g_u * mx - g_v * my
         k0 = fx * g_u
         k1 = fy * g_v
-        k2 = dst[4, u] - g_u * (u - cx) - g_v * (v - cy)
+        k2 = a - g_u * (u - cx) - g_v * (v - cy)
         inv = 1.0 / math.sqrt(max(k0 * k0 + k1 * k1 + k2 * k2, 1e-300))
-        dst[5, u] = k0 * inv
-        dst[6, u] = k1 * inv
-        dst[7, u] = k2 * inv
+        dst[0, c] = select(ok, select(rss > 0.0, rss, 0.0) / max(n - 3.0, 1.0), np.inf)
+        dst[1, c] = n
+        dst[2, c] = g_u
+        dst[3, c] = g_v
+        dst[4, c] = a
+        dst[5, c] = k0 * inv
+        dst[6, c] = k1 * inv
+        dst[7, c] = k2 * inv
+
+
+@pixel
+def _take(best, fits, p, du, dv):
+    """The 3x3 fit of column p of ``fits`` (offset (du, dv) from the pixel) where its residual per dof is less
+    than the best so far, else ``best``: (rss / dof, n, g_u, g_v, a, o_u, o_v). Branch-free."""
+    t, n, g_u, g_v, a, o_u, o_v = best
+    c = fits[0, p]
+    take = c < t
+    return (
+        select(take, c, t),
+        select(take, fits[1, p], n),
+        select(take, fits[2, p], g_u),
+        select(take, fits[3, p], g_v),
+        select(take, fits[4, p], a),
+        select(take, -du, o_u),
+        select(take, -dv, o_v),
+    )
+
+
+@pixel
+def _turn(sums, fits, p, limit, m0, m1, m2):
+    """(total, count) of ``sums`` plus, where the 3x3 fit of column p of ``fits`` is within ``limit`` (its
+    residual per dof; -1: never), the squared sine of the angle between its plane's unit normal and (m0, m1, m2),
+    and 1. Branch-free."""
+    total, count = sums
+    ok = fits[0, p] <= limit
+    d = m0 * fits[5, p] + m1 * fits[6, p] + m2 * fits[7, p]
+    t = 1.0 - d * d
+    return total + select(ok & (t > 0.0), t, 0.0), count + select(ok, 1.0, 0.0)
 
 
 @njit(nogil=True, noalias=True, _nrt=False)
-def _turned(q, n0, n1, n2, m0, m1, m2, limit, total, count):
-    """Per pixel i: to ``total[i]`` the squared sine of the angle between the unit normals (m0, m1, m2)[i] and
-    (n0, n1, n2)[i] where q[i] (a residual per dof) is at most limit[i], and 1 to ``count[i]`` there. One
-    neighbour's planes, already aligned with the pixels (so that the loop vectorises)."""
-    for i in range(total.shape[0]):
-        ok = q[i] <= limit[i]
-        d = m0[i] * n0[i] + m1[i] * n1[i] + m2[i] * n2[i]
-        t = 1.0 - d * d
-        total[i] += select(ok & (t > 0.0), t, 0.0)
-        count[i] += select(ok, 1.0, 0.0)
+def _sigma_row(z, valid, normals, fill, v, fits, cam, noise, gains, tail, lo, hi, out):
+    """Row v of ``d2nt_v3``'s sigma, pixels lo .. hi - 1, into ``out`` (the row; see :func:`_d2nt_sigma`):
+    ``normals``, row v's (3 W); ``fits``, :func:`_fits3_row` of rows v - 1, v, v + 1 (row y at y % 3); ``gains``:
+    (gain, misfit_gain, significance, disagreement, turn); ``tail``: (floor2, no_fit, max_deg). Branch-free."""
+    fx, fy, cx, cy = cam
+    f = math.sqrt(fx * fy)
+    rho_z0, rho_inv_step, rho_t = noise
+    gain, misfit_gain, significance, disagreement, turn = gains
+    floor2, no_fit, max_deg = tail
+    up, mid, dn = fits[(v - 1) % 3], fits[v % 3], fits[(v + 1) % 3]
+    zr = z[v]
+    ok_r = valid[v]
+    n_table = rho_t.shape[0]
+    one, three = np.uint64(1), np.uint64(3)
+    for u in range(np.uint64(lo), np.uint64(hi)):
+        n0, n1, n2 = normals[three * u], normals[three * u + one], normals[three * u + one + one]
+        ok = ok_r[u] & holds_normal(n0, n1, n2, fill)
+        # of the windows centred on the pixel and with it at a corner, the one with the smallest residual per dof
+        # (the first of equals, in this order)
+        p = u + one
+        s = (mid[0, p], mid[1, p], mid[2, p], mid[3, p], mid[4, p], 0.0, 0.0)
+        s = _take(s, up, p - one, -1.0, -1.0)
+        s = _take(s, up, p + one, 1.0, -1.0)
+        s = _take(s, dn, p - one, -1.0, 1.0)
+        best, nb, g_u, g_v, a, o_u, o_v = _take(s, dn, p + one, 1.0, 1.0)
+        fitted = best < np.inf
+        zp = select(ok, np.float64(zr[u]), 1.0)
+        rho = rho_t[table_entry(zp, rho_z0, rho_inv_step, n_table)]  # the frame's noise at this depth
+        s_w = rho / (zp * f)  # ... as the noise of w = 1/z
+        noise2 = s_w * s_w
+        g, va, c_u, c_v = fit_variance(
+            select(fitted, best, 0.0), nb, 1.0, o_u, o_v, noise2, gain, misfit_gain, significance
+        )
+        var = angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g, va, c_u, c_v)
+        # the plane's own normal at the pixel, and the sine of its angle to d2nt_v3's
+        m0 = fx * g_u
+        m1 = fy * g_v
+        m2 = a + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
+        m2n = m0 * m0 + m1 * m1 + m2 * m2
+        dot = n0 * m0 + n1 * m1 + n2 * m2
+        planar = m2n > 0.0
+        var += select(planar, disagreement * max(1.0 - dot * dot / select(planar, m2n, 1.0), 0.0), 0.0)
+        inv = 1.0 / math.sqrt(select(planar, m2n, 1.0))
+        m0, m1, m2 = m0 * inv, m1 * inv, m2 * inv
+        # the turn to the planes of its eight neighbours' windows that pass the adaptive fit's noise test
+        limit = select(planar, noise_limit(zp, rho, f, KAPPA, RHO_FLOOR), -1.0)
+        t = (0.0, 0.0)
+        t = _turn(t, up, p - one, limit, m0, m1, m2)
+        t = _turn(t, up, p, limit, m0, m1, m2)
+        t = _turn(t, up, p + one, limit, m0, m1, m2)
+        t = _turn(t, mid, p - one, limit, m0, m1, m2)
+        t = _turn(t, mid, p + one, limit, m0, m1, m2)
+        t = _turn(t, dn, p - one, limit, m0, m1, m2)
+        t = _turn(t, dn, p, limit, m0, m1, m2)
+        total, count = _turn(t, dn, p + one, limit, m0, m1, m2)
+        sigma = min(_degrees(var + turn * total / max(count, 1.0), floor2), max_deg)
+        out[u] = select(ok, select(fitted, sigma, no_fit), np.nan)
 
 
 @njit(nogil=True, _nrt=False)
-def _turn_row(fits, v, m, limit, total, count, lo, hi):
-    """Per pixel u of row v in lo .. hi - 1: the sum (``total``) and number (``count``) of the squared sines of
-    the angles between the unit normal m[:, u] and those of the planes of the 3x3 windows centred on its eight
-    neighbours that fit within ``limit[u]`` (residual per dof; -1: none), each at its own centre (``fits`` of
-    :func:`_fits3_row`, row y at y % 3)."""
-    W = total.shape[0]
-    total[lo:hi] = 0.0
-    count[lo:hi] = 0.0
-    for dy in range(-1, 2):
-        row = fits[(v + dy) % 3]
-        for dx in range(-1, 2):
-            if dy == 0 and dx == 0:
-                continue
-            a, b = max(lo, -dx), min(hi, W - dx)  # pixels a .. b - 1, their neighbours a + dx .. b - 1 + dx
-            if a >= b:
-                continue
-            p = slice(a + dx, b + dx)
-            _turned(
-                row[0, p],
-                row[5, p],
-                row[6, p],
-                row[7, p],
-                m[0, a:b],
-                m[1, a:b],
-                m[2, a:b],
-                limit[a:b],
-                total[a:b],
-                count[a:b],
-            )
+def _span(row):
+    """(first, last + 1) of the true entries of ``row``; (0, 0) where there is none."""
+    W = row.shape[0]
+    a = 0
+    while a < W and not row[a]:
+        a += 1
+    if a == W:
+        return 0, 0
+    b = W
+    while not row[b - 1]:
+        b -= 1
+    return a, b
 
 
 @njit(nogil=True)
@@ -448,75 +521,43 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
     discontinuity is judged by its own side, as DAG takes its gradient from the smoother side): its plane's
     variance at the pixel (:func:`fit_variance` at r = 1), plus ``disagreement`` times the squared sine of the angle
     between the normal and that plane's, plus ``turn`` times the mean squared sine of the angles to the planes of
-    its neighbours' windows that fit within the noise (:func:`_turn_row`: a surface that turns between pixels, as
-    a mesh's facets do, is not where its pixels' planes say); at most ``max_deg``. ``gains``: (gain,
-    misfit_gain, significance, disagreement, turn)."""
+    its eight neighbours' windows that fit within the noise (the adaptive fit's noise test: a surface that turns
+    between pixels, as a mesh's facets do, is not where its pixels' planes say); at most ``max_deg``. ``gains``:
+    (gain, misfit_gain, significance, disagreement, turn). Only the columns from a row's first to its last valid
+    pixel are worked on."""
     H, W = z.shape
-    fx, fy, cx, cy = cam
-    f = math.sqrt(fx * fy)
-    rho_z0, rho_inv_step, rho_t = noise
-    gain, misfit_gain, significance, disagreement, turn = gains
-    # the 3x3 fits of rows v - 1, v, v + 1, row y at y % 3 (:func:`_fits3_row`)
-    fits = np.zeros((3, 8, W))
+    tail = (floor2, min(no_fit, max_deg), max_deg)
+    # the spans of the valid pixels of rows v0 - 2 .. v1 + 1, row y at y - v0 + 2
+    spans = np.zeros((v1 - v0 + 4, 2), np.int64)
+    for y in range(max(v0 - 2, 0), min(v1 + 2, H)):
+        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = _span(valid[y])
+    inputs = np.zeros((3, 3, W + 2))
+    fits = np.zeros((3, 8, W + 2))
     col = np.empty((6, W + 2))
-    # per pixel of the row: its variance before the turn (NaN: sigma written already), its plane's unit normal,
-    # the noise test's limit (-1: no turn), the turn's sum and count
-    var_row = np.empty(W)
-    m = np.zeros((3, W))
-    limit = np.empty(W)
-    total = np.empty(W)
-    count = np.empty(W)
-    _fits3_row(z, valid, v0 - 1, col, cam, fits[(v0 - 1) % 3])
-    _fits3_row(z, valid, v0, col, cam, fits[v0 % 3])
+
+    def fit(y):
+        # the fits of row y over the span of the valid pixels of rows y - 1 .. y + 1: a window centred outside it
+        # holds at most the three pixels of the span's end column, and has no fit
+        c0, c1 = W, 0
+        for k in range(y - v0 + 1, y - v0 + 4):
+            a, b = spans[k, 0], spans[k, 1]
+            if a < b:
+                c0, c1 = min(c0, a), max(c1, b)
+        _fits3_row(inputs, y, H, cam, c0, c1, col, fits[y % 3])
+
+    _inputs_row(z, valid, v0 - 2, inputs[(v0 - 2) % 3])
+    _inputs_row(z, valid, v0 - 1, inputs[(v0 - 1) % 3])
+    for y in range(v0 - 1, v0 + 1):  # the fits of rows v0 - 1 and v0
+        _inputs_row(z, valid, y + 1, inputs[(y + 1) % 3])
+        fit(y)
     for v in range(v0, v1):
-        _fits3_row(z, valid, v + 1, col, cam, fits[(v + 1) % 3])
-        lo, hi = W, 0  # the span of the row's pixels whose sigma is still to write
-        for u in range(W):
-            var_row[u] = np.nan
-            limit[u] = -1.0
-            if not (valid[v, u] and holds_normal(normals[v, u, 0], normals[v, u, 1], normals[v, u, 2], fill)):
-                out[v, u] = np.nan
-                continue
-            best = fits[v % 3, 0, u]
-            bv, bu = v, u
-            for dv in (-1, 1):
-                for du in (-1, 1):
-                    y, x = v + dv, u + du
-                    if 0 <= x < W and fits[y % 3, 0, x] < best:
-                        best, bv, bu = fits[y % 3, 0, x], y, x
-            if not best < np.inf:
-                out[v, u] = min(no_fit, max_deg)
-                continue
-            zp = z[v, u]
-            o_u, o_v = float(u - bu), float(v - bv)
-            rho = rho_t[table_entry(zp, rho_z0, rho_inv_step, rho_t.shape[0])]  # the frame's noise at this depth
-            s_w = rho / (zp * f)  # ... as the noise of w = 1/z
-            noise2 = s_w * s_w
-            g, a, c_u, c_v = fit_variance(
-                best, fits[bv % 3, 1, bu], 1.0, o_u, o_v, noise2, gain, misfit_gain, significance
-            )
-            n0, n1, n2 = normals[v, u, 0], normals[v, u, 1], normals[v, u, 2]
-            var = angle_variance(n0, n1, n2, zp, u, v, fx, fy, cx, cy, g, a, c_u, c_v)
-            # the plane's own normal at the pixel, and the sine of its angle to d2nt_v3's
-            g_u, g_v = fits[bv % 3, 2, bu], fits[bv % 3, 3, bu]
-            m0 = fx * g_u
-            m1 = fy * g_v
-            m2 = fits[bv % 3, 4, bu] + g_u * o_u + g_v * o_v - g_u * (u - cx) - g_v * (v - cy)
-            m2n = m0 * m0 + m1 * m1 + m2 * m2
-            if m2n > 0.0:
-                dot = n0 * m0 + n1 * m1 + n2 * m2
-                var += disagreement * max(1.0 - dot * dot / m2n, 0.0)
-                inv = 1.0 / math.sqrt(m2n)
-                m[0, u], m[1, u], m[2, u] = m0 * inv, m1 * inv, m2 * inv
-                # the adaptive fit's noise test picks the neighbours' planes
-                limit[u] = noise_limit(zp, rho, f, KAPPA, RHO_FLOOR)
-            var_row[u] = var
-            lo, hi = min(lo, u), u + 1
-        _turn_row(fits, v, m, limit, total, count, lo, hi)
-        for u in range(lo, hi):
-            x = var_row[u]
-            if x == x:
-                out[v, u] = min(_degrees(x + turn * total[u] / max(count[u], 1.0), floor2), max_deg)
+        _inputs_row(z, valid, v + 2, inputs[(v + 2) % 3])
+        fit(v + 1)
+        a, b = spans[v - v0 + 2, 0], spans[v - v0 + 2, 1]
+        out[v, :a] = np.nan
+        out[v, max(a, b) :] = np.nan
+        if a < b:
+            _sigma_row(z, valid, normals[v].reshape(-1), fill, v, fits, cam, noise, gains, tail, a, b, out[v])
 
 
 def d2nt_sigma(z, valid, cam, normals, noise, *, clean=False, fill=0.0, out=None, bands=whole) -> np.ndarray:
@@ -525,6 +566,7 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, clean=False, fill=0.0, out=None
     ``clean`` frame; ``noise``: the frame's rho against depth as (z0, inv_step, table) of
     :func:`surfnorm.kernels._windows.radius_table`."""
     out = np.empty(z.shape, np.float32) if out is None else out
+    normals = np.ascontiguousarray(normals, np.float32)
     args = (z, valid, normals, np.float32(fill), _cam(cam), noise)
     gains = (
         float(D2NT_GAIN),

@@ -435,16 +435,15 @@ def test_d2nt_sigma_against_a_naive_reference(clean, fill):
     cam = (FX, FY, CX, CY)
     max_deg = U.CLEAN_MAX_DEG if clean else U.MAX_DEG
     want = _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill)
-    got = U.d2nt_sigma(z, valid, surfnorm.Intrinsics.from_matrix(K), normals, noise, clean=clean, fill=fill)
+    intrinsics = surfnorm.Intrinsics.from_matrix(K)
+    got = U.d2nt_sigma(z, valid, intrinsics, normals, noise, clean=clean, fill=fill)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
     has = valid & np.isfinite(normals).all(-1) & ~(normals == fill).all(-1)
     assert has.sum() > 100 and not has[2, 5]
     np.testing.assert_array_equal(np.isnan(got), ~has)
     # rows on two threads, split anywhere: the same bits
-    banded = U.d2nt_sigma(
-        z, valid, surfnorm.Intrinsics.from_matrix(K), normals, noise, clean=clean, fill=fill,
-        bands=lambda stage, n: [stage(0, 5), stage(5, n)],
-    )
+    two = lambda stage, n: [stage(0, 5), stage(5, n)]  # noqa: E731
+    banded = U.d2nt_sigma(z, valid, intrinsics, normals, noise, clean=clean, fill=fill, bands=two)
     np.testing.assert_array_equal(banded, got)
 
 

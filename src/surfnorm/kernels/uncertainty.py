@@ -213,18 +213,30 @@ def _degrees(var, floor2):
     return min(math.sqrt(_DEG2 * var + floor2), MAX_DEG)
 
 
-@njit(nogil=True)
+@njit(nogil=True, noalias=True, _nrt=False)
 def _pair_sums(var, i, W, total, count):
     """Fitted row i's variances at full width: at column u, the sum and count of the finite ones among the fitted
-    pixels of columns u and u + 1's pair (u even: its own twice; u odd: its left and right ones). Branch-free."""
-    Wf = var.shape[1]
-    for u in range(W):
-        a = var[i, u >> 1]
-        b = var[i, min((u + 1) >> 1, Wf - 1)]
+    pixels of columns u and u + 1's pair (u even: its own twice; u odd: its left and right ones). Branch-free,
+    over the fitted columns j (u = 2 j and 2 j + 1), unsigned so that the loads vectorise."""
+    row = var[i]
+    last = np.uint64(row.shape[0] - 1)
+    one, two = np.uint64(1), np.uint64(2)
+    for j in range(np.uint64(W >> 1)):  # u = 2 j and 2 j + 1, both inside the frame
+        a = row[j]
+        b = row[min(j + one, last)]
         ok_a = a == a
         ok_b = b == b
-        total[u] = select(ok_a, a, 0.0) + select(ok_b, b, 0.0)
-        count[u] = select(ok_a, 1.0, 0.0) + select(ok_b, 1.0, 0.0)
+        s_a = select(ok_a, a, 0.0)
+        c_a = select(ok_a, 1.0, 0.0)
+        total[two * j] = s_a + s_a
+        count[two * j] = c_a + c_a
+        total[two * j + one] = s_a + select(ok_b, b, 0.0)
+        count[two * j + one] = c_a + select(ok_b, 1.0, 0.0)
+    if W & 1:  # the last column, even
+        a = row[last]
+        ok_a = a == a
+        total[W - 1] = select(ok_a, a, 0.0) + select(ok_a, a, 0.0)
+        count[W - 1] = select(ok_a, 1.0, 0.0) + select(ok_a, 1.0, 0.0)
 
 
 @njit(nogil=True)
@@ -237,9 +249,10 @@ def _spread(has, var, stride, floor2, no_fit, out, v0, v1):
     W = has.shape[1]
     if stride == 1:
         for v in range(v0, v1):
+            has_row, var_row, row = has[v], var[v], out[v]
             for u in range(W):
-                x = var[v, u]
-                out[v, u] = np.nan if not has[v, u] else _degrees(x, floor2) if x == x else no_fit
+                x = var_row[u]
+                row[u] = select(has_row[u], select(x == x, _degrees(x, floor2), no_fit), np.nan)
         return
     up_t = np.empty(W)
     up_c = np.empty(W)
@@ -270,10 +283,15 @@ def _spread(has, var, stride, floor2, no_fit, out, v0, v1):
             up_t, dn_t = dn_t, up_t  # the row below is the next even row's
             up_c, dn_c = dn_c, up_c
             made = i + 1
+        has_row = has[v]
+        lonely = False
         for u in range(W):
-            if not has[v, u]:
-                row[u] = np.nan
-            elif row[u] == np.inf:  # the few without a neighbour's fit: those of the 5x5 neighbourhood
+            row[u] = select(has_row[u], row[u], np.float32(np.nan))
+            lonely |= row[u] == np.inf
+        if not lonely:
+            continue
+        for u in range(W):
+            if row[u] == np.inf:  # the few without a neighbour's fit: those of the 5x5 neighbourhood
                 total = 0.0
                 k = 0
                 for ii in range(max((v - 1) // 2, 0), min((v + 2) // 2, Hf - 1) + 1):

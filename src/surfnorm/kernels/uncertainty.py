@@ -232,8 +232,8 @@ def _pair_sums(var, i, W, total, count):
         count[two * j] = c_a + c_a
         total[two * j + one] = s_a + select(ok_b, b, 0.0)
         count[two * j + one] = c_a + select(ok_b, 1.0, 0.0)
-    if W & 1:  # the last column, even
-        a = row[last]
+    if W & 1:  # the last column, even: its own
+        a = row[W >> 1]
         ok_a = a == a
         total[W - 1] = select(ok_a, a, 0.0) + select(ok_a, a, 0.0)
         count[W - 1] = select(ok_a, 1.0, 0.0) + select(ok_a, 1.0, 0.0)

@@ -333,10 +333,10 @@ def _fit_rows(z, valid, cam, c0=None, c1=None):
     inputs = np.zeros((3, 3, W + 2))
     col = np.empty((6, W + 2))
     fits = np.zeros((H, 8, W + 2))
-    U._inputs_row(z, valid, -1, inputs[2])
-    U._inputs_row(z, valid, 0, inputs[0])
+    U._inputs_row(z, valid, -1, 0, W, inputs[2])
+    U._inputs_row(z, valid, 0, 0, W, inputs[0])
     for v in range(H):
-        U._inputs_row(z, valid, v + 1, inputs[(v + 1) % 3])
+        U._inputs_row(z, valid, v + 1, 0, W, inputs[(v + 1) % 3])
         U._fits3_row(inputs, v, H, (FX, FY, CX, CY), c0, c1, col, fits[v])
     return fits
 

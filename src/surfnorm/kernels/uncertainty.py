@@ -342,11 +342,12 @@ def sigma_from_fits(
 
 
 @njit(nogil=True, noalias=True, _nrt=False)
-def _inputs_row(z, valid, y, dst):
+def _inputs_row(z, valid, y, lo, hi, dst):
     """Input row y's points per column, for the 3x3 fits: (1, w = 1/z, w^2) where valid, else 0, into ``dst``
     (3, W + 2) at columns 1 .. W (column u at u + 1; the pad columns 0 and W + 1, and a row y outside the frame,
-    0). Each row is read once for the three fitted rows that use it. Branch-free."""
-    H, W = z.shape
+    0). ``lo`` .. ``hi`` - 1: the columns that may hold valid pixels (the span of the row's; 0 elsewhere). Each
+    row is read once for the three fitted rows that use it. Branch-free."""
+    H = z.shape[0]
     dst[:, :] = 0.0
     if y < 0 or y >= H:
         return
@@ -354,7 +355,7 @@ def _inputs_row(z, valid, y, dst):
     ok_r = valid[y]
     c, s, ss = dst[0], dst[1], dst[2]
     one = np.uint64(1)
-    for u in range(np.uint64(W)):
+    for u in range(np.uint64(lo), np.uint64(hi)):
         ok = ok_r[u]
         w = select(ok, 1.0 / zr[u], 0.0)
         c[u + one] = select(ok, 1.0, 0.0)
@@ -553,6 +554,9 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
     fits = np.zeros((3, 8, W + 2))
     col = np.empty((6, W + 2))
 
+    def read(y):  # input row y, over its span
+        _inputs_row(z, valid, y, spans[y - v0 + 2, 0], spans[y - v0 + 2, 1], inputs[y % 3])
+
     def fit(y):
         # the fits of row y over the span of the valid pixels of rows y - 1 .. y + 1: a window centred outside it
         # holds at most the three pixels of the span's end column, and has no fit
@@ -563,13 +567,13 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
                 c0, c1 = min(c0, a), max(c1, b)
         _fits3_row(inputs, y, H, cam, c0, c1, col, fits[y % 3])
 
-    _inputs_row(z, valid, v0 - 2, inputs[(v0 - 2) % 3])
-    _inputs_row(z, valid, v0 - 1, inputs[(v0 - 1) % 3])
+    read(v0 - 2)
+    read(v0 - 1)
     for y in range(v0 - 1, v0 + 1):  # the fits of rows v0 - 1 and v0
-        _inputs_row(z, valid, y + 1, inputs[(y + 1) % 3])
+        read(y + 1)
         fit(y)
     for v in range(v0, v1):
-        _inputs_row(z, valid, v + 2, inputs[(v + 2) % 3])
+        read(v + 2)
         fit(v + 1)
         a, b = spans[v - v0 + 2, 0], spans[v - v0 + 2, 1]
         out[v, :a] = np.nan

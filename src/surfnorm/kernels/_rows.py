@@ -1,5 +1,5 @@
-"""Helpers shared by the kernels: clamped reads, runs of fully valid pixels, exp, normalise-and-store,
-orientation, the point cloud.
+"""Helpers shared by the kernels: clamped reads, a row's span of valid pixels, runs of fully valid pixels, exp,
+normalise-and-store, orientation, the point cloud.
 
 Private to :mod:`surfnorm.kernels`; every kernel module imports its shared helpers from here and from
 no other kernel module's internals.
@@ -79,6 +79,22 @@ def stencil(valid, v, u, dv, du, reflect):
             vb, ub, vf, uf, dist = v - dv, u - du, v, u, 1
     # (one return statement: Numba compiles several tuple returns in a hot helper far slower)
     return vb, ub, vf, uf, dist
+
+
+@pixel
+def valid_span(ok_row):
+    """(first, last + 1) of the columns where ``ok_row`` is true (or nonzero); (0, 0) where it is nowhere: the
+    columns a row kernel works on when only valid pixels get a value (the rest is fill)."""
+    W = ok_row.shape[0]
+    a = 0
+    while a < W and not ok_row[a]:
+        a += 1
+    if a == W:
+        return 0, 0
+    b = W
+    while not ok_row[b - 1]:
+        b -= 1
+    return a, b
 
 
 # --- runs of pixels whose 3x3 neighbourhood is valid ---------------------------------------------

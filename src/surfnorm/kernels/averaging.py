@@ -35,7 +35,7 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, select
-from ._rows import point_cloud, unit_or_fill
+from ._rows import point_cloud, unit_or_fill, valid_span
 
 __all__ = ["area_weighted", "angle_weighted", "RING"]
 
@@ -135,16 +135,7 @@ def _make_row(term):
         W = out.shape[1] // 3
         # Only the columns [a, b) from the first to the last valid pixel of the row are computed: an
         # invalid pixel gets the fill value whatever its neighbours (a masked-out background costs nothing).
-        k_row = OK[v]
-        a, b = W, W
-        for u in range(W):
-            if k_row[u + 1] != 0:
-                a = u
-                break
-        for u in range(W - 1, a - 1, -1):
-            if k_row[u + 1] != 0:
-                b = u + 1
-                break
+        a, b = valid_span(OK[v, 1 : W + 1])
         row_out = out[v - 1]
         for i in range(3 * a):
             row_out[i] = fill

@@ -69,6 +69,7 @@ from .._bands import whole
 from .._config import njit, pixel, select
 from .._constants import CORRELATION_WIDTH, KAPPA, RHO_FLOOR
 from ._assembly import holds_normal, mark_row
+from ._rows import valid_span
 from ._windows import noise_limit, radius_table, table_entry
 from .sensor_noise import adaptive_weight, noise_profile, stride_gain
 
@@ -518,21 +519,6 @@ def _sigma_row(z, valid, normals, fill, v, fits, cam, noise, gains, tail, lo, hi
         out[u] = select(ok, select(fitted, sigma, no_fit), np.nan)
 
 
-@njit(nogil=True, _nrt=False)
-def _span(row):
-    """(first, last + 1) of the true entries of ``row``; (0, 0) where there is none."""
-    W = row.shape[0]
-    a = 0
-    while a < W and not row[a]:
-        a += 1
-    if a == W:
-        return 0, 0
-    b = W
-    while not row[b - 1]:
-        b -= 1
-    return a, b
-
-
 @njit(nogil=True)
 def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_deg, out, v0, v1):
     """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma: of the 3x3 windows centred on the pixel and with it at a corner
@@ -549,7 +535,7 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
     # the spans of the valid pixels of rows v0 - 2 .. v1 + 1, row y at y - v0 + 2
     spans = np.zeros((v1 - v0 + 4, 2), np.int64)
     for y in range(max(v0 - 2, 0), min(v1 + 2, H)):
-        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = _span(valid[y])
+        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = valid_span(valid[y])
     inputs = np.zeros((3, 3, W + 2))
     fits = np.zeros((3, 8, W + 2))
     col = np.empty((6, W + 2))

@@ -415,36 +415,108 @@ def _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill):
     return out
 
 
-@pytest.mark.parametrize("clean", [False, True])
-@pytest.mark.parametrize("fill", [0.0, np.nan])
-def test_d2nt_sigma_against_a_naive_reference(clean, fill):
-    rng = np.random.default_rng(11)
+def _test_frame(fill, noise=2e-3, seed=11):
+    """A tilted plane with noise, holes, an empty row, a row whose depth starts and ends inside the frame, and a
+    step; d2nt_v3's normals (one valid pixel without a normal, at (2, 5)); K."""
+    rng = np.random.default_rng(seed)
     H, W = 12, 15
-    # a tilted plane with noise, holes, an empty row, and a row whose depth starts and ends inside the frame
     u, v = np.meshgrid(np.arange(W), np.arange(H))
-    z = (1.5 + 0.01 * u + 0.004 * v + rng.normal(0.0, 2e-3, (H, W))) * (rng.random((H, W)) < 0.85)
+    z = (1.5 + 0.01 * u + 0.004 * v + rng.normal(0.0, noise, (H, W))) * (rng.random((H, W)) < 0.85)
     z[4] = 0.0
     z[7, :3] = z[7, 11:] = 0.0
     z[9:, 9:] *= 1.2  # a step
     z = z.astype(np.float32)
-    valid = z > 0
     K = np.array([[FX, 0, CX], [0, FY, CY], [0, 0, 1.0]])
     normals = surfnorm.estimate(z, K, method="d2nt_v3", fill=fill)
-    normals[2, 5] = fill  # a valid pixel without a normal
-    noise = (1.4, 20.0, rng.uniform(1e-4, 3e-3, 8))  # the frame's rho at 1.4 + k / 20 m
-    cam = (FX, FY, CX, CY)
-    max_deg = U.CLEAN_MAX_DEG if clean else U.MAX_DEG
-    want = _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill)
-    intrinsics = surfnorm.Intrinsics.from_matrix(K)
-    got = U.d2nt_sigma(z, valid, intrinsics, normals, noise, clean=clean, fill=fill)
-    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
-    has = valid & np.isfinite(normals).all(-1) & ~(normals == fill).all(-1)
+    normals[2, 5] = fill
+    return z, normals, K
+
+
+def _check_sigma(got, want, z, normals, fill, banded, atol=1e-5):
+    """``got`` as ``want`` (to ``atol`` degrees), NaN exactly where there is no normal, and the same bits with rows
+    on two threads."""
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=atol)
+    has = (z > 0) & np.isfinite(normals).all(-1) & ~(normals == fill).all(-1)
     assert has.sum() > 100 and not has[2, 5]
     np.testing.assert_array_equal(np.isnan(got), ~has)
-    # rows on two threads, split anywhere: the same bits
-    two = lambda stage, n: [stage(0, 5), stage(5, n)]  # noqa: E731
-    banded = U.d2nt_sigma(z, valid, intrinsics, normals, noise, clean=clean, fill=fill, bands=two)
-    np.testing.assert_array_equal(banded, got)
+    two = lambda stage, n: [stage(0, 5), stage(5, n)]  # noqa: E731  rows split anywhere
+    np.testing.assert_array_equal(banded(two), got)
+
+
+@pytest.mark.parametrize("fill", [0.0, np.nan])
+def test_d2nt_sigma_against_a_naive_reference(fill):
+    z, normals, K = _test_frame(fill)
+    valid = z > 0
+    rng = np.random.default_rng(12)
+    noise = (1.4, 20.0, rng.uniform(1e-4, 3e-3, 8))  # the frame's rho at 1.4 + k / 20 m
+    want = _naive_d2nt_sigma(z, valid, normals, (FX, FY, CX, CY), noise, U.MAX_DEG, fill)
+    cam = surfnorm.Intrinsics.from_matrix(K)
+    got = U.d2nt_sigma(z, valid, cam, normals, noise, fill=fill)
+
+    def banded(bands):
+        return U.d2nt_sigma(z, valid, cam, normals, noise, fill=fill, bands=bands)
+
+    _check_sigma(got, want, z, normals, fill, banded)
+
+
+def _naive_clean_sigma(z, normals, fill):
+    """The clean model pixel by pixel, as the module's docstring says."""
+    H, W = z.shape
+    f = math.sqrt(FX * FY)
+    valid = z > 0
+    n = normals.astype(np.float64)
+    has = valid & np.isfinite(n).all(-1) & ~(n == fill).all(-1)
+    w = np.where(valid, 1.0 / np.where(valid, z, 1.0), 0.0)
+
+    def pairs(y, x):  # (squared sines, count) of pixel (y, x)'s pairs with its right and lower neighbours
+        out = []
+        for q in ((y, x + 1), (y + 1, x)):
+            if 0 <= q[0] < H and 0 <= q[1] < W and has[y, x] and has[q]:
+                out.append(1.0 - float(n[y, x] @ n[q]) ** 2)
+        return out
+
+    sigma = np.full((H, W), np.nan)
+    for v in range(H):
+        for u in range(W):
+            if not has[v, u]:
+                continue
+            bend = 0.0
+            for a, b in (((v - 1, u), (v + 1, u)), ((v, u - 1), (v, u + 1))):
+                if not all(0 <= p[0] < H and 0 <= p[1] < W for p in (a, b)):
+                    continue  # a line that leaves the frame says nothing
+                if valid[a] and valid[b]:
+                    bend = max(bend, abs(w[a] - 2.0 * w[v, u] + w[b]) / w[v, u])
+                else:
+                    bend = max(bend, 1.0)  # a discontinuity
+            sines = [
+                t
+                for y in range(v - 2, v + 3)
+                for x in range(u - 2, u + 3)
+                if 0 <= y < H and 0 <= x < W
+                for t in pairs(y, x)
+            ]
+            turn = np.mean(sines) if sines else 0.0
+            var = (U.CLEAN_BEND * f * bend) ** 2 + U.CLEAN_TURN * turn
+            sigma[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * var + U.CLEAN_FLOOR_DEG**2), U.CLEAN_MAX_DEG)
+    return sigma
+
+
+@pytest.mark.parametrize("fill", [0.0, np.nan])
+@pytest.mark.parametrize("noise", [0.0, 2e-4])
+def test_clean_sigma_against_a_naive_reference(fill, noise):
+    z, normals, K = _test_frame(fill, noise)
+    valid = z > 0
+    want = _naive_clean_sigma(z, normals, fill)
+    cam = surfnorm.Intrinsics.from_matrix(K)
+    got = U.d2nt_sigma(z, valid, cam, normals, None, clean=True, fill=fill)
+
+    def banded(bands):
+        return U.d2nt_sigma(z, valid, cam, normals, None, clean=True, fill=fill, bands=bands)
+
+    _check_sigma(got, want, z, normals, fill, banded, atol=1e-3)  # the kernel works in float32
+    # every term shows: the floor on the plane, the bend, the turn and the cap at the step and the holes
+    assert np.nanmin(got) < U.CLEAN_FLOOR_DEG + 0.5 and np.nanmax(got) == pytest.approx(U.CLEAN_MAX_DEG)
+    assert np.sum((got > U.CLEAN_FLOOR_DEG + 0.5) & (got < U.CLEAN_MAX_DEG - 0.5)) >= 5
 
 
 def _roof(tilt_deg, shape=(60, 80)):
@@ -460,18 +532,24 @@ def _roof(tilt_deg, shape=(60, 80)):
     return z.astype(np.float32), K
 
 
-def test_d2nt_sigma_grows_where_clean_planes_turn():
-    # a clean roof: the faces' pixels are judged by their own 3x3 planes alone (sigma the floor); the pixels
-    # beside the ridge see their neighbours' planes turn, by more on a sharper ridge
+@pytest.mark.parametrize("method", ["d2nt_v3", "auto"])
+def test_clean_sigma_grows_where_planes_turn(method):
+    # a clean roof: the faces' pixels away from the ridge see flat depth and parallel normals (sigma the floor);
+    # the pixels beside the ridge see the depth bend and the normals turn, by more on a sharper ridge
     soft, K = _roof(5.0)
     sharp, _ = _roof(20.0)
-    s_soft = surfnorm.estimate(soft, K, method="d2nt_v3", uncertainty=True)[1]
-    s_sharp = surfnorm.estimate(sharp, K, method="d2nt_v3", uncertainty=True)[1]
+    s_soft = surfnorm.estimate(soft, K, method=method, uncertainty=True)[1]
+    s_sharp = surfnorm.estimate(sharp, K, method=method, uncertainty=True)[1]
     face = np.s_[10:50, 10:30]
     ridge = np.s_[10:50, 39:41]
-    assert np.allclose(s_soft[face], U.FLOOR_DEG, atol=0.05)
-    assert np.nanmedian(s_soft[ridge]) > U.FLOOR_DEG + 0.3
+    assert np.allclose(s_soft[face], U.CLEAN_FLOOR_DEG, atol=0.01)
+    assert np.nanmedian(s_soft[ridge]) > U.CLEAN_FLOOR_DEG + 0.3
     assert np.nanmedian(s_sharp[ridge]) > np.nanmedian(s_soft[ridge]) + 1.0
+    # the clean model, as d2nt_sigma gives it
+    valid = soft > 0
+    normals = surfnorm.estimate(soft, K, method=method)
+    cam = surfnorm.Intrinsics.from_matrix(K)
+    np.testing.assert_array_equal(s_soft, U.d2nt_sigma(soft, valid, cam, normals, None, clean=True))
 
 
 def test_clean_sigma_is_capped_and_noisy_sigma_is_not():

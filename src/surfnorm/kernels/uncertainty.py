@@ -41,22 +41,36 @@ and carried further (:func:`fit_covariance`).
 
 ``d2nt_v3`` takes the gradients of its DAG filter from one pixel's neighbours: its error is that of the 3x3
 neighbourhood's plane, the same formulas at r = 1 (a fit of every pixel's 3x3 window, its own residual;
-``D2NT_GAIN``). On clean depth that residual is the surface's curvature or a discontinuity inside the window.
-Two more terms are for clean depth, where the noise says little:
+``D2NT_GAIN``). Two more terms see what the noise does not:
 
 - A surface that turns between pixels (a mesh's facets, a crease) is not where any one pixel's plane says: the
   mean squared sine of the angles between the pixel's plane and those of its eight neighbours' windows that fit
   within the noise (the adaptive fit's noise test), times ``D2NT_TURN``, is added to the variance. Planes give 0.
-- Where every window beside a pixel spans a discontinuity (a thin part, detail finer than a pixel), the misfit
-  says tens of degrees, but DAG takes its gradients from the smoother side and errs by less: on a frame whose
-  noise reading is clean (``adaptive_weight`` 0) sigma is at most ``CLEAN_MAX_DEG``.
+- The angle between the normal and the pixel's best plane, times ``D2NT_DISAGREEMENT``.
 
-Both were set on the simulator's clean preset (``exact``: the 12 3F2N frames), whose error is mostly the ground
-truth's own (smooth-shaded normals of faceted meshes); on sensor depth the default runs the adaptive fit, and
-neither term applies to it.
+On a clean frame (its noise reading clean, ``adaptive_weight`` 0, where ``auto`` runs ``d2nt_v3`` alone) there is
+no noise to weigh, the 3x3 fits would cost as much as ``d2nt_v3`` itself, and the error is the surface's shape
+between pixels. Sigma there comes from two quantities that cost a pass over the normals and the depth
+(:func:`_clean_sigma`):
+
+- the bend b: the larger of the relative second differences |w_- - 2 w + w_+| / w of w = 1/z down the pixel's
+  column and along its row; 1 where a neighbour on that line is invalid (a discontinuity), nothing where the line
+  leaves the frame. f b is the angle (radians) between the slopes on the pixel's two sides, of which DAG's
+  gradient carries a share, ``CLEAN_BEND``;
+- the turn t: the mean squared sine of the angles between neighbouring normals (each pixel with its right and its
+  lower neighbour, both with a normal), over the pairs of the pixels of the 5x5 neighbourhood: the facets and
+  creases around the pixel, which the ground truth of a rendered mesh smooths over::
+
+    sigma^2 = CLEAN_FLOOR_DEG^2 + (CLEAN_BEND f b)^2 + CLEAN_TURN t     (in degrees^2), at most CLEAN_MAX_DEG   (4)
+
+Where every window beside a pixel spans a discontinuity (a thin part, detail finer than a pixel) DAG takes its
+gradients from the smoother side and errs by less than the bend says: at most ``CLEAN_MAX_DEG``. The numbers of
+(4) were set on the simulator's clean preset (``exact``: the 10 3F2N frames of the calibration), whose error is
+mostly the ground truth's own (smooth-shaded normals of faceted meshes); on sensor depth the default runs the
+adaptive fit, and (4) does not apply to it.
 
 A pixel that has a normal always gets a sigma (a normal whose window says nothing, for lack of points, gets
-``NO_FIT_DEG``, or ``CLEAN_MAX_DEG`` where that is less); NaN exactly where the normal is fill.
+``NO_FIT_DEG``); NaN exactly where the normal is fill.
 """
 
 from __future__ import annotations
@@ -85,6 +99,10 @@ __all__ = [
     "CORRELATION_WIDTH",
     "FIT_GAIN",
     "D2NT_GAIN",
+    "CLEAN_BEND",
+    "CLEAN_TURN",
+    "CLEAN_FLOOR_DEG",
+    "CLEAN_MAX_DEG",
     "NO_FIT_DEG",
 ]
 
@@ -114,12 +132,19 @@ D2NT_DISAGREEMENT = 0.3
 #: Weight (on the variance) of how far the planes of the pixel's neighbours' 3x3 windows turn from its own, for
 #: ``d2nt_v3`` (:func:`_d2nt_sigma`).
 D2NT_TURN = 1.0
-#: The largest ``d2nt_v3`` sigma (degrees) on a frame whose noise reading is clean (``adaptive_weight`` 0): a
-#: window's misfit there is an edge or detail finer than a pixel, not noise, and DAG's one-sided gradients err
-#: by about this much (RMS) where every window beside a pixel has it.
-CLEAN_MAX_DEG = 25.0
-#: Added in quadrature to every sigma (degrees).
+#: Added in quadrature to every sigma (degrees) but the clean model's.
 FLOOR_DEG = 3.0
+#: ``d2nt_v3``'s sigma on a clean frame (``adaptive_weight`` 0), eq. (4): the share of the bend (the angle
+#: between the slopes on a pixel's two sides) that DAG's gradient carries.
+CLEAN_BEND = 0.075
+#: Eq. (4): the weight (on the variance) of the mean squared sine of the angles between neighbouring normals in a
+#: pixel's 5x5 neighbourhood.
+CLEAN_TURN = 1.0
+#: Eq. (4): added in quadrature (degrees).
+CLEAN_FLOOR_DEG = 1.25
+#: Eq. (4): the largest sigma (degrees). An edge or detail finer than a pixel bends the depth, not noise, and DAG's
+#: one-sided gradients err by about this much (RMS) where every window beside a pixel has it.
+CLEAN_MAX_DEG = 25.0
 #: Sigma (degrees) of a normal without a fit to judge it by.
 NO_FIT_DEG = 30.0
 #: Square degrees per square radian.
@@ -568,13 +593,185 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_
             _sigma_row(z, valid, normals[v].reshape(-1), fill, v, fits, cam, noise, gains, tail, a, b, out[v])
 
 
+# --- d2nt_v3's sigma on a clean frame -----------------------------------------------------------------------------
+# Rows travel in rings, padded by two columns each side (column u at u + 2), in float32: a row's normals (planar,
+# with whether each pixel holds one), its pairs' turn summed over five columns, its w = 1/z. Only the span of a
+# row's valid pixels is worked on; the rest of each ring row is 0.
+
+
+@njit(nogil=True, noalias=True, _nrt=False)
+def _clean_normals_row(valid, normals, fill, y, lo, hi, dst):
+    """Row y's normals into ``dst`` (4, W + 4): (n0, n1, n2, 1) where the pixel holds a normal, else 0 (and for a
+    row outside the frame); ``lo`` .. ``hi`` - 1: the span of the row's valid pixels. Branch-free."""
+    H = valid.shape[0]
+    if y < 0 or y >= H or lo >= hi:
+        dst[:, :] = 0.0
+        return
+    dst[:, : lo + 2] = 0.0
+    dst[:, hi + 2 :] = 0.0
+    nr = normals[y].reshape(-1)
+    ok_r = valid[y]
+    one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
+    zero = np.float32(0.0)
+    for u in range(np.uint64(lo), np.uint64(hi)):
+        n0, n1, n2 = nr[three * u], nr[three * u + one], nr[three * u + two]
+        h = ok_r[u] & holds_normal(n0, n1, n2, fill)
+        dst[0, u + two] = select(h, n0, zero)
+        dst[1, u + two] = select(h, n1, zero)
+        dst[2, u + two] = select(h, n2, zero)
+        dst[3, u + two] = select(h, np.float32(1.0), zero)
+
+
+@pixel
+def _pair(rows, a, p, b, q):
+    """(squared sine of the angle between the normals at column p of ``rows[a]`` and q of ``rows[b]``, 1) where
+    both pixels hold one, else (0, 0). Branch-free."""
+    d = rows[a, 0, p] * rows[b, 0, q] + rows[a, 1, p] * rows[b, 1, q] + rows[a, 2, p] * rows[b, 2, q]
+    both = rows[a, 3, p] * rows[b, 3, q]
+    return both * max(np.float32(1.0) - d * d, np.float32(0.0)), both
+
+
+@njit(nogil=True, noalias=True, _nrt=False)
+def _clean_pairs_row(rows, y, lo, hi, scratch, dst):
+    """Row y's pairs of neighbouring normals, each pixel's with its right and its lower neighbour, summed over five
+    columns, into ``dst`` (2, W + 4): at column u, the sum over the pixels of columns u - 2 .. u + 2 of their
+    pairs' squared sines, and the count of those pairs. ``rows``: :func:`_clean_normals_row` of rows y and y + 1
+    (row y at y % 4); ``lo`` .. ``hi`` - 1: row y's span; ``scratch`` (2, W + 4). Branch-free."""
+    P = dst.shape[1]
+    if lo >= hi:
+        dst[:, :] = 0.0
+        return
+    a, b = y % 4, (y + 1) % 4
+    one, two = np.uint64(1), np.uint64(2)
+    total, count = scratch[0], scratch[1]
+    scratch[:, : lo + 2] = 0.0
+    scratch[:, hi + 2 :] = 0.0
+    for p in range(np.uint64(lo) + two, np.uint64(hi) + two):
+        right, n_right = _pair(rows, a, p, a, p + one)
+        down, n_down = _pair(rows, a, p, b, p)
+        total[p] = right + down
+        count[p] = n_right + n_down
+    c0, c1 = max(lo, 2), min(hi + 4, P - 2)
+    dst[:, :c0] = 0.0
+    dst[:, c1:] = 0.0
+    for p in range(np.uint64(c0), np.uint64(c1)):
+        dst[0, p] = total[p - two] + total[p - one] + total[p] + total[p + one] + total[p + two]
+        dst[1, p] = count[p - two] + count[p - one] + count[p] + count[p + one] + count[p + two]
+
+
+@njit(nogil=True, noalias=True, _nrt=False)
+def _clean_depth_row(z, valid, y, lo, hi, dst):
+    """Row y's w = 1/z (0 where invalid) and its code, 2 valid, 1 invalid, 0 outside the frame, into ``dst``
+    (2, W + 4); ``lo`` .. ``hi`` - 1: the span of the row's valid pixels. Branch-free."""
+    H, W = z.shape
+    if y < 0 or y >= H:
+        dst[:, :] = 0.0
+        return
+    dst[0, : lo + 2] = 0.0
+    dst[0, hi + 2 :] = 0.0
+    dst[1, :2] = 0.0
+    dst[1, 2 : lo + 2] = 1.0
+    dst[1, hi + 2 : W + 2] = 1.0
+    dst[1, W + 2 :] = 0.0
+    zr = z[y]
+    ok_r = valid[y]
+    two = np.uint64(2)
+    one_f, zero_f = np.float32(1.0), np.float32(0.0)
+    for u in range(np.uint64(lo), np.uint64(hi)):
+        ok = ok_r[u]
+        dst[0, u + two] = select(ok, one_f / np.float32(zr[u]), zero_f)
+        dst[1, u + two] = select(ok, np.float32(2.0), one_f)
+
+
+@pixel
+def _bend(e, depth, a, pa, b, pb, w, inv_w):
+    """The larger of ``e`` and |w_a - 2 w + w_b| / w, the relative second difference of w = 1/z along the line
+    through the pixel (``w``; ``inv_w`` its inverse) and its neighbours at column pa of ``depth[a]`` and pb of
+    ``depth[b]``: 1 where either neighbour is invalid (a discontinuity), ``e`` where either is outside the
+    frame. Branch-free."""
+    half, one = np.float32(0.5), np.float32(1.0)
+    ca, cb = depth[a, 1, pa], depth[b, 1, pb]
+    d2 = abs(depth[a, 0, pa] - np.float32(2.0) * w + depth[b, 0, pb]) * inv_w
+    d2 = select((ca > one + half) & (cb > one + half), d2, one)
+    return max(e, select((ca > half) & (cb > half), d2, np.float32(0.0)))
+
+
+@njit(nogil=True, noalias=True, _nrt=False)
+def _clean_sigma_row(v, rows, depth, pairs, gains, lo, hi, out):
+    """Row v of the clean model's sigma, pixels lo .. hi - 1, into ``out`` (the row; see :func:`_clean_sigma`):
+    ``rows``, :func:`_clean_normals_row` with row v at v % 4; ``depth``, :func:`_clean_depth_row` of rows
+    v - 1 .. v + 1 (row y at y % 3); ``pairs``, :func:`_clean_pairs_row` of rows v - 2 .. v + 2 (row y at
+    y % 5); ``gains``: (f times the bend's gain, the turn's gain, the floor^2 in degrees^2, the largest sigma).
+    Branch-free."""
+    bend_gain, turn_gain, floor2, max_deg = gains
+    bend_gain, turn_gain = np.float32(bend_gain), np.float32(turn_gain)
+    floor2, max_deg, deg2 = np.float32(floor2), np.float32(max_deg), np.float32(_DEG2)
+    has_r = rows[v % 4, 3]
+    a, b, c = (v - 1) % 3, v % 3, (v + 1) % 3
+    one, two = np.uint64(1), np.uint64(2)
+    one_f = np.float32(1.0)
+    for u in range(np.uint64(lo), np.uint64(hi)):
+        p = u + two
+        has = has_r[p] > np.float32(0.5)
+        w = depth[b, 0, p]
+        inv_w = one_f / select(has, w, one_f)
+        e = _bend(np.float32(0.0), depth, a, p, c, p, w, inv_w)  # down the column
+        e = _bend(e, depth, b, p - one, b, p + one, w, inv_w)  # along the row
+        total = pairs[0, 0, p] + pairs[1, 0, p] + pairs[2, 0, p] + pairs[3, 0, p] + pairs[4, 0, p]
+        count = pairs[0, 1, p] + pairs[1, 1, p] + pairs[2, 1, p] + pairs[3, 1, p] + pairs[4, 1, p]
+        bend = bend_gain * e
+        var = bend * bend + turn_gain * total / max(count, one_f)
+        out[u] = select(has, min(math.sqrt(deg2 * var + floor2), max_deg), np.float32(np.nan))
+
+
+@njit(nogil=True)
+def _clean_sigma(z, valid, normals, fill, gains, out, v0, v1):
+    """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma on a clean frame (see :func:`d2nt_sigma`); ``gains``: see
+    :func:`_clean_sigma_row`."""
+    H, W = z.shape
+    # the spans of the valid pixels of rows v0 - 2 .. v1 + 2, row y at y - v0 + 2
+    spans = np.zeros((v1 - v0 + 5, 2), np.int64)
+    for y in range(max(v0 - 2, 0), min(v1 + 3, H)):
+        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = valid_span(valid[y])
+    rows = np.zeros((4, 4, W + 4), np.float32)
+    pairs = np.zeros((5, 2, W + 4), np.float32)
+    depth = np.zeros((3, 2, W + 4), np.float32)
+    scratch = np.zeros((2, W + 4), np.float32)
+
+    def span(y):
+        return spans[y - v0 + 2, 0], spans[y - v0 + 2, 1]
+
+    _clean_normals_row(valid, normals, fill, v0 - 2, *span(v0 - 2), rows[(v0 - 2) % 4])
+    _clean_depth_row(z, valid, v0 - 1, *span(v0 - 1), depth[(v0 - 1) % 3])
+    _clean_depth_row(z, valid, v0, *span(v0), depth[v0 % 3])
+    for y in range(v0 - 2, v1 + 2):
+        _clean_normals_row(valid, normals, fill, y + 1, *span(y + 1), rows[(y + 1) % 4])
+        _clean_pairs_row(rows, y, *span(y), scratch, pairs[y % 5])
+        v = y - 2
+        if v < v0:
+            continue
+        _clean_depth_row(z, valid, v + 1, *span(v + 1), depth[(v + 1) % 3])
+        lo, hi = span(v)
+        out[v, :lo] = np.nan
+        out[v, max(lo, hi) :] = np.nan
+        if lo < hi:
+            _clean_sigma_row(v, rows, depth, pairs, gains, lo, hi, out[v])
+
+
 def d2nt_sigma(z, valid, cam, normals, noise, *, clean=False, fill=0.0, out=None, bands=whole) -> np.ndarray:
-    """``d2nt_v3``'s sigma (degrees; NaN where the normal is ``fill``), see :func:`_d2nt_sigma`, with ``D2NT_GAIN``,
-    ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT``, ``D2NT_TURN`` and ``FLOOR_DEG``, at most ``CLEAN_MAX_DEG`` on a
-    ``clean`` frame; ``noise``: the frame's rho against depth as (z0, inv_step, table) of
-    :func:`surfnorm.kernels._windows.radius_table`."""
+    """``d2nt_v3``'s sigma (degrees; NaN where the normal is ``fill``): on a ``clean`` frame the clean model
+    (:func:`_clean_sigma`, with ``CLEAN_BEND``, ``CLEAN_TURN``, ``CLEAN_FLOOR_DEG``, at most ``CLEAN_MAX_DEG``),
+    else the 3x3 fits' (:func:`_d2nt_sigma`, with ``D2NT_GAIN``, ``D2NT_MISFIT_GAIN``, ``D2NT_DISAGREEMENT``,
+    ``D2NT_TURN`` and ``FLOOR_DEG``); ``noise``: the frame's rho against depth as (z0, inv_step, table) of
+    :func:`surfnorm.kernels._windows.radius_table` (not read on a clean frame)."""
     out = np.empty(z.shape, np.float32) if out is None else out
     normals = np.ascontiguousarray(normals, np.float32)
+    if clean:
+        f = math.sqrt(cam.fx * cam.fy)
+        gains = (f * float(CLEAN_BEND), float(CLEAN_TURN), float(CLEAN_FLOOR_DEG) ** 2, float(CLEAN_MAX_DEG))
+        args = (z, valid, normals, np.float32(fill), gains, out)
+        bands(lambda a, b: _clean_sigma(*args, a, b), z.shape[0])
+        return out
     args = (z, valid, normals, np.float32(fill), _cam(cam), noise)
     gains = (
         float(D2NT_GAIN),
@@ -583,7 +780,7 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, clean=False, fill=0.0, out=None
         float(D2NT_DISAGREEMENT),
         float(D2NT_TURN),
     )
-    tail = (float(FLOOR_DEG) ** 2, float(NO_FIT_DEG), float(CLEAN_MAX_DEG if clean else MAX_DEG))
+    tail = (float(FLOOR_DEG) ** 2, float(NO_FIT_DEG), float(MAX_DEG))
     bands(lambda a, b: _d2nt_sigma(*args, gains, *tail, out, a, b), z.shape[0])
     return out
 
@@ -612,14 +809,18 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
         )
     if t < 1.0:
         profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
-        z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
+        clean = adaptive_weight(profile) == 0.0
+        noise = None  # the clean model does not read it
+        if not clean:
+            z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
+            noise = (z0, inv_step, rho)
         d2nt = d2nt_sigma(
             z,
             valid,
             cam,
             normals,
-            (z0, inv_step, rho),
-            clean=adaptive_weight(profile) == 0.0,
+            noise,
+            clean=clean,
             fill=fill,
             out=out if t == 0.0 else None,
             bands=bands,

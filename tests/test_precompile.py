@@ -36,6 +36,9 @@ def test_variants_cover_the_kernel_choices():
         assert {"method": name} in kinds and {"method": name + "+mnr"} in kinds
         assert {"method": name, "mask": True} in kinds
     assert {"method": "plane_svd", "window": 5} in variants("plane_svd")
+    for name in ("auto", "adaptive_fit", "d2nt_v3"):  # sigma's kernels: the clean frame's and the noisy one's
+        assert {"method": name, "uncertainty": True} in variants(name)
+    assert not any(v.get("uncertainty") for v in variants("plane_svd"))
     sda = variants("sda_sne")
     assert {"method": "sda_sne", "scale_invariant": True} in sda and {"method": "sda_sne", "base": "3f2n"} in sda
     assert {"method": "sda_sne", "base": "3f2n", "scale_invariant": True} in sda

@@ -15,8 +15,9 @@ CPU, same Python and Numba) loads the compiled code. It calls
 and a small noisy one (``auto`` runs d2nt_v3 on the first, adaptive_fit on the
 second) for each method (optionally only those named) in every variant that
 compiles different code: the default options, with a mask, in the
-scale-invariant mode, followed by ``+mnr``, and the options whose values select
-other kernels (a larger plane-fit window, SDA-SNE's 3F2N base). New registered
+scale-invariant mode, followed by ``+mnr``, with ``uncertainty=True`` (the methods
+that give a sigma), and the options whose values select other kernels (a larger
+plane-fit window, SDA-SNE's 3F2N base). New registered
 methods are covered without change.
 
 Where the cache goes: Numba writes it into ``__pycache__`` beside the sources
@@ -45,10 +46,13 @@ KERNEL_CHOICES: dict[str, list] = {"window": [5], "base": ["3f2n"]}
 
 def variants(name: str) -> list[dict]:
     """The keyword arguments of ``estimate`` that together compile every kernel of method ``name``."""
+    from ._api import UNCERTAIN
     from .methods import _REGISTRY
 
     method = _REGISTRY[name]
     out: list[dict] = [{"method": name}, {"method": name, "mask": True}, {"method": name + "+mnr"}]
+    if name in UNCERTAIN:
+        out.append({"method": name, "uncertainty": True})
     if method.ties:
         out.append({"method": name, "scale_invariant": True})
     for option, values in KERNEL_CHOICES.items():

@@ -61,7 +61,7 @@ between pixels. Sigma there comes from two quantities that cost a pass over the 
   lower neighbour, both with a normal), over the pairs of the pixels of the 5x5 neighbourhood: the facets and
   creases around the pixel, which the ground truth of a rendered mesh smooths over::
 
-    sigma^2 = CLEAN_FLOOR_DEG^2 + (CLEAN_BEND f b)^2 + CLEAN_TURN t     (in degrees^2), at most CLEAN_MAX_DEG   (4)
+    sigma^2 = CLEAN_FLOOR_DEG^2 + (180 / pi)^2 ((CLEAN_BEND f b)^2 + CLEAN_TURN t),  sigma <= CLEAN_MAX_DEG   (4)
 
 Where every window beside a pixel spans a discontinuity (a thin part, detail finer than a pixel) DAG takes its
 gradients from the smoother side and errs by less than the bend says: at most ``CLEAN_MAX_DEG``. The numbers of

@@ -27,7 +27,9 @@ m, and the intrinsics given by ``--fx --fy --cx --cy``.
 What runs, for each pair (i, i + k), k in ``--strides``: the source is frame i + k, the target frame i, so that ICP's
 answer maps source points into the target's camera frame and is compared with inv(T_i) @ T_{i+k} (T = camera to
 world). Before any ICP the script checks that convention: the ground truth's relative pose must leave a smaller
-point-to-plane residual than its inverse and than the identity, on every pair, or it stops. Both clouds are the
+point-to-plane residual than its inverse and the two world-side products on at least 90 % of the pairs, or it stops
+(the pairs where it does not are reported: a real sequence's ground truth has errors of its own). A pair whose two
+depth frames are identical (a dropped frame sent twice, as TUM RGB-D has) is left out and reported. Both clouds are the
 back-projected pixels (0-based pixel centres), thinned by a voxel grid of ``--voxel`` metres that keeps the first
 pixel of each voxel in raster order, with that pixel's own normal (no averaging of points or normals). Open3D's
 ``registration_icp`` with ``TransformationEstimationPointToPlane()`` (L2), identity initial guess, maximum
@@ -75,6 +77,9 @@ ROOT = Path(__file__).resolve().parents[1]
 MAX_ITERATIONS = 50
 RELATIVE = 1e-6
 KEEP_PERCENTILE = 70.0
+#: The share of the pairs on which the ground truth's relative pose may lose the convention check (a real
+#: sequence's ground truth has errors of its own) before the script stops.
+CONVENTION_MISSES = 0.1
 LINEMOD_WINDOW = 5
 TUM_MAX_DT = 0.02
 
@@ -402,13 +407,18 @@ def benchmark(data: Path, strides, voxel: float, max_distance: float) -> dict:
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     depths, poses, K, meta, names = read_data(data)
     pairs = [(i, i + k) for k in strides for i in range(len(depths) - k)]
+    # a repeated frame (a sensor's dropped frame sent twice): the same depth under two poses, nothing to register
+    repeated = [[i, j] for i, j in pairs if np.array_equal(depths[i], depths[j])]
+    pairs = [(i, j) for i, j in pairs if [i, j] not in repeated]
     if not pairs:
         raise SystemExit(f"icp: no pairs with strides {strides} in {len(depths)} frames")
     convention = check_convention(depths, poses, K, pairs, voxel, max_distance)
     wrong = ("inverse_mm", "world_side_mm", "world_side_inverse_mm")
     bad = [c["pair"] for c in convention if not all(c["gt_mm"] < c[k] for k in wrong)]
-    if bad:
+    if len(bad) > CONVENTION_MISSES * len(pairs):
         raise SystemExit(f"icp: the ground truth's relative pose does not register pairs {bad}: check the convention")
+    if bad:  # a real sequence's ground truth has errors of its own (timing, motion blur): kept, and reported
+        print(f"icp: the ground truth's relative pose is not the best of the four on pairs {bad}", flush=True)
     targets: dict = {}
     results = []
     for i, j in pairs:
@@ -468,6 +478,8 @@ def benchmark(data: Path, strides, voxel: float, max_distance: float) -> dict:
             "keep_percentile": KEEP_PERCENTILE,
         },
         "convention_check": convention,
+        "convention_misses": bad,
+        "repeated_frames": repeated,
         "pairs": results,
         "summary": summarise(results),
         "summary_by_stride": {
@@ -563,6 +575,10 @@ def markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: Up to this many pairs the figure shows every pair's errors as bars; beyond, each variant's sorted errors.
+BARS_UP_TO = 30
+
+
 def figure(report: dict, path: Path) -> None:
     import matplotlib
 
@@ -570,21 +586,36 @@ def figure(report: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = [n for n, r in report["summary"].items() if r["available"]]
-    labels = [f"{r['pair'][0]}-{r['pair'][1]}" for r in report["pairs"]]
-    x = np.arange(len(labels))
-    width = 0.8 / max(1, len(names))
+    pairs = report["pairs"]
     fig, axes = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True)
-    for k, name in enumerate(names):
-        t = [r["variants"][name]["t_err_m"] * 1e3 for r in report["pairs"]]
-        a = [r["variants"][name]["r_err_deg"] for r in report["pairs"]]
-        axes[0].bar(x + (k - (len(names) - 1) / 2) * width, t, width, label=name)
-        axes[1].bar(x + (k - (len(names) - 1) / 2) * width, a, width, label=name)
+    title = "Point-to-plane ICP against the ground truth, by the target's normals"
+    if len(pairs) <= BARS_UP_TO:
+        labels = [f"{r['pair'][0]}-{r['pair'][1]}" for r in pairs]
+        x = np.arange(len(labels))
+        width = 0.8 / max(1, len(names))
+        for k, name in enumerate(names):
+            t = [r["variants"][name]["t_err_m"] * 1e3 for r in pairs]
+            a = [r["variants"][name]["r_err_deg"] for r in pairs]
+            axes[0].bar(x + (k - (len(names) - 1) / 2) * width, t, width, label=name)
+            axes[1].bar(x + (k - (len(names) - 1) / 2) * width, a, width, label=name)
+        axes[1].set_xticks(x, labels)
+        axes[1].set_xlabel("pair (target-source frame)")
+    else:  # too many pairs for bars: each variant's errors sorted, the share of pairs at or below each
+        share = 100.0 * np.arange(1, len(pairs) + 1) / len(pairs)
+        for name in names:
+            style = "-" if name.startswith("surfnorm") else "--"
+            t = np.sort([r["variants"][name]["t_err_m"] * 1e3 for r in pairs])
+            a = np.sort([r["variants"][name]["r_err_deg"] for r in pairs])
+            axes[0].plot(share, t, style, label=name)
+            axes[1].plot(share, a, style, label=name)
+        axes[0].set_yscale("log")
+        axes[1].set_yscale("log")
+        axes[1].set_xlabel(f"share of the {len(pairs)} pairs (%), each variant's errors sorted")
+        title += " (lower is better)"
     axes[0].set_ylabel("translation error (mm)")
     axes[1].set_ylabel("rotation error (deg)")
-    axes[1].set_xticks(x, labels)
-    axes[1].set_xlabel("pair (target-source frame)")
     axes[0].legend(fontsize=7, ncol=3)
-    axes[0].set_title("Point-to-plane ICP against the ground truth, by the target's normals")
+    axes[0].set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

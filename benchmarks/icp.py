@@ -371,6 +371,17 @@ def run_icp(source, target, max_distance: float) -> np.ndarray:
     return np.asarray(result.transformation).copy()
 
 
+def convention_misses(convention: list[dict]) -> list:
+    """The pairs of :func:`check_convention`'s rows on which the ground truth's relative pose does not leave the
+    smallest residual of the four conventions; SystemExit where they are more than ``CONVENTION_MISSES`` of all
+    (the convention, not the ground truth's own error, is then wrong)."""
+    wrong = ("inverse_mm", "world_side_mm", "world_side_inverse_mm")
+    bad = [c["pair"] for c in convention if not all(c["gt_mm"] < c[k] for k in wrong)]
+    if len(bad) > CONVENTION_MISSES * len(convention):
+        raise SystemExit(f"icp: the ground truth's relative pose does not register pairs {bad}: check the convention")
+    return bad
+
+
 def check_convention(depths, poses, K, pairs, voxel, max_distance) -> list[dict]:
     """The ground truth's relative pose against its inverse and the identity, by the point-to-plane residual."""
     import open3d as o3d
@@ -413,10 +424,7 @@ def benchmark(data: Path, strides, voxel: float, max_distance: float) -> dict:
     if not pairs:
         raise SystemExit(f"icp: no pairs with strides {strides} in {len(depths)} frames")
     convention = check_convention(depths, poses, K, pairs, voxel, max_distance)
-    wrong = ("inverse_mm", "world_side_mm", "world_side_inverse_mm")
-    bad = [c["pair"] for c in convention if not all(c["gt_mm"] < c[k] for k in wrong)]
-    if len(bad) > CONVENTION_MISSES * len(pairs):
-        raise SystemExit(f"icp: the ground truth's relative pose does not register pairs {bad}: check the convention")
+    bad = convention_misses(convention)
     if bad:  # a real sequence's ground truth has errors of its own (timing, motion blur): kept, and reported
         print(f"icp: the ground truth's relative pose is not the best of the four on pairs {bad}", flush=True)
     targets: dict = {}

@@ -103,3 +103,21 @@ def test_uncertainty_not_available_is_a_reason(monkeypatch):
     monkeypatch.setattr(surfnorm, "estimate", refuse)
     got, why = icp.surfnorm_uncertainty(np.ones((4, 4)), np.eye(3))
     assert got is None and "uncertainty=True" in why
+
+
+def test_the_convention_check_allows_a_tenth_of_the_pairs_to_miss():
+    def row(pair, gt, others):
+        return {
+            "pair": pair,
+            "gt_mm": gt,
+            "inverse_mm": others,
+            "world_side_mm": others,
+            "world_side_inverse_mm": others,
+        }
+
+    good = [row([i, i + 1], 2.0, 9.0) for i in range(18)]
+    misses = [row([18, 19], 5.0, 4.0), row([19, 20], 3.0, 3.0)]  # a tie is a miss
+    assert icp.convention_misses(good) == []
+    assert icp.convention_misses(good + misses) == [[18, 19], [19, 20]]  # 2 of 20
+    with pytest.raises(SystemExit, match=r"does not register pairs \[\[18, 19\], \[19, 20\], \[20, 21\]\]"):
+        icp.convention_misses(good + misses + [row([20, 21], 5.0, 1.0)])  # 3 of 21

@@ -432,7 +432,7 @@ def _test_frame(fill, noise=2e-3, seed=11):
     return z, normals, K
 
 
-def _check_sigma(got, want, z, normals, fill, banded, atol=1e-5):
+def _check_sigma(got, want, z, normals, fill, banded, atol=1e-6):
     """``got`` as ``want`` (to ``atol`` degrees), NaN exactly where there is no normal, and the same bits with rows
     on two threads."""
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=atol)

@@ -364,7 +364,7 @@ def test_centred_3x3_fits_against_least_squares():
     assert np.all(part[:, 0, :3] == np.inf) and np.all(part[:, 0, 7:] == np.inf)
 
 
-def _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill):
+def _naive_d2nt_sigma(z, valid, normals, cam, noise, fill):
     """d2nt_v3's sigma pixel by pixel, as the module's docstring says, from least-squares fits (the variance
     formulas themselves are checked against the analytic ones above)."""
     fx, fy, cx, cy = cam
@@ -388,7 +388,7 @@ def _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill):
                 if got is not None and (best is None or got[0] < best[0][0]):
                     best = (got, v + dv, u + du)
             if best is None:
-                out[v, u] = min(U.NO_FIT_DEG, max_deg)
+                out[v, u] = U.NO_FIT_DEG
                 continue
             (q, count, g_u, g_v, a, _), bv, bu = best
             o_u, o_v = float(u - bu), float(v - bv)
@@ -411,7 +411,7 @@ def _naive_d2nt_sigma(z, valid, normals, cam, noise, max_deg, fill):
                 if (y, x) != (v, u) and fit[y, x] is not None and fit[y, x][0] <= limit
             ]
             var += U.D2NT_TURN * (np.mean(turns) if turns else 0.0)
-            out[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * var + U.FLOOR_DEG**2), U.MAX_DEG, max_deg)
+            out[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * var + U.FLOOR_DEG**2), U.MAX_DEG)
     return out
 
 
@@ -449,7 +449,7 @@ def test_d2nt_sigma_against_a_naive_reference(fill):
     valid = z > 0
     rng = np.random.default_rng(12)
     noise = (1.4, 20.0, rng.uniform(1e-4, 3e-3, 8))  # the frame's rho at 1.4 + k / 20 m
-    want = _naive_d2nt_sigma(z, valid, normals, (FX, FY, CX, CY), noise, U.MAX_DEG, fill)
+    want = _naive_d2nt_sigma(z, valid, normals, (FX, FY, CX, CY), noise, fill)
     cam = surfnorm.Intrinsics.from_matrix(K)
     got = U.d2nt_sigma(z, valid, cam, normals, noise, fill=fill)
 

@@ -488,12 +488,12 @@ def _turn(sums, fits, p, limit, m0, m1, m2):
 def _sigma_row(z, valid, normals, fill, v, fits, cam, noise, gains, tail, lo, hi, out):
     """Row v of ``d2nt_v3``'s sigma, pixels lo .. hi - 1, into ``out`` (the row; see :func:`_d2nt_sigma`):
     ``normals``, row v's (3 W); ``fits``, :func:`_fits3_row` of rows v - 1, v, v + 1 (row y at y % 3); ``gains``:
-    (gain, misfit_gain, significance, disagreement, turn); ``tail``: (floor2, no_fit, max_deg). Branch-free."""
+    (gain, misfit_gain, significance, disagreement, turn); ``tail``: (floor2, no_fit). Branch-free."""
     fx, fy, cx, cy = cam
     f = math.sqrt(fx * fy)
     rho_z0, rho_inv_step, rho_t = noise
     gain, misfit_gain, significance, disagreement, turn = gains
-    floor2, no_fit, max_deg = tail
+    floor2, no_fit = tail
     up, mid, dn = fits[(v - 1) % 3], fits[v % 3], fits[(v + 1) % 3]
     zr = z[v]
     ok_r = valid[v]
@@ -540,23 +540,23 @@ def _sigma_row(z, valid, normals, fill, v, fits, cam, noise, gains, tail, lo, hi
         t = _turn(t, dn, p - one, limit, m0, m1, m2)
         t = _turn(t, dn, p, limit, m0, m1, m2)
         total, count = _turn(t, dn, p + one, limit, m0, m1, m2)
-        sigma = min(_degrees(var + turn * total / max(count, 1.0), floor2), max_deg)
+        sigma = _degrees(var + turn * total / max(count, 1.0), floor2)
         out[u] = select(ok, select(fitted, sigma, no_fit), np.nan)
 
 
 @njit(nogil=True)
-def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, max_deg, out, v0, v1):
+def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, out, v0, v1):
     """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma: of the 3x3 windows centred on the pixel and with it at a corner
     (``fits`` of :func:`_fits3_row`), the one with the smallest residual per dof (a pixel beside a
     discontinuity is judged by its own side, as DAG takes its gradient from the smoother side): its plane's
     variance at the pixel (:func:`fit_variance` at r = 1), plus ``disagreement`` times the squared sine of the angle
     between the normal and that plane's, plus ``turn`` times the mean squared sine of the angles to the planes of
     its eight neighbours' windows that fit within the noise (the adaptive fit's noise test: a surface that turns
-    between pixels, as a mesh's facets do, is not where its pixels' planes say); at most ``max_deg``. ``gains``:
+    between pixels, as a mesh's facets do, is not where its pixels' planes say); at most ``MAX_DEG``; ``no_fit`` where no window has a fit. ``gains``:
     (gain, misfit_gain, significance, disagreement, turn). Only the columns from a row's first to its last valid
     pixel are worked on."""
     H, W = z.shape
-    tail = (floor2, min(no_fit, max_deg), max_deg)
+    tail = (floor2, no_fit)
     # the spans of the valid pixels of rows v0 - 2 .. v1 + 1, row y at y - v0 + 2
     spans = np.zeros((v1 - v0 + 4, 2), np.int64)
     for y in range(max(v0 - 2, 0), min(v1 + 2, H)):
@@ -780,7 +780,7 @@ def d2nt_sigma(z, valid, cam, normals, noise, *, clean=False, fill=0.0, out=None
         float(D2NT_DISAGREEMENT),
         float(D2NT_TURN),
     )
-    tail = (float(FLOOR_DEG) ** 2, float(NO_FIT_DEG), float(MAX_DEG))
+    tail = (float(FLOOR_DEG) ** 2, float(NO_FIT_DEG))
     bands(lambda a, b: _d2nt_sigma(*args, gains, *tail, out, a, b), z.shape[0])
     return out
 

@@ -15,6 +15,7 @@ import argparse
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -41,8 +42,6 @@ def main(argv=None) -> int:
     print("| frame | default, ms | noise given, ms | LINEMOD, ms | default / LINEMOD | noise given / LINEMOD |")
     print("|---|---|---|---|---|---|")
     for folder in args.folders:
-        from pathlib import Path
-
         fr = read_sensor_frame(Path(folder))
         z = np.ascontiguousarray(fr.depth, np.float32)
         valid = z > 0

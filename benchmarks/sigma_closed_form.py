@@ -23,7 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # tests.surface
 import surfnorm  # noqa: E402
 from surfnorm.bench.uncertainty import deciles  # noqa: E402
 from surfnorm.kernels.uncertainty import CLEAN_MAX_DEG  # noqa: E402
-from tests.surfaces import angle_deg, camera, cylinder, plane, sphere  # noqa: E402
+from surfnorm.metrics import angular_error  # noqa: E402
+from tests.surfaces import camera, cylinder, plane, sphere  # noqa: E402
 
 
 def scene(rng, H, W, K, with_plane):
@@ -56,8 +57,7 @@ def main() -> None:
         z, normals, hit = scene(rng, H, W, K, with_plane=k % 2 == 0)
         est, sigma = surfnorm.estimate(z, K, uncertainty=True)
         m = hit & np.isfinite(sigma)
-        e = angle_deg(est[m].astype(np.float64), normals[m])
-        errors.append(np.minimum(e, 180.0 - e))
+        errors.append(angular_error(est, normals)[m].astype(np.float64))  # folded, as the calibration's
         sigmas.append(sigma[m].astype(np.float64))
     e, s = np.concatenate(errors), np.concatenate(sigmas)
     d = deciles(e, s)

@@ -545,6 +545,17 @@ def _sigma_row(z, valid, normals, fill, v, fits, cam, noise, gains, tail, lo, hi
 
 
 @njit(nogil=True)
+def _band_spans(valid, v0, v1):
+    """The spans (:func:`valid_span`) of the valid pixels of rows v0 - 2 .. v1 + 2 around a band of rows
+    v0 .. v1 - 1, row y at y - v0 + 2; (0, 0) for a row outside the frame."""
+    H = valid.shape[0]
+    spans = np.zeros((v1 - v0 + 5, 2), np.int64)
+    for y in range(max(v0 - 2, 0), min(v1 + 3, H)):
+        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = valid_span(valid[y])
+    return spans
+
+
+@njit(nogil=True)
 def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, out, v0, v1):
     """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma: of the 3x3 windows centred on the pixel and with it at a corner
     (``fits`` of :func:`_fits3_row`), the one with the smallest residual per dof (a pixel beside a
@@ -557,10 +568,7 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, out,
     pixel are worked on."""
     H, W = z.shape
     tail = (floor2, no_fit)
-    # the spans of the valid pixels of rows v0 - 2 .. v1 + 1, row y at y - v0 + 2
-    spans = np.zeros((v1 - v0 + 4, 2), np.int64)
-    for y in range(max(v0 - 2, 0), min(v1 + 2, H)):
-        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = valid_span(valid[y])
+    spans = _band_spans(valid, v0, v1)
     inputs = np.zeros((3, 3, W + 2))
     fits = np.zeros((3, 8, W + 2))
     col = np.empty((6, W + 2))
@@ -729,10 +737,7 @@ def _clean_sigma(z, valid, normals, fill, gains, out, v0, v1):
     """Rows v0 .. v1 - 1 of ``d2nt_v3``'s sigma on a clean frame (see :func:`d2nt_sigma`); ``gains``: see
     :func:`_clean_sigma_row`."""
     H, W = z.shape
-    # the spans of the valid pixels of rows v0 - 2 .. v1 + 2, row y at y - v0 + 2
-    spans = np.zeros((v1 - v0 + 5, 2), np.int64)
-    for y in range(max(v0 - 2, 0), min(v1 + 3, H)):
-        spans[y - v0 + 2, 0], spans[y - v0 + 2, 1] = valid_span(valid[y])
+    spans = _band_spans(valid, v0, v1)
     rows = np.zeros((4, 4, W + 4), np.float32)
     pairs = np.zeros((5, 2, W + 4), np.float32)
     depth = np.zeros((3, 2, W + 4), np.float32)

@@ -89,6 +89,23 @@ def test_rows_without_depth_match_naive_reference(seed, stride):
     assert np.array_equal(surfnorm.estimate(z, K, method="adaptive_fit", stride=stride, threads=2), got)
 
 
+@pytest.mark.parametrize("stride", [1, 2])
+@pytest.mark.parametrize("seed", range(3))
+def test_rows_of_every_density_match_naive_reference(seed, stride):
+    """A fitted row with few valid pixels (under half: a LiDAR frame's) works on those alone, a denser one on every
+    fitted pixel: with rows of every density from 2 % to all valid, the normals agree with the naive reference,
+    which fits pixel by pixel, and on two threads to the bit."""
+    z, K = scene(seed, H=64, holes=0.0)
+    rng = np.random.default_rng(10 + seed)
+    density = rng.uniform(0.02, 1.0, z.shape[0])
+    z[rng.random(z.shape) > density[:, None]] = 0.0
+    got = surfnorm.estimate(z, K, method="adaptive_fit", stride=stride, threads=1)
+    assert_like_naive(got, naive.adaptive_fit(z, K, stride=stride))
+    assert np.array_equal(surfnorm.estimate(z, K, method="adaptive_fit", stride=stride, threads=2), got)
+    _, sigma = surfnorm.estimate(z, K, method="adaptive_fit", stride=stride, uncertainty=True)
+    assert np.array_equal(np.isnan(sigma), ~np.any(got != 0, axis=-1))
+
+
 @pytest.mark.parametrize("seed", range(8))
 @pytest.mark.parametrize("quantum", [0.0, 0.001])
 def test_planes_any_orientation_and_distance(seed, quantum):
@@ -275,7 +292,7 @@ def test_window_ties_go_the_same_way_in_every_unit():
 @pytest.mark.parametrize("r", [1, 2, 4, 15, 40])
 def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
     """box_row, box_row_sparse and coordinate_sums (the row path of the window sums) give, for every picked fitted pixel
-    (column u = stride i), exactly (bottom - top at column u + r + 1) - (bottom - top at column u - r),
+    (column u = stride i, or the columns of a compacted row), exactly (bottom - top at column u + r + 1) - (bottom - top at column u - r),
     clipped, with the integral columns where integral_positions places them; box_row keeps src elsewhere
     unless ``first``, and coordinate_sums fills only windows that are not the full square. The kernel's
     outputs rest on these bits (the windows' fits and every decision made from them)."""
@@ -307,16 +324,21 @@ def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
         np.testing.assert_array_equal(dst[:, pick], box[list(_BOXED)][:, pick])
         if not first:
             np.testing.assert_array_equal(dst[:, ~pick], src[:, ~pick])
-    in_place = src.copy()  # the pixel-by-pixel path: the same sums where picked, the rest kept
-    box_row_sparse(top, bottom, r, stride, pos, pick, in_place)
-    np.testing.assert_array_equal(in_place[:, pick], box[list(_BOXED)][:, pick])
-    np.testing.assert_array_equal(in_place[:, ~pick], src[:, ~pick])
-    counts = np.where(rng.random(n_fit) < 0.5, float((2 * r + 1) ** 2), box[0])
-    coords = np.full((len(_COORDS), n_fit), np.nan)
-    coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords)
-    fill = pick & (counts != (2 * r + 1) ** 2)
-    np.testing.assert_array_equal(coords[:, fill], box[list(_COORDS)][:, fill])
-    assert np.isnan(coords[:, ~fill]).all()
+    # the pixel-by-pixel path, at the fitted columns and at a compacted row's (some of them, in their order): the
+    # same sums where picked, the rest kept
+    few = np.flatnonzero(rng.random(n_fit) < 0.3)
+    for k in (np.arange(n_fit), few):
+        cols = u[k]
+        in_place = src[:, k].copy()
+        box_row_sparse(top, bottom, r, cols, pos, pick[k], in_place)
+        np.testing.assert_array_equal(in_place[:, pick[k]], box[list(_BOXED)][:, k][:, pick[k]])
+        np.testing.assert_array_equal(in_place[:, ~pick[k]], src[:, k][:, ~pick[k]])
+        counts = np.where(rng.random(k.size) < 0.5, float((2 * r + 1) ** 2), box[0, k])
+        coords = np.full((len(_COORDS), k.size), np.nan)
+        coordinate_sums(top, bottom, r, cols, pos, pick[k], counts, coords)
+        fill = pick[k] & (counts != (2 * r + 1) ** 2)
+        np.testing.assert_array_equal(coords[:, fill], box[list(_COORDS)][:, k][:, fill])
+        assert np.isnan(coords[:, ~fill]).all()
 
 
 def test_stride_follows_the_density_of_the_depth():

@@ -313,12 +313,13 @@ SPARSE = 8
 
 
 @njit(noalias=True, _nrt=False)
-def box_row_sparse(top, bottom, r, stride, pos, pick, dst):
-    """:func:`box_row` pixel by pixel, in place: dst[j, i] for the pixels where ``pick`` only (the same sums)."""
+def box_row_sparse(top, bottom, r, cols, pos, pick, dst):
+    """:func:`box_row` pixel by pixel, in place: dst[j, i] for the pixels where ``pick`` only (the same sums), the
+    fitted pixel i at column ``cols[i]`` (any columns, in any order)."""
     W = pos.shape[0] - 1
-    for i in range(dst.shape[1]):
+    for i in range(pick.shape[0]):
         if pick[i]:
-            u = stride * i
+            u = cols[i]
             u0 = pos[max(u - r, 0)]
             u1 = pos[min(u + r + 1, W)]
             for j in range(len(_BOXED)):
@@ -327,14 +328,14 @@ def box_row_sparse(top, bottom, r, stride, pos, pick, dst):
 
 
 @njit(noalias=True, _nrt=False)
-def coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords):
-    """The coordinate sums (``_COORDS``) at radius r into coords[j, i] (columns u = stride i), for the pixels
-    where ``pick`` whose window is not the full (2r + 1)^2 square (``counts``, from :func:`box_row`)."""
+def coordinate_sums(top, bottom, r, cols, pos, pick, counts, coords):
+    """The coordinate sums (``_COORDS``) at radius r into coords[j, i] (the fitted pixel i at column ``cols[i]``), for
+    the pixels where ``pick`` whose window is not the full (2r + 1)^2 square (``counts``, from :func:`box_row`)."""
     W = pos.shape[0] - 1
     full = (2 * r + 1) * (2 * r + 1)
-    for i in range(coords.shape[1]):
+    for i in range(pick.shape[0]):
         if pick[i] and counts[i] != full:
-            u = stride * i
+            u = cols[i]
             u0 = pos[max(u - r, 0)]
             u1 = pos[min(u + r + 1, W)]
             for j in range(len(_COORDS)):
@@ -343,18 +344,22 @@ def coordinate_sums(top, bottom, r, stride, pos, pick, counts, coords):
 
 
 @pixel
-def picked_sums(ring, slot, H, v, r, stride, pos, pick, count, first, cur, spare, coords):
+def picked_sums(ring, slot, H, v, r, stride, pos, cols, pick, count, first, cur, spare, coords):
     """The window sums at radius r of the ``count`` pixels of row v where ``pick``: the count and w moments into
     ``cur`` (the others keep theirs), or into ``spare`` with the others copied (:func:`box_row`, where many take
-    them), and the coordinate moments into ``coords``. Returns (cur, spare), swapped in the second case."""
+    them), and the coordinate moments into ``coords``. Returns (cur, spare), swapped in the second case.
+
+    The row's fitted pixels are at columns ``cols``: every ``stride``-th column of the row (``stride`` > 0), or any
+    columns (``stride`` 0: the valid ones of a sparse row, :func:`surfnorm.kernels.adaptive_fit._adaptive_fit_kernel`),
+    which go pixel by pixel."""
     top = ring[slot[max(v - r, 0)]]
     bottom = ring[slot[min(v + r + 1, H)]]
-    if SPARSE * count < cur.shape[1]:
-        box_row_sparse(top, bottom, r, stride, pos, pick, cur)
+    if stride == 0 or SPARSE * count < pick.shape[0]:
+        box_row_sparse(top, bottom, r, cols, pos, pick, cur)
     else:
         cur, spare = spare, cur
         box_row(top, bottom, r, stride, pos, pick, first, spare, cur)
-    coordinate_sums(top, bottom, r, stride, pos, pick, cur[0], coords)
+    coordinate_sums(top, bottom, r, cols, pos, pick, cur[0], coords)
     return cur, spare
 
 

@@ -189,9 +189,9 @@ def fit_at(m_box, m_coords, r_row, x_row, y, u):
 def fit_row(m_box, m_coords, r_row, x_row, y, g_u, g_v, a, rss, dof):
     """:func:`affine_fit` for every pixel of row ``y``, from the row's window moments (``m_box``: the
     ``_BOXED`` ones, ``m_coords``: the ``_COORDS`` ones), radii ``r_row`` and centred abscissae ``x_row``
-    (floats, holding integers and half-integers exactly: int64 operands would not vectorise)."""
-    W = m_box.shape[1]
-    for u in range(W):
+    (floats, holding integers and half-integers exactly: int64 operands would not vectorise); as many pixels as
+    ``a`` holds (the moment arrays may be wider)."""
+    for u in range(a.shape[0]):
         a[u], g_u[u], g_v[u], rss[u], dof[u] = fit_at(m_box, m_coords, r_row, x_row, y, u)
 
 
@@ -215,18 +215,19 @@ def widened_row(
 
 
 @njit(noalias=True, _nrt=False)
-def window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments):
+def window_moments(sums, W, v, cols, valid_row, dof, r_row, shifted, m, moments):
     """The coordinate moments (u', v', u'u', u'v', v'v') of each fitted pixel's window that is not the full square
     (where it has a fit: valid, ``dof`` > 0; radius ``r_row``, centre ``shifted`` from the pixel) into
     ``moments`` (5, fitted pixels), read again from the integral rows (``sums``). Its count is the fit's, dof + 3;
-    a full square's moments are known (as in :func:`affine_fit`), and most windows of dense depth are one."""
-    ring, slot, H, stride, pos = sums
+    a full square's moments are known (as in :func:`affine_fit`), and most windows of dense depth are one. The
+    fitted pixel i is at column ``cols[i]``."""
+    ring, slot, H, _, pos = sums
     _, shift_u, shift_v = shifted
-    for i in range(moments.shape[1]):
+    for i in range(r_row.shape[0]):
         r = r_row[i]
         if not (valid_row[i] and dof[i] > 0.0) or dof[i] + 3.0 == (2 * r + 1) * (2 * r + 1):
             continue
-        window_sums(ring, slot, pos, H, W, v + int(shift_v[i]), stride * i + int(shift_u[i]), r, _COORDS, m)
+        window_sums(ring, slot, pos, H, W, v + int(shift_v[i]), cols[i] + int(shift_u[i]), r, _COORDS, m)
         for c in range(5):
             moments[c, i] = m[c + 1]
 
@@ -237,13 +238,13 @@ def variance_row(row, fit, window, noise, cam, gains, out_row):
     (:func:`surfnorm.kernels.uncertainty.fit_covariance`, :func:`~surfnorm.kernels.uncertainty.angle_variance_cov`),
     NaN where it has no fit. Branch-free.
 
-    ``row``: (z_row, valid_row, x_row, v, y, stride), the fitted pixels' depth, validity and centred abscissae,
-    the row and its centred ordinate; ``fit``: (a, g_u, g_v, rss, dof); ``window``: (r_row, shifted, moments),
+    ``row``: (z_row, valid_row, x_row, v, y, cols), the fitted pixels' depth, validity and centred abscissae,
+    the row, its centred ordinate and the fitted pixels' columns; ``fit``: (a, g_u, g_v, rss, dof); ``window``: (r_row, shifted, moments),
     the radius, the centre's offset (``shifted``: (record, shift_u, shift_v) of :func:`_edge_row`) and the
     coordinate moments (:func:`window_moments`; the count is dof + 3); ``noise``: (rho_table, t_row), the noise at
     each pixel's depth; ``gains`` as in :func:`_adaptive_fit_kernel`.
     """
-    z_row, valid_row, x_row, v, y, stride = row
+    z_row, valid_row, x_row, v, y, cols = row
     r_row, shifted, moments = window
     rho_table, t_row = noise
     a, g_u, g_v, rss, dof = fit
@@ -270,7 +271,7 @@ def variance_row(row, fit, window, noise, cam, gains, out_row):
         g_uu, g_vv, g_uv, var_a, c_u, c_v = fit_covariance(
             rss[i] / d, n, cuu, cuv, cvv, x_row[i] - mu, y - mv, noise * noise, gains[0], gains[1], gains[2], gains[3]
         )
-        u = stride * i
+        u = cols[i]
         nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
         out_row[i] = select(
             ok, angle_variance_cov(nx, ny, nz, zp, u, v, fx, fy, cx, cy, g_uu, g_vv, g_uv, var_a, c_u, c_v), np.nan
@@ -310,7 +311,7 @@ def _start_radii(z_row, valid_row, tables, t_row, r_row, need, present):
 
 
 @pixel
-def _grown_sums(sums, v, grow, r_max, valid_row, r_row, need, present, pick, m_a, m_b, m_coords):
+def _grown_sums(sums, v, grow, r_max, cols, valid_row, r_row, need, present, pick, m_a, m_b, m_coords):
     """The window sums of row v's valid fitted pixels at their radii ``r_row``, radius by radius, into ``m_coords``
     and the returned array (``m_a`` or ``m_b``, the other one its scratch: :func:`picked_sums`).
 
@@ -330,7 +331,7 @@ def _grown_sums(sums, v, grow, r_max, valid_row, r_row, need, present, pick, m_a
             p = valid_row[u] & (r_row[u] == r)
             pick[u] = p
             count += p
-        m_row, m_src = picked_sums(ring, slot, H, v, r, stride, pos, pick, count, first, m_row, m_src, m_coords)
+        m_row, m_src = picked_sums(ring, slot, H, v, r, stride, pos, cols, pick, count, first, m_row, m_src, m_coords)
         first = False
         if r == r_max:
             continue
@@ -348,7 +349,7 @@ def _grown_sums(sums, v, grow, r_max, valid_row, r_row, need, present, pick, m_a
 
 @pixel
 def _widened_sums(
-    sums, v, widen, r_max, r_row, passed, present, widened, tried, pick, r_try, r_try_f, m_c, m_d, m_coords
+    sums, v, widen, r_max, cols, r_row, passed, present, widened, tried, pick, r_try, r_try_f, m_c, m_d, m_coords
 ):
     """The window sums at the next radius (``widen``) of the pixels whose fit ``passed`` (at a radius of
     ``present``), into ``m_coords`` and the returned array (``m_c`` or ``m_d``): ``tried`` where they were taken,
@@ -376,19 +377,20 @@ def _widened_sums(
         if count == 0:
             continue
         widened[r2] = True
-        m_try, m_old = picked_sums(ring, slot, H, v, r2, stride, pos, pick, count, first, m_try, m_old, m_coords)
+        m_try, m_old = picked_sums(ring, slot, H, v, r2, stride, pos, cols, pick, count, first, m_try, m_old, m_coords)
         first = False
     return m_try, not first
 
 
 @pixel
-def _edge_row(sums, W, v, y, x_row, z_row, valid_row, fit, limit, r_row, counts, kappa, m, shifted):
+def _edge_row(sums, W, v, y, cols, x_row, z_row, valid_row, fit, limit, r_row, counts, kappa, m, shifted):
     """The edge test on row v: a valid pixel whose fit (``fit``: a, g_u, g_v, rss, dof, updated in place) fails
     the noise test takes the best of the four quadrant windows of its radius (smallest residual per dof) among
     those whose plane passes through the pixel itself; ``counts``: the centred windows' counts; ``m`` scratch
     (_N_MOMENTS,). ``shifted``: (record, shift_u, shift_v): where recording, the chosen window's residual stays
-    in rss and its offset goes to shift_u, shift_v (the centred window's is 0)."""
-    ring, slot, H, stride, pos = sums
+    in rss and its offset goes to shift_u, shift_v (the centred window's is 0). The fitted pixel i is at column
+    ``cols[i]``."""
+    ring, slot, H, _, pos = sums
     a, g_u, g_v, rss, dof = fit
     record, shift_u, shift_v = shifted
     if record:
@@ -400,7 +402,7 @@ def _edge_row(sums, W, v, y, x_row, z_row, valid_row, fit, limit, r_row, counts,
         ok = dof[i] > 0.0
         if ok and rss[i] <= limit[i] * dof[i]:
             continue
-        u = stride * i
+        u = cols[i]
         x = x_row[i]
         r = r_row[i]
         # A candidate is consistent when its plane passes through the pixel itself (within kappa
@@ -442,6 +444,18 @@ def _edge_row(sums, W, v, y, x_row, z_row, valid_row, fit, limit, r_row, counts,
                     shift_v[i] = dv
 
 
+#: A fitted row works on its valid pixels alone (compacted) where fewer than one in COMPACT of them are valid.
+COMPACT = 2
+
+
+@pixel
+def _scatter(dst, empty, cols, stride, src):
+    """dst[cols[i] // stride] = src[i], and ``empty`` elsewhere in ``dst``."""
+    dst[:] = empty
+    for i in range(src.shape[0]):
+        dst[cols[i] // stride] = src[i]
+
+
 @pixel
 def _floats(n):
     """Five float64 rows of ``n``."""
@@ -467,8 +481,8 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
 
     ``tables``: (z0, inv_step, radius, rho) of :func:`radius_table`; ``steps``: (grow, widen) of
     :func:`growth_table` and :func:`widen_table`; ``cam``: (fx, fy, cx, cy); ``options``: (n_widen, kappa,
-    rho_floor, r_max, fill); ``work``: (ring, cols, pos, w_scratch, made), the ``ring`` that holds the integral
-    rows up to ``made`` and ``cols`` the column sums after it (:func:`surfnorm.kernels._windows.prime`), ``pos``:
+    rho_floor, r_max, fill); ``work``: (ring, col_sums, pos, w_scratch, made), the ``ring`` that holds the integral
+    rows up to ``made`` and ``col_sums`` the column sums after it (:func:`surfnorm.kernels._windows.prime`), ``pos``:
     :func:`surfnorm.kernels._windows.integral_positions`, ``w_scratch``: (W,).
 
     The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
@@ -492,23 +506,32 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     grow, widen = steps
     fx, fy, cx, cy = cam
     n_widen, kappa, rho_floor, r_max, fill = options
-    ring, cols, pos, w_scratch, made = work
-    sums = (ring, np.arange(H + 1) % ring.shape[0], H, stride, pos)
+    ring, col_sums, pos, w_scratch, made = work
+    slot = np.arange(H + 1) % ring.shape[0]
+    sums = (ring, slot, H, stride, pos)
+    sums_any = (ring, slot, H, 0, pos)  # a compacted row's pixels: any columns (picked_sums)
     n_fit = (W + stride - 1) // stride
     m = np.zeros(_N_MOMENTS)
     m_a, m_b = np.zeros((len(_BOXED), n_fit)), np.zeros((len(_BOXED), n_fit))
     m_c, m_d = np.zeros((len(_BOXED), n_fit)), np.zeros((len(_BOXED), n_fit))
     m_coords, m_coords2 = np.zeros((len(_COORDS), n_fit)), np.zeros((len(_COORDS), n_fit))
-    x_row = np.empty(n_fit)
+    # every fitted pixel of a row (its column, centred abscissa, depth and validity), and the valid ones of a row
+    # that has few (compacted)
+    x_all, x_few, z_all, z_few = _floats(n_fit)[:4]
+    cols_all, cols_few = np.empty(n_fit, np.int64), np.empty(n_fit, np.int64)
+    valid_all, valid_few = np.empty(n_fit, np.bool_), np.ones(n_fit, np.bool_)
     for i in range(n_fit):
-        x_row[i] = stride * i - 0.5 * W
-    z_row, need, limit, r_float, r_try_f = _floats(n_fit)
-    g_u, g_v, a, rss, dof = _floats(n_fit)
-    g_u3, g_v3, a3, rss3, dof3 = _floats(n_fit)
-    valid_row, pick, passed, tried = _flags(n_fit)
-    r_row, r_try, r_next, t_row = _ints(n_fit)
+        cols_all[i] = stride * i
+        x_all[i] = stride * i - 0.5 * W
+    # the row's planes at every fitted pixel, for the assembly, where the row was compacted
+    a_all, g_u_all, g_v_all, dof_all, limit_all = _floats(n_fit)
+    need_b, limit_b, r_float_b, r_try_f_b, var_b = _floats(n_fit)
+    g_u_b, g_v_b, a_b, rss_b, dof_b = _floats(n_fit)
+    g_u3_b, g_v3_b, a3_b, rss3_b, dof3_b = _floats(n_fit)
+    pick_b, passed_b, tried_b, _ = _flags(n_fit)
+    r_row_b, r_try_b, r_next_b, t_row_b = _ints(n_fit)
     record = info.shape[0] > 0
-    shifted = (record, np.zeros(n_fit), np.zeros(n_fit))
+    shift_u_b, shift_v_b = np.zeros(n_fit), np.zeros(n_fit)
     moments = np.zeros((5, n_fit if record else 0))
     present = np.zeros(r_max + 2, np.bool_)
     widened = np.zeros(r_max + 2, np.bool_)
@@ -529,33 +552,69 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     band = (z, valid, v0, v1, stride, v_first, fitted, none, cam, fill, got, out_flat, has)
     for v in range(v_first, v_last + 1, stride):
         if made < min(H, v + 2 * r_max + 1):  # the integral rows of this row's windows (``made``: the last one)
-            made = make_rows(z, valid, ring, cols, pos, w_scratch, made, min(H, v + 2 * r_max + 1), 0)
+            made = make_rows(z, valid, ring, col_sums, pos, w_scratch, made, min(H, v + 2 * r_max + 1), 0)
         y = v - 0.5 * H
-        any_valid = False
+        n_valid = 0
         for i in range(n_fit):
-            z_row[i] = z[v, stride * i]
-            valid_row[i] = valid[v, stride * i]
-            any_valid |= valid_row[i]
-        if not any_valid:  # no fits (a LiDAR frame's upper rows): valid_row alone gives the fill and no planes
+            z_all[i] = z[v, stride * i]
+            valid_all[i] = valid[v, stride * i]
+            n_valid += valid_all[i]
+        if n_valid == 0:  # no fits (a LiDAR frame's upper rows): valid_all alone gives the fill and no planes
             if record:
                 info[v // stride, :] = np.nan
-            row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
+            row_done(v, valid_all, a_all, g_u_all, g_v_all, dof_all, limit_all, ok_row, band)
             continue
+        # A row with few valid fitted pixels (sparse depth) works on those alone, each at its column, with the same
+        # arithmetic (the same bits); a denser row on every fitted pixel, whole rows at a time (they vectorise).
+        few = COMPACT * n_valid < n_fit
+        if few:
+            n = 0
+            for i in range(n_fit):
+                if valid_all[i]:
+                    z_few[n] = z_all[i]
+                    x_few[n] = x_all[i]
+                    cols_few[n] = cols_all[i]
+                    n += 1
+            z_row, valid_row, x_row, cols, row_sums = z_few[:n], valid_few[:n], x_few[:n], cols_few[:n], sums_any
+        else:
+            n = n_fit
+            z_row, valid_row, x_row, cols, row_sums = z_all, valid_all, x_all, cols_all, sums
+        need, limit, r_float, r_try_f = need_b[:n], limit_b[:n], r_float_b[:n], r_try_f_b[:n]
+        g_u, g_v, a, rss, dof = g_u_b[:n], g_v_b[:n], a_b[:n], rss_b[:n], dof_b[:n]
+        g_u3, g_v3, a3, rss3, dof3 = g_u3_b[:n], g_v3_b[:n], a3_b[:n], rss3_b[:n], dof3_b[:n]
+        pick, passed, tried = pick_b[:n], passed_b[:n], tried_b[:n]
+        r_row, r_try, r_next, t_row = r_row_b[:n], r_try_b[:n], r_next_b[:n], t_row_b[:n]
+        shifted = (record, shift_u_b[:n], shift_v_b[:n])
         _start_radii(z_row, valid_row, tables, t_row, r_row, need, present)
-        m_row = _grown_sums(sums, v, grow, r_max, valid_row, r_row, need, present, pick, m_a, m_b, m_coords)
-        for u in range(n_fit):
+        m_row = _grown_sums(row_sums, v, grow, r_max, cols, valid_row, r_row, need, present, pick, m_a, m_b, m_coords)
+        for u in range(n):
             r_float[u] = r_row[u]
         fit_row(m_row, m_coords, r_float, x_row, y, g_u, g_v, a, rss, dof)
         # The noise test: a fit is consistent with the noise when its residual per degree of
         # freedom is at most the limit (kappa sigma_w)^2.
-        for u in range(n_fit):
+        for u in range(n):
             limit[u] = noise_limit(z_row[u], rho_table[t_row[u]], f, kappa, rho_floor)
             passed[u] = valid_row[u] & (dof[u] > 0.0) & (rss[u] <= limit[u] * dof[u])
         # Wider where the data allow: a fit that passes is tried on a window twice as wide, kept
         # while it still passes (planes get wide windows, curved surfaces and edges keep theirs).
         for _ in range(n_widen):
             m_try, any_tried = _widened_sums(
-                sums, v, widen, r_max, r_row, passed, present, widened, tried, pick, r_try, r_try_f, m_c, m_d, m_coords2
+                row_sums,
+                v,
+                widen,
+                r_max,
+                cols,
+                r_row,
+                passed,
+                present,
+                widened,
+                tried,
+                pick,
+                r_try,
+                r_try_f,
+                m_c,
+                m_d,
+                m_coords2,
             )
             if not any_tried:
                 break
@@ -591,15 +650,24 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
             r_row, r_next = r_next, r_row
         # The edge test: a pixel whose fit fails the noise test takes the best of the four
         # quadrant windows (smallest residual per dof).
-        _edge_row(
-            sums, W, v, y, x_row, z_row, valid_row, (a, g_u, g_v, rss, dof), limit, r_row, m_row[0], kappa, m, shifted
-        )
+        fit = (a, g_u, g_v, rss, dof)
+        _edge_row(row_sums, W, v, y, cols, x_row, z_row, valid_row, fit, limit, r_row, m_row[0], kappa, m, shifted)
         if record:
-            window_moments(sums, W, v, valid_row, dof, r_row, shifted, m, moments)
-            row = (z_row, valid_row, x_row, v, y, stride)
+            window_moments(row_sums, W, v, cols, valid_row, dof, r_row, shifted, m, moments)
+            row = (z_row, valid_row, x_row, v, y, cols)
             window = (r_row, shifted, moments)
-            variance_row(row, (a, g_u, g_v, rss, dof), window, (rho_table, t_row), cam, gains, info[v // stride])
-        row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
+            var_row = var_b[:n] if few else info[v // stride]
+            variance_row(row, fit, window, (rho_table, t_row), cam, gains, var_row)
+            if few:
+                _scatter(info[v // stride], np.nan, cols, stride, var_row)
+        if few:  # the planes at every fitted pixel again (none where invalid)
+            _scatter(dof_all, 0.0, cols, stride, dof)
+            for c in range(n):
+                i = cols[c] // stride
+                a_all[i], g_u_all[i], g_v_all[i], limit_all[i] = a[c], g_u[c], g_v[c], limit[c]
+            row_done(v, valid_all, a_all, g_u_all, g_v_all, dof_all, limit_all, ok_row, band)
+        else:
+            row_done(v, valid_row, a, g_u, g_v, dof, limit, ok_row, band)
     for o in range(v_last + 1 - reach, v_last + 1 + reach):  # stride 2: the frame's last rows, if in the band
         if v0 <= o < v1 and o < H:
             emit_row(z, valid, o, stride, fitted, v_first, v_last, none, cam, fill, got, out_flat, has)

@@ -272,6 +272,15 @@ def store_unit_flat(out_flat, i, n_x, n_y, n_z, ok, fill):
 
 
 @pixel
+def fill_pixels(out_flat, a, b, fill):
+    """Pixels a .. b - 1 of a flat row of normals (x, y, z, x, y, z, ...) set to ``fill``, what every per-pixel rule
+    gives a pixel without depth: the row functions write it so (vectorised) and run their rule on the others only,
+    for the same values (an invalid region, such as a rendered object's background, costs no per-pixel rule)."""
+    for i in range(3 * a, 3 * b):
+        out_flat[i] = fill
+
+
+@pixel
 def fill_pixel(out, v, u, fill):
     out[v, u, 0] = fill
     out[v, u, 1] = fill

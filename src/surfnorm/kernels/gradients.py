@@ -224,13 +224,16 @@ def laplacian_row(z, valid, r, runs, n_runs, dlf, axis, s):
     """
     H, W = z.shape
     up, mid, dn = z[max(r - 1, 0)], z[r], z[min(r + 1, H - 1)]
+    valid_r = valid[r]
     edge_w, corner_w = _DLF_EDGE[dlf], _DLF_CORNER[dlf]
     u = 0
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
         for x in range(u, a):
-            s_x = smoothness(z, valid, r, x, dlf, axis)
-            s[x] = s_x if valid[r, x] else np.float32(0.0)
+            s_x = np.float32(0.0)  # pixels without depth
+            if valid_r[x]:
+                s_x = smoothness(z, valid, r, x, dlf, axis)
+            s[x] = s_x
         if b > a:
             # Views shifted so that the loop index starts at 0: Numba's negative-index
             # handling otherwise hides the address pattern and LLVM does not vectorise.

@@ -21,7 +21,7 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, row
-from ._rows import box_row, copy_row, fast_row, segment
+from ._rows import box_row, copy_row, fast_row, fill_pixels, segment
 from .gradients import dlf_code, laplacian_row
 
 __all__ = ["mnr", "mnr_row", "self_smoothness_row"]
@@ -137,8 +137,10 @@ def mnr_row(v, H, normals, has, scores, z_row, tie_tol, fill, scratch, out_row):
     u = 0
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
+        fill_pixels(out_flat, u, a, fill)  # pixels without a normal (the rule's value for them)
         for x in range(u, a):
-            mnr_pixel(v, H, x, normals, has, scores, tie_tol * z_row[x], fill, out_row)
+            if has_mid[x]:
+                mnr_pixel(v, H, x, normals, has, scores, tie_tol * z_row[x], fill, out_row)
         if b > a:  # all four neighbours have normals: branch-free argmin (views start at a: see laplacian_row)
             s_l, s_r, s_a, s_b, s_c = s_h[a - 1 : b - 1], s_h[a + 1 : b + 1], s_up[a:b], s_dn[a:b], s_self[a:b]
             z_p = z_row[a:b]

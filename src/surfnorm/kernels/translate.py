@@ -22,7 +22,7 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel, row
-from ._rows import centred_columns, fast_row, segment, stencil, store_unit, store_unit_flat
+from ._rows import centred_columns, fast_row, fill_pixels, segment, stencil, store_unit, store_unit_flat
 from .gradients import (
     dag_gradient,
     dlf_code,
@@ -89,12 +89,15 @@ def d2nt_fd_row(z, valid, v, f_x, f_y, u_c, v_c, reflect, fill, col, runs, out_r
     n_runs = fast_row(valid, v, col, runs)
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
     out_flat = out_row.reshape(3 * W)
+    valid_v = valid[v]
     two = np.float32(2.0)
     u = 0
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
+        fill_pixels(out_flat, u, a, fill)  # pixels without depth (the rule's value for them)
         for x in range(u, a):
-            d2nt_fd_pixel(z, valid, v, x, f_x, f_y, u_c[x], v_c, reflect, fill, out_row)
+            if valid_v[x]:
+                d2nt_fd_pixel(z, valid, v, x, f_x, f_y, u_c[x], v_c, reflect, fill, out_row)
         if b > a:  # 3x3 all valid: central differences, no checks (views start at a: see laplacian_row)
             left, centre, right, above, below = mid[a - 1 : b - 1], mid[a:b], mid[a + 1 : b + 1], up[a:b], dn[a:b]
             u_cs, run_out = u_c[a:b], out_flat[3 * a : 3 * b]
@@ -197,11 +200,16 @@ def dag_row(z, valid, v, runs, n_runs, weights, cam, v_c, ratio, fill, out_row, 
     H, W = z.shape
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
     out_flat = out_row.reshape(3 * W)
+    valid_v = valid[v]
     u = 0
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
+        fill_pixels(out_flat, u, a, fill)  # pixels without depth (the rule's value for them)
         for x in range(u, a):
-            ok_row[x] = dag_pixel(z, valid, v, x, p_h, p_up, p_dn, f_x, f_y, u_c[x], v_c, ratio, fill, out_row)
+            ok = False
+            if valid_v[x]:
+                ok = dag_pixel(z, valid, v, x, p_h, p_up, p_dn, f_x, f_y, u_c[x], v_c, ratio, fill, out_row)
+            ok_row[x] = ok
         if b > a:  # 3x3 all valid: both neighbours exist along both axes (views start at a: see laplacian_row)
             left, centre, right, above, below = mid[a - 1 : b - 1], mid[a:b], mid[a + 1 : b + 1], up[a:b], dn[a:b]
             p_l, p_r, p_a, p_b = p_h[a - 1 : b - 1], p_h[a + 1 : b + 1], p_up[a:b], p_dn[a:b]
@@ -331,12 +339,15 @@ def cp2tv_row(z, valid, v, f_x, f_y, c_x, c_y, u_c, reflect, fill, col, runs, ou
     n_runs = fast_row(valid, v, col, runs)
     up, mid, dn = z[max(v - 1, 0)], z[v], z[min(v + 1, H - 1)]
     out_flat = out_row.reshape(3 * W)
+    valid_v = valid[v]
     v_c, v_up, v_dn = v - c_y, (v - 1) - c_y, (v + 1) - c_y
     u = 0
     for k in range(n_runs + 1):
         a, b = segment(runs, n_runs, k, W)
+        fill_pixels(out_flat, u, a, fill)  # pixels without depth (the rule's value for them)
         for x in range(u, a):
-            cp2tv_pixel(z, valid, v, x, f_x, f_y, c_x, c_y, reflect, fill, out_row)
+            if valid_v[x]:
+                cp2tv_pixel(z, valid, v, x, f_x, f_y, c_x, c_y, reflect, fill, out_row)
         if b > a:  # central differences of back-projected neighbours, no checks (views: see laplacian_row)
             left, right, above, below = mid[a - 1 : b - 1], mid[a + 1 : b + 1], up[a:b], dn[a:b]
             uc_l, uc_r, uc_c, run_out = u_c[a - 1 : b - 1], u_c[a + 1 : b + 1], u_c[a:b], out_flat[3 * a : 3 * b]

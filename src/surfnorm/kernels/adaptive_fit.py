@@ -239,10 +239,10 @@ def variance_row(row, fit, window, noise, cam, gains, out_row):
     NaN where it has no fit. Branch-free.
 
     ``row``: (z_row, valid_row, x_row, v, y, cols), the fitted pixels' depth, validity and centred abscissae,
-    the row, its centred ordinate and the fitted pixels' columns; ``fit``: (a, g_u, g_v, rss, dof); ``window``: (r_row, shifted, moments),
-    the radius, the centre's offset (``shifted``: (record, shift_u, shift_v) of :func:`_edge_row`) and the
-    coordinate moments (:func:`window_moments`; the count is dof + 3); ``noise``: (rho_table, t_row), the noise at
-    each pixel's depth; ``gains`` as in :func:`_adaptive_fit_kernel`.
+    the row, its centred ordinate and the fitted pixels' columns; ``fit``: (a, g_u, g_v, rss, dof); ``window``:
+    (r_row, shifted, moments), the radius, the centre's offset (``shifted``: (record, shift_u, shift_v) of
+    :func:`_edge_row`) and the coordinate moments (:func:`window_moments`; the count is dof + 3); ``noise``:
+    (rho_table, t_row), the noise at each pixel's depth; ``gains`` as in :func:`_adaptive_fit_kernel`.
     """
     z_row, valid_row, x_row, v, y, cols = row
     r_row, shifted, moments = window
@@ -484,6 +484,10 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     rho_floor, r_max, fill); ``work``: (ring, col_sums, pos, w_scratch, made), the ``ring`` that holds the integral
     rows up to ``made`` and ``col_sums`` the column sums after it (:func:`surfnorm.kernels._windows.prime`), ``pos``:
     :func:`surfnorm.kernels._windows.integral_positions`, ``w_scratch``: (W,).
+
+    A fitted row with under half of its fitted pixels valid (``COMPACT``: sparse depth) works on those alone, each at
+    its column (the window sums pixel by pixel), and hands its planes back at every fitted pixel: the same
+    arithmetic, so the same bits as a sweep over every fitted pixel, which denser rows take (whole rows at a time).
 
     The windows are fitted on the pixels of every ``stride``-th row and column; with ``stride`` 2 every other
     pixel takes its plane from the fitted pixels around it (:mod:`surfnorm.kernels._assembly`), so a band fits

@@ -222,6 +222,24 @@ def run_end(valid, v, u):
 
 
 @pixel
+def invalid_end(valid_row, u):
+    """The first pixel from u on in ``valid_row`` that holds depth (its length where none does)."""
+    end = u
+    while end < valid_row.shape[0] and not valid_row[end]:
+        end += 1
+    return end
+
+
+@pixel
+def fill_run(out_row, a, b, fill):
+    """Pixels a .. b - 1 of a row of normals (W, 3) set to ``fill``: what :func:`generic_pixel` gives a pixel
+    without depth, for a whole stretch of them at once (a rendered object's background costs no per-pixel rule)."""
+    flat = out_row.reshape(-1)
+    for i in range(3 * a, 3 * b):
+        flat[i] = fill
+
+
+@pixel
 def interior_gradients(z_l, z_r, z_a, z_b):
     """dD/du, dD/dv of D = 1/Z from the 4 neighbours: (1/z_r - 1/z_l) / 2 as (z_l - z_r) / (2 z_l z_r),
     both with one division (the products of two float32 depths are exact in float64)."""
@@ -547,8 +565,13 @@ def _tf2n_kernel(z, valid, rows_valid, median, f_x, f_y, c_x, c_y, reflect, fill
             generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out)
             continue
         u = 0
+        valid_v, out_v = valid[v], out[v]
         while u < W:
-            if all_nine_valid(valid, v, u):
+            end = invalid_end(valid_v, u)
+            if end > u:  # no depth here
+                fill_run(out_v, u, end, fill)
+                u = end
+            elif all_nine_valid(valid, v, u):
                 end = run_end(valid, v, u)
                 interior_run(median, z, v, u, end, f_x, f_y, c_x, c_y, rows, flat, fronto, out)
                 u = end

@@ -66,7 +66,7 @@ import numpy as np
 
 from .._bands import whole
 from .._config import njit, pixel
-from ._rows import camera_facing, facing_sign, fill_pixel, stencil, usable, write_unit
+from ._rows import camera_facing, facing_sign, fill_pixel, fill_pixels, stencil, usable, write_unit
 
 __all__ = ["three_filters", "sne_roadseg", "THIRD_FILTERS"]
 
@@ -228,15 +228,6 @@ def invalid_end(valid_row, u):
     while end < valid_row.shape[0] and not valid_row[end]:
         end += 1
     return end
-
-
-@pixel
-def fill_run(out_row, a, b, fill):
-    """Pixels a .. b - 1 of a row of normals (W, 3) set to ``fill``: what :func:`generic_pixel` gives a pixel
-    without depth, for a whole stretch of them at once (a rendered object's background costs no per-pixel rule)."""
-    flat = out_row.reshape(-1)
-    for i in range(3 * a, 3 * b):
-        flat[i] = fill
 
 
 @pixel
@@ -565,11 +556,11 @@ def _tf2n_kernel(z, valid, rows_valid, median, f_x, f_y, c_x, c_y, reflect, fill
             generic_pixel(z, valid, v, W - 1, f_x, f_y, c_x, c_y, reflect, fill, median, buf, out)
             continue
         u = 0
-        valid_v, out_v = valid[v], out[v]
+        valid_v, out_v = valid[v], out[v].reshape(-1)
         while u < W:
             end = invalid_end(valid_v, u)
-            if end > u:  # no depth here
-                fill_run(out_v, u, end, fill)
+            if end > u:  # no depth here: what generic_pixel gives such pixels, for the whole stretch at once
+                fill_pixels(out_v, u, end, fill)
                 u = end
             elif all_nine_valid(valid, v, u):
                 end = run_end(valid, v, u)

@@ -291,11 +291,12 @@ def test_window_ties_go_the_same_way_in_every_unit():
 @pytest.mark.parametrize("stride", [1, 2])
 @pytest.mark.parametrize("r", [1, 2, 4, 15, 40])
 def test_row_window_sums_are_the_box_formula_where_picked(r, stride, W):
-    """box_row, box_row_sparse and coordinate_sums (the row path of the window sums) give, for every picked fitted pixel
-    (column u = stride i, or the columns of a compacted row), exactly (bottom - top at column u + r + 1) - (bottom - top at column u - r),
-    clipped, with the integral columns where integral_positions places them; box_row keeps src elsewhere
-    unless ``first``, and coordinate_sums fills only windows that are not the full square. The kernel's
-    outputs rest on these bits (the windows' fits and every decision made from them)."""
+    """box_row, box_row_sparse and coordinate_sums (the row path of the window sums) give, for every picked
+    fitted pixel (column u = stride i, or the columns of a compacted row), exactly (bottom - top at column
+    u + r + 1) - (bottom - top at column u - r), clipped, with the integral columns where integral_positions
+    places them; box_row keeps src elsewhere unless ``first``, and coordinate_sums fills only windows that are not
+    the full square. The kernel's outputs rest on these bits (the windows' fits and every decision made from
+    them)."""
     from surfnorm.kernels._windows import (
         _BOXED,
         _COORDS,

@@ -563,9 +563,9 @@ def _d2nt_sigma(z, valid, normals, fill, cam, noise, gains, floor2, no_fit, out,
     variance at the pixel (:func:`fit_variance` at r = 1), plus ``disagreement`` times the squared sine of the angle
     between the normal and that plane's, plus ``turn`` times the mean squared sine of the angles to the planes of
     its eight neighbours' windows that fit within the noise (the adaptive fit's noise test: a surface that turns
-    between pixels, as a mesh's facets do, is not where its pixels' planes say); at most ``MAX_DEG``; ``no_fit`` where no window has a fit. ``gains``:
-    (gain, misfit_gain, significance, disagreement, turn). Only the columns from a row's first to its last valid
-    pixel are worked on."""
+    between pixels, as a mesh's facets do, is not where its pixels' planes say); at most ``MAX_DEG``; ``no_fit``
+    where no window has a fit. ``gains``: (gain, misfit_gain, significance, disagreement, turn). Only the columns
+    from a row's first to its last valid pixel are worked on."""
     H, W = z.shape
     tail = (floor2, no_fit)
     spans = _band_spans(valid, v0, v1)

@@ -19,10 +19,20 @@ def on_ladder(r, r_max):
     return min(next((x for x in LADDER if x >= r), r_max), r_max)
 
 
+def sampling_step(H, W, samples=12_000):
+    """Every step-th row and column: about ``samples`` pixels, but on frames smaller than that makes it no step over
+    5 (the step of a 640x480 frame) while the frame holds at least 3,000 pixels per step squared."""
+    step = max(1, int(round(math.sqrt(H * W / samples))))
+    small = 5
+    while small > 1 and H * W < 3_000 * small * small:
+        small -= 1
+    return max(step, small)
+
+
 def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
     H, W = z.shape
     zmin, zmax = float(z[valid].min()), float(z[valid].max())
-    step = max(1, int(round(math.sqrt(z.size / samples))))
+    step = sampling_step(H, W, samples)
     lo, span = math.log(zmin), math.log(zmax) - math.log(zmin)
     xs, bins = [], []
     for v in range(0, H, step):
@@ -233,7 +243,7 @@ def noise_extras(z, valid, f, *, samples=12_000, max_gap=4, min_samples=64):
     and |x_4 - 4 x_2| / sqrt(70 / 6), each quantile taken on its own.
     """
     H, W = z.shape
-    step = max(1, int(round(math.sqrt(z.size / samples))))
+    step = sampling_step(H, W, samples)
     changed, jumps, x2, x4 = 0, [], [], []
     for v in range(0, H, step):
         for u in range(0, W, step):

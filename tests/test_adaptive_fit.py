@@ -41,9 +41,10 @@ def scene(seed, H=48, W=64, quantum=0.002, holes=0.1):
     return z.astype(np.float32), K
 
 
+@pytest.mark.parametrize("size", [(48, 64), (120, 160)])  # sampled at step 1 and step 2
 @pytest.mark.parametrize("seed", range(6))
-def test_noise_profile_matches_naive(seed):
-    z, K = scene(seed)
+def test_noise_profile_matches_naive(seed, size):
+    z, K = scene(seed, *size)
     valid = z > 0
     f = math.sqrt(K[0, 0] * K[1, 1])
     got = noise_profile(z, valid, f)
@@ -51,6 +52,23 @@ def test_noise_profile_matches_naive(seed):
     np.testing.assert_allclose(got.depths, centres, rtol=1e-12)
     np.testing.assert_allclose(got.rho, rho, rtol=1e-9, atol=1e-12)
     assert got.floor == pytest.approx(floor, rel=1e-12)
+
+
+def test_noise_sampling_step_is_a_640x480_frames_on_smaller_frames():
+    """Every 5th row and column at 640x480 and below (not denser on smaller frames, so that the measurement's share
+    of the call does not grow), at least 3,000 pixels per step squared, about 12,000 samples on larger frames."""
+    from surfnorm._constants import noise_step
+
+    known = {(480, 640): 5, (375, 450): 5, (240, 320): 5, (192, 256): 4, (120, 160): 2, (48, 64): 1, (375, 1242): 6}
+    known |= {(480, 848): 6, (1080, 1920): 13, (1, 1): 1, (100, 110): 1, (110, 110): 2}
+    for (H, W), step in known.items():
+        assert noise_step(H, W) == step, (H, W)
+    rng = np.random.default_rng(0)
+    for H, W in rng.integers(1, 2000, size=(300, 2)):
+        step = noise_step(int(H), int(W))
+        assert step == naive.sampling_step(int(H), int(W)), (H, W)
+        assert H * W >= 3_000 * step * step or step == 1
+        assert step >= 5 or H * W < 3_000 * (step + 1) ** 2
 
 
 @pytest.mark.slow

@@ -22,7 +22,7 @@ def test_kernels_use_the_shared_constants():
     # each constant in the module that uses it
     homes = {
         adaptive_fit: ("ALPHA", "KAPPA", "RHO_FLOOR", "MAX_WINDOW", "N_WIDEN", "MIN_POINTS", "TIE"),
-        sensor_noise: ("N_BINS", "MIN_SAMPLES", "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS"),
+        sensor_noise: ("N_BINS", "MIN_SAMPLES", "noise_step", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS"),
         _windows: ("RADII", "_TABLE"),
         _schedule: ("MAX_UNREACHED",),
     }

@@ -172,7 +172,7 @@ class TestParity:
 
         homes = {  # each constant where the NumPy side uses it
             adaptive_fit: ("ALPHA", "KAPPA", "RHO_FLOOR", "N_WIDEN", "MIN_POINTS", "TIE"),
-            sensor_noise: ("N_BINS", "MIN_SAMPLES", "_NOISE_SAMPLES", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS"),
+            sensor_noise: ("N_BINS", "MIN_SAMPLES", "noise_step", "_MAX_GAP", "_MAX_SPREAD", "_CLIP_SIGMAS"),
             _windows: ("RADII", "_TABLE"),
             _schedule: ("MAX_UNREACHED",),
         }

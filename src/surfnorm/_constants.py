@@ -44,8 +44,24 @@ MIN_POINTS = 12
 N_BINS = 8
 #: Samples a depth bin needs to have its own noise level; bins with fewer take their neighbours'.
 MIN_SAMPLES = 64
-#: About how many pixels the noise profile samples (every step-th row and column).
+#: About how many pixels the noise profile samples at most (every step-th row and column: :func:`noise_step`).
 _NOISE_SAMPLES = 12_000
+#: The step a smaller frame is sampled at, down to ``_FEWEST_NOISE_SAMPLES`` pixels: that of a 640x480 frame
+#: (``_NOISE_SAMPLES`` give step 5 there), not a denser one, so that the measurement's share of a call does not grow
+#: as frames shrink (12,000 samples of a 450x375 frame were a third of the default's call on two cores).
+_NOISE_STEP = 5
+_FEWEST_NOISE_SAMPLES = 3_000
+
+
+def noise_step(H: int, W: int) -> int:
+    """The noise profile's sampling step on an H x W frame (every step-th row and column): about ``_NOISE_SAMPLES``
+    pixels on frames of over 300,000 pixels; on smaller ones ``_NOISE_STEP`` where H W / step^2 is at least
+    ``_FEWEST_NOISE_SAMPLES``, else the widest step for which it is (1 on frames of under 12,000 pixels)."""
+    n = H * W
+    dense = max(1, round(math.sqrt(n / _NOISE_SAMPLES)))
+    return max(dense, min(_NOISE_STEP, int(math.sqrt(n / _FEWEST_NOISE_SAMPLES))))
+
+
 #: Widest gap (pixels) between the samples of a second difference, for sparse depth.
 _MAX_GAP = 4
 #: Depth ratio within a second-difference stencil above which it counts as spanning a discontinuity.

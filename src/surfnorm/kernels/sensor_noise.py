@@ -8,7 +8,8 @@ from it what the frame is (clean, sensor or between: its floor, terraces and smo
 :mod:`surfnorm.kernels.uncertainty` predicts each normal's error from it. ``surfnorm.torch`` measures the same
 statistics on tensors (:mod:`surfnorm.torch._adaptive`).
 
-A statistic of the whole frame, sampled on every step-th row and column (about ``_NOISE_SAMPLES`` pixels).
+A statistic of the whole frame, sampled on every step-th row and column (:func:`surfnorm._constants.noise_step`: every
+5th on frames up to 640x480, about 12,000 pixels on larger ones).
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ from .._constants import (
     _FOURTH_RMS,
     _MAX_GAP,
     _MAX_SPREAD,
-    _NOISE_SAMPLES,
     _SMOOTH_GAUSS,
     _SMOOTH_SAMPLES,
     CLEAN_FLOOR,
@@ -38,6 +38,7 @@ from .._constants import (
     SMOOTH_SHARE,
     TERRACED_HIGH,
     TERRACED_LOW,
+    noise_step,
 )
 
 __all__ = [
@@ -347,7 +348,7 @@ def _samples(z, valid, f):
     zmin, zmax = depth_range(z, valid)
     if not zmax > 0.0:
         return zmin, zmax, np.empty((3, 0)), np.empty(0, np.int64), np.empty(0), 0
-    step = max(1, int(round(math.sqrt(z.size / _NOISE_SAMPLES))))
+    step = noise_step(*z.shape)
     size = 2 * ((z.shape[0] + step - 1) // step) * ((z.shape[1] + step - 1) // step)
     xs = np.empty((3, size))
     bins = np.empty(size, np.int64)
@@ -455,8 +456,8 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     clean depth is not taken for noise). Noise correlated between neighbours
     (stereo matchers aggregate over windows) shows less at stride 1 than at
     stride 2 while it still moves a fitted slope, so rho is the larger of the
-    stride-1 estimate and (16 v_2 - v_4) / 15. Sampled on every step-th row and column (about
-    ``_NOISE_SAMPLES`` pixels). Bins with fewer than ``MIN_SAMPLES`` samples
+    stride-1 estimate and (16 v_2 - v_4) / 15. Sampled on every step-th row and column
+    (:func:`surfnorm._constants.noise_step`). Bins with fewer than ``MIN_SAMPLES`` samples
     take the value of the nearest bins that have enough; with none, rho is 0
     (3x3 windows).
 

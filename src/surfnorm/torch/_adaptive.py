@@ -54,7 +54,6 @@ from .._constants import (
     _FOURTH_RMS,
     _MAX_GAP,
     _MAX_SPREAD,
-    _NOISE_SAMPLES,
     _SMOOTH_GAUSS,
     _SMOOTH_SAMPLES,
     _TABLE,
@@ -75,6 +74,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
+    noise_step,
 )
 from ._ops import Grid
 
@@ -158,7 +158,7 @@ def _samples(z, valid, f, lo, span):
     test: changed (B, N), the stencils taken at a = 1 whose depth changes, and jumps (B, N), the jump height
     where such a stencil is a flat step beside a jump, else NaN."""
     B, H, W = z.shape
-    step = max(1, round(math.sqrt(H * W / _NOISE_SAMPLES)))
+    step = noise_step(H, W)
     pad = 4 * _MAX_GAP
     zp = F.pad(z, (pad, pad, pad, pad), value=1.0)
     vp = F.pad(valid, (pad, pad, pad, pad), value=False)

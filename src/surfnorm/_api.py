@@ -9,6 +9,7 @@ import numpy as np
 
 from ._bands import CORES, map_threads, on_threads, whole
 from ._choices import DLF_NAMES
+from ._results import new_result
 from ._validate import (
     as_depth,
     as_mask,
@@ -53,7 +54,7 @@ def _intrinsics_list(K, n: int | None) -> list[Intrinsics] | Intrinsics:
 
 def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relative=0.0, bands=whole):
     if out is None:
-        out = np.empty(z.shape + (3,), dtype=np.float32)
+        out = new_result(z.shape + (3,))
     if tie_tol and method.ties:
         options = dict(options, tie_tol=tie_tol)
     if relative and method.relative:
@@ -67,7 +68,7 @@ def _run(method, refined, options, z, valid, cam, out=None, tie_tol=0.0, relativ
 
     mnr_dlf = options["mnr_dlf"]
     run_options = options if method.mnr else {k: v for k, v in options.items() if k != "mnr_dlf"}
-    raw = method.run(z, valid, cam, np.empty(out.shape, np.float32), **run_options)
+    raw = method.run(z, valid, cam, new_result(out.shape), **run_options)
     return mnr(z, valid, raw, out, dlf=mnr_dlf, fill=options["fill"], tie_tol=tie_tol, bands=bands)
 
 
@@ -200,9 +201,11 @@ def estimate(
     out : ndarray of float32, shape of the result, optional
         Write the normals into this C-contiguous array (and return it) instead
         of a new one, so that a stream of frames or batches reuses one buffer.
-        A new output is memory that the system hands over and zeroes when it
-        is first written, a cost per frame that more threads do not lower
-        (``make bench`` measures it on a stack of frames).
+        Without it, a result of over 256 KiB takes the memory of an earlier
+        result of its size that nothing uses any more, where there is one (see
+        :mod:`surfnorm._results`); else it is memory that the system hands over
+        and zeroes when it is first written, a cost per frame that more threads
+        do not lower (``make bench`` measures it on a stack of frames).
     uncertainty : bool
         True: also return each normal's predicted RMS angular error in degrees
         (``sigma``), from the estimator's own fit: its residual, its support
@@ -267,7 +270,7 @@ def estimate(
         bands = on_threads(workers)
         z_0, valid_0, options_0 = frame(None, bands)
         if uncertainty:
-            sigma = np.empty(z.shape, np.float32)
+            sigma = new_result(z.shape)
             normals = _run_uncertain(method_obj, options_0, z_0, valid_0, cam, out, sigma, tie_tol, relative, bands)
             return normals, sigma
         return _run(method_obj, refined, options_0, z_0, valid_0, cam, out, tie_tol, relative, bands)
@@ -276,8 +279,8 @@ def estimate(
     for i, cam_i in {id(c): (i, c) for i, c in enumerate(cams)}.values():  # each distinct camera once
         cam_i.check_frame(z.shape, name="K" if one_camera else f"K[{i}]", stacklevel=2)
     if out is None:
-        out = np.empty(z.shape + (3,), dtype=np.float32)
-    sigmas = np.empty(z.shape, np.float32) if uncertainty else None
+        out = new_result(z.shape + (3,))
+    sigmas = new_result(z.shape) if uncertainty else None
 
     def one(i):
         # Everything per frame (validity, kernel) runs here, so frames proceed in parallel:

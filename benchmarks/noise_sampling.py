@@ -27,7 +27,6 @@ import argparse
 import json
 import math
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -69,7 +68,14 @@ def main(argv=None) -> int:
     single_thread()  # LINEMOD on one thread; surfnorm's own calls use every core
     import surfnorm
     import surfnorm.kernels.sensor_noise as noise
-    from surfnorm.bench.sensor import SensorFrame, find_sensor_frames, make_entries, read_sensor_frame, score_frame
+    from surfnorm.bench.sensor import (
+        SensorFrame,
+        alternating_medians,
+        find_sensor_frames,
+        make_entries,
+        read_sensor_frame,
+        score_frame,
+    )
     from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
     from surfnorm.bench.uncertainty import SKIP, deciles
     from surfnorm.io.threef2n import find_frames, read_frame
@@ -182,16 +188,7 @@ def main(argv=None) -> int:
             "dense": lambda z=z, K=K: under("dense", surfnorm.estimate, z, K),
             "linemod": lambda z=z, K=K, valid=valid: linemod.call(z, K, valid),
         }
-        for call in calls.values():
-            call()
-            call()
-        times: dict[str, list[float]] = {k: [] for k in calls}
-        for r in range(args.rounds):
-            for k in calls if r % 2 == 0 else reversed(list(calls)):
-                t0 = time.perf_counter()
-                calls[k]()
-                times[k].append(time.perf_counter() - t0)
-        ms = {k: float(np.median(v)) * 1e3 for k, v in times.items()}
+        ms = alternating_medians(calls, args.rounds)
         result["speed"][name] = ms
         print(
             f"| {name} | {ms['shipped']:.2f} | {ms['dense']:.2f} | {ms['linemod']:.2f} "

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ def main(argv=None) -> int:
     single_thread()  # LINEMOD on one thread; surfnorm's own calls use every core
     import surfnorm
     import surfnorm.kernels.adaptive_fit as fit
-    from surfnorm.bench.sensor import make_entries, read_sensor_frame
+    from surfnorm.bench.sensor import alternating_medians, make_entries, read_sensor_frame
     from surfnorm.kernels.sensor_noise import noise_profile
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -60,15 +59,7 @@ def main(argv=None) -> int:
             "linemod": lambda z=z, K=fr.K, valid=valid: linemod.call(z, K, valid),
         }
         assert np.array_equal(calls["default"](), calls["given"](), equal_nan=True)
-        for call in calls.values():
-            call()
-        times: dict[str, list[float]] = {k: [] for k in calls}
-        for r in range(args.repeats):
-            for k in calls if r % 2 == 0 else reversed(list(calls)):
-                t0 = time.perf_counter()
-                calls[k]()
-                times[k].append(time.perf_counter() - t0)
-        ms = {k: float(np.median(v)) * 1e3 for k, v in times.items()}
+        ms = alternating_medians(calls, args.repeats, warm_up=1)
         print(
             f"| {fr.name} | {ms['default']:.2f} | {ms['given']:.2f} | {ms['linemod']:.2f} "
             f"| {ms['default'] / ms['linemod']:.2f} | {ms['given'] / ms['linemod']:.2f} |",

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -27,20 +26,11 @@ SIZES = ((424, 512), (480, 848), (240, 320))
 
 
 def _ratio(entries, z, K, rounds: int) -> tuple[float, float, float]:
-    import numpy as np
+    from surfnorm.bench.sensor import alternating_medians
 
     valid = z > 0
-    for e in entries:
-        e.call(z, K, valid)
-        e.call(z, K, valid)
-    times: list[list[float]] = [[] for _ in entries]
-    for r in range(rounds):
-        order = range(len(entries)) if r % 2 == 0 else reversed(range(len(entries)))
-        for k in order:
-            t0 = time.perf_counter()
-            entries[k].call(z, K, valid)
-            times[k].append(time.perf_counter() - t0)
-    ours, theirs = (float(np.median(t)) * 1e3 for t in times)
+    ms = alternating_medians({e.label: (lambda e=e: e.call(z, K, valid)) for e in entries}, rounds)
+    ours, theirs = (ms[e.label] for e in entries)
     return ours / theirs, ours, theirs
 
 

@@ -325,3 +325,13 @@ def test_peers_on_one_thread_after_open3d_loaded_its_tbb():
     done = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "1"
+
+
+def test_alternating_medians_runs_each_call_once_a_round_in_turned_orders():
+    from surfnorm.bench.sensor import alternating_medians
+
+    order = []
+    calls = {name: (lambda name=name: order.append(name)) for name in ("a", "b", "c")}
+    ms = alternating_medians(calls, 3, warm_up=2)
+    assert order == ["a", "a", "b", "b", "c", "c"] + ["a", "b", "c", "c", "b", "a", "a", "b", "c"]
+    assert set(ms) == {"a", "b", "c"} and all(0.0 <= v < 1e3 for v in ms.values())

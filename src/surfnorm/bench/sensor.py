@@ -41,6 +41,7 @@ __all__ = [
     "Entry",
     "VARIANTS",
     "make_entries",
+    "alternating_medians",
     "parse_name",
     "run_simulated",
     "sim_tables",
@@ -170,6 +171,24 @@ def _timed(entry: Entry, depth, cam, valid) -> tuple[np.ndarray, float]:
     raw = entry.call(depth, cam, valid)
     ms = (time.perf_counter() - t0) * 1e3
     return entry.finish(raw), ms
+
+
+def alternating_medians(calls: dict[str, Callable[[], object]], rounds: int, *, warm_up: int = 2) -> dict[str, float]:
+    """The median milliseconds of each of ``calls`` (name: a call without arguments) over ``rounds`` rounds, each
+    call once per round, in the order given on even rounds and the reverse on odd ones (so that no call always
+    follows the same one), after ``warm_up`` untimed calls of each. For the same-run ratios of the benchmark scripts.
+    """
+    for call in calls.values():
+        for _ in range(warm_up):
+            call()
+    times: dict[str, list[float]] = {name: [] for name in calls}
+    names = list(calls)
+    for r in range(rounds):
+        for name in names if r % 2 == 0 else names[::-1]:
+            t0 = time.perf_counter()
+            calls[name]()
+            times[name].append(time.perf_counter() - t0)
+    return {name: float(np.median(t)) * 1e3 for name, t in times.items()}
 
 
 # ---------------------------------------------------------------------------- simulated sensors

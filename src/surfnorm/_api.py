@@ -201,7 +201,7 @@ def estimate(
     out : ndarray of float32, shape of the result, optional
         Write the normals into this C-contiguous array (and return it) instead
         of a new one, so that a stream of frames or batches reuses one buffer.
-        Without it, a result of over 256 KiB takes the memory of an earlier
+        Without it, a result of 256 KiB or more takes the memory of an earlier
         result of its size that nothing uses any more, where there is one (see
         :mod:`surfnorm._results`); else it is memory that the system hands over
         and zeroes when it is first written, a cost per frame that more threads

@@ -26,18 +26,16 @@ def main(argv=None) -> int:
 
     single_thread()  # LINEMOD on one thread; surfnorm's own calls use every core unless told
     import surfnorm
-    from surfnorm.bench.sensor import make_entries, read_sensor_frame
+    from surfnorm.bench.sensor import linemod_entry, read_sensor_frame
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("folders", nargs="+")
     ap.add_argument("--rounds", type=int, default=41)
     ap.add_argument("--pause-ms", type=float, default=3.4)
     args = ap.parse_args(argv)
-    entries, absent = make_entries(["opencv_linemod_w5"])
-    if absent or not entries:
-        print(f"after_other_work: OpenCV's RgbdNormals is needed: {absent}", file=sys.stderr)
+    linemod = linemod_entry("after_other_work")
+    if linemod is None:
         return 2
-    linemod = entries[0]
     pause = args.pause_ms / 1e3
 
     def busy():

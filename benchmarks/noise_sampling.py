@@ -72,7 +72,7 @@ def main(argv=None) -> int:
         SensorFrame,
         alternating_medians,
         find_sensor_frames,
-        make_entries,
+        linemod_entry,
         read_sensor_frame,
         score_frame,
     )
@@ -86,11 +86,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=21)
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
-    entries, absent = make_entries(["opencv_linemod_w5"])
-    if absent or not entries:
-        print(f"noise_sampling: OpenCV's RgbdNormals is needed: {absent}", file=sys.stderr)
+    linemod = linemod_entry("noise_sampling")
+    if linemod is None:
         return 2
-    linemod = entries[0]
     rules = {"shipped": noise.noise_step, "dense": dense_step}
 
     def under(rule, func, *a, **k):

@@ -25,18 +25,16 @@ def main(argv=None) -> int:
     single_thread()  # LINEMOD on one thread; surfnorm's own calls use every core
     import surfnorm
     import surfnorm.kernels.adaptive_fit as fit
-    from surfnorm.bench.sensor import alternating_medians, make_entries, read_sensor_frame
+    from surfnorm.bench.sensor import alternating_medians, linemod_entry, read_sensor_frame
     from surfnorm.kernels.sensor_noise import noise_profile
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("folders", nargs="+")
     ap.add_argument("--repeats", type=int, default=25)
     args = ap.parse_args(argv)
-    entries, absent = make_entries(["opencv_linemod_w5"])
-    if absent or not entries:
-        print(f"noise_share: OpenCV's RgbdNormals is needed: {absent}", file=sys.stderr)
+    linemod = linemod_entry("noise_share")
+    if linemod is None:
         return 2
-    linemod = entries[0]
     measure = fit.noise_profile
     print("| frame | default, ms | noise given, ms | LINEMOD, ms | default / LINEMOD | noise given / LINEMOD |")
     print("|---|---|---|---|---|---|")

@@ -40,7 +40,7 @@ def main(argv=None) -> int:
     single_thread()  # LINEMOD on one thread, as in the sensor benchmark; surfnorm's entry names its threads
     import numpy as np
 
-    from surfnorm.bench.sensor import find_sensor_frames, make_entries, read_sensor_frame
+    from surfnorm.bench.sensor import find_sensor_frames, linemod_entry, make_entries, read_sensor_frame
     from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
     from surfnorm.camera import Intrinsics
     from surfnorm.io.threef2n import find_frames, read_frame, sample_root
@@ -50,10 +50,10 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=9)
     ap.add_argument("--json", default=None, help="write every per-frame record here")
     args = ap.parse_args(argv)
-    entries, absent = make_entries(["auto:threads=all", "opencv_linemod_w5"])
-    if absent or len(entries) != 2:
-        print(f"speed_vs_linemod: OpenCV's RgbdNormals is needed: {absent}", file=sys.stderr)
+    linemod = linemod_entry("speed_vs_linemod")
+    if linemod is None:
         return 2
+    entries = make_entries(["auto:threads=all"])[0] + [linemod]
     records = []
     root = REPO / "tests" / "data" / "3f2n-sample"
     root = root if root.is_dir() else Path(sample_root())

@@ -335,3 +335,22 @@ def test_alternating_medians_runs_each_call_once_a_round_in_turned_orders():
     ms = alternating_medians(calls, 3, warm_up=2)
     assert order == ["a", "a", "b", "b", "c", "c"] + ["a", "b", "c", "c", "b", "a", "a", "b", "c"]
     assert set(ms) == {"a", "b", "c"} and all(0.0 <= v < 1e3 for v in ms.values())
+
+
+def test_linemod_entry_is_the_sensor_benchmarks_peer_or_one_line_naming_the_script(monkeypatch, capsys):
+    from surfnorm.bench import sensor
+
+    entries, absent = sensor.make_entries(["opencv_linemod_w5"])
+    got = sensor.linemod_entry("some_script")
+    if absent:
+        assert got is None
+    else:
+        assert got is not None and got.label == entries[0].label == "opencv_linemod_w5"
+    monkeypatch.setattr(sensor, "make_entries", lambda names: ([], {"opencv_linemod_w5": "No module named 'cv2'"}))
+    capsys.readouterr()
+    assert sensor.linemod_entry("some_script") is None
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "some_script: expected OpenCV's RgbdNormals (pip install opencv-contrib-python-headless), "
+        "got opencv_linemod_w5: No module named 'cv2'"
+    ]

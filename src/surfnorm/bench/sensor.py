@@ -41,6 +41,7 @@ __all__ = [
     "Entry",
     "VARIANTS",
     "make_entries",
+    "linemod_entry",
     "alternating_medians",
     "parse_name",
     "run_simulated",
@@ -171,6 +172,23 @@ def _timed(entry: Entry, depth, cam, valid) -> tuple[np.ndarray, float]:
     raw = entry.call(depth, cam, valid)
     ms = (time.perf_counter() - t0) * 1e3
     return entry.finish(raw), ms
+
+
+def linemod_entry(script: str) -> Entry | None:
+    """OpenCV's LINEMOD (window 5, the sensor benchmark's most accurate peer) for a benchmark ``script`` to time the
+    default against; None after one line on standard error that names ``script`` and why the peer is absent (the
+    script then exits 2)."""
+    import sys
+
+    entries, absent = make_entries(["opencv_linemod_w5"])
+    if entries and not absent:
+        return entries[0]
+    why = "; ".join(f"{k}: {v}" for k, v in absent.items()) or "no entry made"
+    print(
+        f"{script}: expected OpenCV's RgbdNormals (pip install opencv-contrib-python-headless), got {why}",
+        file=sys.stderr,
+    )
+    return None
 
 
 def alternating_medians(calls: dict[str, Callable[[], object]], rounds: int, *, warm_up: int = 2) -> dict[str, float]:

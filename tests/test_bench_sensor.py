@@ -351,6 +351,6 @@ def test_linemod_entry_is_the_sensor_benchmarks_peer_or_one_line_naming_the_scri
     assert sensor.linemod_entry("some_script") is None
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
-        "some_script: expected OpenCV's RgbdNormals (pip install opencv-contrib-python-headless), "
+        "some_script: OpenCV's RgbdNormals is needed (pip install opencv-contrib-python-headless), "
         "got opencv_linemod_w5: No module named 'cv2'"
     ]

@@ -185,7 +185,7 @@ def linemod_entry(script: str) -> Entry | None:
         return entries[0]
     why = "; ".join(f"{k}: {v}" for k, v in absent.items()) or "no entry made"
     print(
-        f"{script}: expected OpenCV's RgbdNormals (pip install opencv-contrib-python-headless), got {why}",
+        f"{script}: OpenCV's RgbdNormals is needed (pip install opencv-contrib-python-headless), got {why}",
         file=sys.stderr,
     )
     return None

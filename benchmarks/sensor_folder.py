@@ -6,6 +6,9 @@
     # OpenCV's SGBM on a rectified pair with ground-truth disparity (reference planes from the ground truth)
     PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2003_teddy im2.png im6.png disp2.png \\
         --gt-scale 4 --fx 450 --baseline 0.16 --source "Middlebury 2003 Teddy (quarter size)"
+    # the same pair through OpenCV's block matcher (another stereo family)
+    PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2003_teddy_bm9 im2.png im6.png disp2.png \\
+        --gt-scale 4 --fx 450 --baseline 0.16 --matcher bm --source "Middlebury 2003 Teddy (quarter size)"
 
 The folder gets the layout of the benchmark's frames: the input file(s) as given (raw.*, or raw_left.*,
 raw_right.*, raw_gt.*), depth.npy (float32 metres, 0 where invalid), K.json (fx, fy, cx, cy; 0-based pixel
@@ -19,8 +22,10 @@ piece's points, facing the camera. For a stereo pair they are found on the groun
 SGBM gave depth, so that coverage measures the estimators, not the matcher. Open3D's RANSAC is not bit-stable
 across runs on every frame: keep the planes.npz a run wrote as the reference.
 
-SGBM: 5x5 blocks, P1 = 8 * 3 * 25, P2 = 32 * 3 * 25, disp12MaxDiff 1, uniqueness 10, speckle window 100 and
-range 2, numDisparities the multiple of 16 above the ground truth's largest disparity + 8; depth f B / d.
+SGBM (the default matcher): 5x5 blocks, P1 = 8 * 3 * 25, P2 = 32 * 3 * 25, disp12MaxDiff 1, uniqueness 10, speckle
+window 100 and range 2, numDisparities the multiple of 16 above the ground truth's largest disparity + 8; depth f B / d.
+``--matcher bm``: OpenCV's block matcher on the grey images instead (9x9 blocks, uniqueness 10, the same speckle
+filter and disparity range), a second family of stereo error: fronto-parallel patches the size of a block.
 
 Needs Open3D (``pip install open3d``; on Debian also ``apt-get install libusb-1.0-0``).
 """
@@ -83,11 +88,28 @@ def reference_planes(depth: np.ndarray, fx: float, fy: float, cx: float, cy: flo
     return np.array(normals), np.array(masks), threshold
 
 
-def sgbm_disparity(left: np.ndarray, right: np.ndarray, largest: float) -> np.ndarray:
-    block = 5
+#: Block sizes the matchers take when ``--block`` is not given.
+BLOCKS = {"sgbm": 5, "bm": 9}
+
+
+def stereo_disparity(left: np.ndarray, right: np.ndarray, largest: float, matcher: str = "sgbm", block=None):
+    """Disparity (pixels, float64; <= 0 where the matcher gave none) of a rectified colour pair (H, W, 3) by OpenCV's
+    semi-global matcher (``"sgbm"``) or its block matcher (``"bm"``, on the grey images: block matching alone,
+    with its fronto-parallel patches and without SGBM's smoothness terms), searching up to the multiple of 16
+    above ``largest`` + 8 (the ground truth's largest disparity); ``block``: the block's side (default
+    :data:`BLOCKS`)."""
+    block = BLOCKS[matcher] if block is None else block
+    n_disp = int(16 * np.ceil((largest + 8.0) / 16.0))
+    if matcher == "bm":
+        bm = cv2.StereoBM.create(numDisparities=n_disp, blockSize=block)
+        bm.setUniquenessRatio(10)
+        bm.setSpeckleWindowSize(100)
+        bm.setSpeckleRange(2)
+        grey = [cv2.cvtColor(x, cv2.COLOR_BGR2GRAY) for x in (left, right)]
+        return bm.compute(*grey).astype(np.float64) / 16.0
     sgbm = cv2.StereoSGBM.create(
         minDisparity=0,
-        numDisparities=int(16 * np.ceil((largest + 8.0) / 16.0)),
+        numDisparities=n_disp,
         blockSize=block,
         P1=8 * 3 * block * block,
         P2=32 * 3 * block * block,
@@ -133,6 +155,8 @@ def main(argv=None) -> int:
     s.add_argument("gt", type=Path)
     s.add_argument("--gt-scale", type=float, default=1.0, help="stored ground-truth units per pixel of disparity")
     s.add_argument("--baseline", type=float, required=True, help="metres")
+    s.add_argument("--matcher", choices=sorted(BLOCKS), default="sgbm", help="OpenCV's SGBM (default) or block matcher")
+    s.add_argument("--block", type=int, default=None, help="the matcher's block side (default: SGBM 5, BM 9)")
     for p in (d, s):
         p.add_argument("--fx", type=float, required=True)
         p.add_argument("--fy", type=float, default=None, help="default: fx")
@@ -157,6 +181,13 @@ def main(argv=None) -> int:
         raw = {"raw" + args.depth.suffix: args.depth}
         write(args.out, depth, K, depth, raw, {"source": args.source, "depth": "as read by surfnorm.io.read_depth"})
         return 0
+    least = 5 if args.matcher == "bm" else 1
+    if args.block is not None and (args.block < least or args.block % 2 == 0):
+        print(
+            f"error: --block: expected an odd side of at least {least} for {args.matcher}, got {args.block}",
+            file=sys.stderr,
+        )
+        return 2
     left, right = (cv2.imread(str(p), cv2.IMREAD_COLOR) for p in (args.left, args.right))
     gt = cv2.imread(str(args.gt), cv2.IMREAD_UNCHANGED)
     if left is None or right is None or gt is None:
@@ -164,12 +195,18 @@ def main(argv=None) -> int:
         return 2
     gt = (gt[..., 0] if gt.ndim == 3 else gt).astype(np.float64) / args.gt_scale
     K = intrinsics(*gt.shape)
-    disparity = sgbm_disparity(left, right, float(gt.max()))
+    disparity = stereo_disparity(left, right, float(gt.max()), args.matcher, args.block)
     fb = K["fx"] * args.baseline
     depth = np.where(disparity > 0, fb / np.where(disparity > 0, disparity, 1.0), 0.0)
     gt_depth = np.where(gt > 0, fb / np.where(gt > 0, gt, 1.0), 0.0).astype(np.float32)
     raw = {f"raw_{k}{p.suffix}": p for k, p in (("left", args.left), ("right", args.right), ("gt", args.gt))}
-    meta = {"source": args.source, "depth": "OpenCV SGBM (benchmarks/sensor_folder.py), f B / d", "K": K}
+    block = BLOCKS[args.matcher] if args.block is None else args.block
+    name = {"sgbm": "SGBM", "bm": "StereoBM"}[args.matcher]
+    meta = {
+        "source": args.source,
+        "depth": f"OpenCV {name}, {block}x{block} blocks (benchmarks/sensor_folder.py), f B / d",
+    }
+    meta["K"] = K
     write(args.out, depth, K, gt_depth, raw, meta)
     np.save(args.out / "gt_depth.npy", gt_depth)
     return 0

@@ -354,3 +354,55 @@ def test_linemod_entry_is_the_sensor_benchmarks_peer_or_one_line_naming_the_scri
         "some_script: OpenCV's RgbdNormals is needed (pip install opencv-contrib-python-headless), "
         "got opencv_linemod_w5: No module named 'cv2'"
     ]
+
+
+def _sensor_folder_script():
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "sensor_folder.py"
+    spec = importlib.util.spec_from_file_location("sensor_folder", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    return script
+
+
+def test_sensor_folder_matchers_find_a_known_disparity():
+    """benchmarks/sensor_folder.py's stereo matchers on a textured pair shifted by 12.25 pixels, with a textureless
+    band across it: with either, most textured pixels away from the borders get that disparity within a quarter
+    pixel, and the left border (no match in the right image) none. In the band SGBM carries the disparity across
+    (its smoothness terms) and the block matcher gives none (``matcher`` reaches OpenCV)."""
+    import cv2
+
+    script = _sensor_folder_script()
+    rng = np.random.default_rng(3)
+    H, W, d = 120, 200, 12.25
+    texture = cv2.GaussianBlur(rng.integers(0, 256, (H, 2 * W)).astype(np.float32), (0, 0), 1.2)
+    texture = (texture - texture.mean()) * 2.5 + 128.0
+    texture[50:70] = 128.0
+    u = np.arange(W) + 40.0
+    left, right = (np.stack([np.interp(u + s, np.arange(2 * W), row) for row in texture]) for s in (0.0, d))
+    pair = [np.repeat(np.clip(x, 0, 255).astype(np.uint8)[..., None], 3, axis=2) for x in (left, right)]
+    maps = {m: script.stereo_disparity(pair[0], pair[1], largest=d, matcher=m) for m in ("sgbm", "bm")}
+    textured = np.r_[15:40, 80:105]
+    for disparity in maps.values():
+        assert disparity.shape == (H, W)
+        assert np.mean(np.abs(disparity[textured, 50:-15] - d) <= 0.25) > 0.9
+        assert not (disparity[:, :8] > 0).any()
+    band = np.s_[56:64, 50:-15]
+    assert np.mean(np.abs(maps["sgbm"][band] - d) <= 0.25) > 0.9
+    assert not (maps["bm"][band] > 0).any()
+
+
+@pytest.mark.parametrize("block", ["4", "3", "0"])
+def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, capsys):
+    """An even block, or one under 5 for the block matcher: one line naming --block, what it takes and what it got;
+    exit 2, nothing written."""
+    script = _sensor_folder_script()
+    out = tmp_path / "frame"
+    argv = ["stereo", str(out), "l.png", "r.png", "gt.png", "--fx", "450", "--baseline", "0.16"]
+    argv += ["--matcher", "bm", "--block", block, "--source", "test"]
+    assert script.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert err == f"error: --block: expected an odd side of at least 5 for bm, got {block}"
+    assert not out.exists()

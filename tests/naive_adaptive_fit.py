@@ -67,8 +67,34 @@ def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_sampl
     rho = np.sqrt(np.maximum(np.maximum(16 * ms[0] - ms[1], 16 * ms[1] - ms[2]), 0) / 15)
     edges = np.geomspace(zmin, zmax, n_bins + 1)
     centres = np.sqrt(edges[:-1] * edges[1:])
-    ok = np.bincount(bins, minlength=n_bins) >= min_samples
-    return centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor
+    counts = np.bincount(bins, minlength=n_bins)
+    ok = counts >= min_samples
+    return centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor, correlation(ms, counts, min_samples)
+
+
+def correlation(ms, counts, min_samples, width=1.5):
+    """How much more the noise shows at stride 2 than at stride 1: per bin, m_s = a + b k_s / 6 + C s^4 solved for
+    white noise a, noise b correlated over ``width`` pixels (k_s: the mean square of its second difference at stride s)
+    and curvature C; then (m_2 - 16 C) / (m_1 - C), averaged over the bins weighted by their samples."""
+    def k(s):
+        return 6 - 8 * math.exp(-s * s / (4 * width * width)) + 2 * math.exp(-s * s / (width * width))
+
+    A = np.array([[1.0, k(s) / 6, s ** 4] for s in (1, 2, 4)])
+    total = weight = 0.0
+    for b in range(ms.shape[1]):
+        if counts[b] < min_samples or not ms[0, b] > 0:
+            continue
+        C = max(np.linalg.solve(A, ms[:, b])[2], 0.0)
+        m1, m2 = ms[0, b] - C, ms[1, b] - 16 * C
+        total += counts[b] * (m2 / m1 if m1 > 0 and m2 > 0 else ms[1, b] / ms[0, b])
+        weight += counts[b]
+    return total / weight if weight else 1.0
+
+
+def kappa_gain(corr, rho_bins):
+    """The noise test's kappa is doubled for noise correlated across pixels (correlation 3 and more, none at 2 and
+    less) where rho is noise (median 1.5 point spacings and less), not fine geometry (2.5 and more); linear between."""
+    return 1 + float(np.clip(corr - 2, 0, 1) * np.clip((2.5 - np.median(rho_bins)) / 1.0, 0, 1))
 
 
 def _fit(z, valid, v, u, vc, uc, r):
@@ -119,7 +145,8 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
     fx, fy, cx, cy = K[0][0], K[1][1], K[0][2], K[1][2]
     f = math.sqrt(fx * fy)
     z32 = z.astype(np.float32).astype(np.float64)
-    centres, rho_bins, _ = noise_profile(z32, valid, f)
+    centres, rho_bins, _, corr = noise_profile(z32, valid, f)
+    kappa = kappa * kappa_gain(corr, rho_bins)
     r_max = (max_window - 1) // 2
     zs = np.linspace(centres[0], centres[-1], table)
     rho_t = np.interp(np.log(zs), np.log(centres), rho_bins)

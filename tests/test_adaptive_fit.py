@@ -48,10 +48,11 @@ def test_noise_profile_matches_naive(seed, size):
     valid = z > 0
     f = math.sqrt(K[0, 0] * K[1, 1])
     got = noise_profile(z, valid, f)
-    centres, rho, floor = naive.noise_profile(z.astype(np.float64), valid, f)
+    centres, rho, floor, correlation = naive.noise_profile(z.astype(np.float64), valid, f)
     np.testing.assert_allclose(got.depths, centres, rtol=1e-12)
     np.testing.assert_allclose(got.rho, rho, rtol=1e-9, atol=1e-12)
     assert got.floor == pytest.approx(floor, rel=1e-12)
+    assert got.correlation == pytest.approx(correlation, rel=1e-9)
 
 
 def test_noise_sampling_step_is_a_640x480_frames_on_smaller_frames():
@@ -516,3 +517,57 @@ def test_bands_balanced_by_their_times_give_the_same_bits():
         got = adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), bands=on_threads(2))
         np.testing.assert_array_equal(got, ref)
     assert _balance.factors((z.shape, 2, 31, None)) is not None
+
+
+def test_kappa_gain_doubles_kappa_for_correlated_noise_not_for_fine_geometry():
+    """kappa_gain: 1 for noise independent from pixel to pixel (correlation up to 2), 2 from correlation 3 on where
+    rho is noise (median 1.5 point spacings and less), none where rho is 2.5 or more (fine geometry), linear
+    between; 1 where the correlation is not a number."""
+    from surfnorm.kernels.sensor_noise import NoiseProfile, kappa_gain
+
+    def gain(correlation, rho):
+        return kappa_gain(NoiseProfile(np.ones(3), np.full(3, rho), 0.5, correlation=correlation))
+
+    assert gain(1.0, 0.5) == gain(2.0, 0.5) == 1.0
+    assert gain(3.0, 0.5) == gain(11.0, 1.5) == 2.0
+    assert gain(2.5, 0.5) == pytest.approx(1.5)
+    assert gain(4.0, 2.0) == pytest.approx(1.5)
+    assert gain(4.0, 2.5) == gain(4.0, 9.0) == 1.0
+    assert gain(float("nan"), 0.5) == 1.0
+    # the median of the bins' rho: one loud bin does not switch it off
+    assert kappa_gain(NoiseProfile(np.ones(3), np.array([0.5, 0.5, 9.0]), 0.5, correlation=4.0)) == 2.0
+
+
+def smooth_error_plane(seed, H=120, W=160):
+    """A tilted plane through the smooth-error preset (disparity error correlated over about 2 pixels): its exact
+    normal, the simulated depth and K."""
+    from surfnorm.bench.simulate import simulate
+
+    K = camera(W, H, fov_deg=60)
+    z, n, _ = plane(K, H, W, [0.3, -0.4, -1.0], 2.0)
+    return n, simulate(z, K, "smooth_error", seed=seed, scale=1.0), K
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_correlated_noise_gets_the_wider_noise_test(seed):
+    """On noise correlated across pixels the fit runs with kappa times kappa_gain (the same bits as asking for that
+    kappa with the gain off), and its normals are closer to the plane's than with the gain off."""
+    from surfnorm.kernels.adaptive_fit import KAPPA, adaptive_fit
+    from surfnorm.kernels.sensor_noise import kappa_gain
+
+    n, z, K = smooth_error_plane(seed)
+    valid = z > 0
+    cam = Intrinsics.from_matrix(K)
+    p = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
+    assert kappa_gain(p) == 2.0
+
+    def fit(profile, **kw):
+        return adaptive_fit(z, valid, cam, np.empty(z.shape + (3,), np.float32), profile=profile, **kw)
+
+    got = fit(p)
+    off = p._replace(correlation=1.0)
+    np.testing.assert_array_equal(got, fit(off, kappa=KAPPA * kappa_gain(p)))
+    plain = fit(off)
+    assert not np.array_equal(got, plain)
+    err_got, err_plain = (angles_deg(x[valid], np.broadcast_to(n, x.shape)[valid]).mean() for x in (got, plain))
+    assert err_got < 0.8 * err_plain, (err_got, err_plain)

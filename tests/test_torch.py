@@ -283,6 +283,10 @@ class TestAdaptive:
         yield "no valid depth", np.zeros((20, 24), np.float32), K, None
 
     def test_noise_tables_as_numpy(self):
+        from surfnorm._constants import KAPPA
+        from surfnorm.kernels.sensor_noise import kappa_gain
+
+        gains = set()
         for label, depth, Kf, mask in self.scenes():
             for window, max_window in ((None, 31), (None, 9), (5, 31)):
                 profile, (z0, inv_step, radius, rho) = self.numpy_tables(depth, Kf, mask, window, max_window)
@@ -296,6 +300,26 @@ class TestAdaptive:
                 np.testing.assert_allclose(
                     [got.z0.item(), got.inv_step.item()], [z0, inv_step], rtol=1e-13, err_msg=msg
                 )
+                assert got.kappa.item() == pytest.approx(KAPPA * kappa_gain(profile), rel=1e-12), msg
+                gains.add(kappa_gain(profile) > 1.0)
+        assert gains == {True, False}  # scenes with the wider noise test for correlated noise, and without
+
+    def test_noise_tables_kappa_follows_correlation_and_rho(self):
+        """The torch tables' kappa is KAPPA times kappa_gain of the NumPy profile, from 1 (white noise) to more than
+        1.5 (correlated noise): a 3F2N frame through three presets."""
+        from surfnorm._constants import KAPPA
+        from surfnorm.bench.simulate import simulate
+        from surfnorm.kernels.sensor_noise import kappa_gain
+
+        f = threef2n.read_frame(threef2n.sample_root(), "Medium/Trex/000001")
+        seen = []
+        for sensor, seed in (("smooth_error", 0), ("stereo_sgbm", 1), ("kinect_v1", 2)):
+            depth = simulate(f.depth, f.K, sensor, seed=seed, mask=f.mask, normals=f.normals)
+            profile, _ = self.numpy_tables(depth, f.K.matrix)
+            got = self.torch_tables(depth, f.K.matrix)
+            assert got.kappa.item() == pytest.approx(KAPPA * kappa_gain(profile), rel=1e-12), sensor
+            seen.append(kappa_gain(profile))
+        assert max(seen) > 1.5 and min(seen) == 1.0, seen
 
     def test_choices_differ_across_the_scene(self):
         # the parity tests on sensor_like() scenes are only worth something if the scene exercises every choice

@@ -40,6 +40,9 @@ and hold at least ``MIN_POINTS``.
 
 Edge awareness. A window across a depth discontinuity or a crease fits badly:
 its residual per degree of freedom exceeds the noise level (kappa sigma_w)^2.
+Noise correlated across pixels (a stereo matcher's, a camera SDK's smooth float
+error) shows less in the second differences than in a wide window's residual:
+kappa is then raised, up to 2x (:func:`~surfnorm.kernels.sensor_noise.kappa_gain`).
 Such a pixel is refitted on the four quadrant windows of the same size (shifted
 by r diagonally, each with the pixel at a corner), and keeps the fit with the
 smallest residual per degree of freedom (the Kuwahara principle) among those
@@ -106,7 +109,7 @@ from ._windows import (
     widen_table,
     window_sums,
 )
-from .sensor_noise import NoiseProfile, noise_profile
+from .sensor_noise import NoiseProfile, kappa_gain, noise_profile
 from .uncertainty import (
     MISFIT_GAIN,
     MISFIT_SIGNIFICANCE,
@@ -706,7 +709,7 @@ class FitPlan:
         record: dict | None = None,
     ):
         self.z, self.valid, self.out, self.profile, self.record = z, valid, out, profile, record
-        self.window, self.max_window, self.alpha = window, max_window, alpha
+        self.window, self.max_window, self.alpha, self.kappa = window, max_window, alpha, float(kappa)
         self.f = math.sqrt(cam.fx * cam.fy)
         self.r_max = (max_window - 1) // 2
         self.stride = choose_stride(valid) if stride is None else stride
@@ -740,6 +743,10 @@ class FitPlan:
             self.gains[3] = correlated_share(p)
         if not fit:
             return None
+        # the noise test's kappa for this frame's noise (kappa_gain: wider where the noise is correlated); set before
+        # the bands fit, which wait for these tables
+        n_widen, _, rho_floor, r_max, fill = self.options
+        self.options = (n_widen, self.kappa * kappa_gain(p), rho_floor, r_max, fill)
         return radius_table(p.depths, p.rho, alpha=self.alpha, window=self.window, max_window=self.max_window)
 
     def fit(self, v0: int, v1: int, work, tables) -> None:
@@ -798,7 +805,9 @@ def adaptive_fit(
         Radius gain, r = ceil(alpha sqrt(rho)).
     kappa : float
         Edge test: a fit whose residual per degree of freedom exceeds
-        (kappa sigma_w)^2 is replaced by the best shifted window.
+        (kappa sigma_w)^2 is replaced by the best shifted window. Multiplied by
+        the frame's :func:`~surfnorm.kernels.sensor_noise.kappa_gain` (1, up to 2
+        where the noise is correlated across pixels).
     fill : float
         Value of pixels without a normal.
     profile : NoiseProfile, callable or None

@@ -30,8 +30,13 @@ from .._constants import (
     _MAX_SPREAD,
     _SMOOTH_GAUSS,
     _SMOOTH_SAMPLES,
+    _STRIDES_SOLVE,
     CLEAN_FLOOR,
-    CORRELATION_WIDTH,
+    CORRELATED_HIGH,
+    CORRELATED_KAPPA_GAIN,
+    CORRELATED_LOW,
+    GEOMETRY_RHO_HIGH,
+    GEOMETRY_RHO_LOW,
     MIN_SAMPLES,
     N_BINS,
     NOISY_FLOOR,
@@ -39,6 +44,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     noise_step,
+    stride_gain,
 )
 from ._spare import Spares
 
@@ -49,6 +55,7 @@ __all__ = [
     "terrace_statistics",
     "stride_gain",
     "adaptive_weight",
+    "kappa_gain",
     "reading",
     "quantisation",
 ]
@@ -430,20 +437,6 @@ class NoiseProfile(NamedTuple):
     correlation: float = 1.0
 
 
-def stride_gain(s: float) -> float:
-    """k_s: the mean square of the second difference at stride s of noise of unit variance correlated over
-    ``CORRELATION_WIDTH`` = l pixels (correlation exp(-d^2 / 4 l^2)), 6 - 8 exp(-s^2 / 4 l^2) + 2 exp(-s^2 / l^2);
-    white noise gives 6 at every stride."""
-    l2 = CORRELATION_WIDTH * CORRELATION_WIDTH
-    return 6.0 - 8.0 * math.exp(-s * s / (4.0 * l2)) + 2.0 * math.exp(-s * s / l2)
-
-
-#: Per bin, the mean squares m_1, m_2, m_4 of the second differences at strides 1, 2, 4 (white noise of rho gives
-#: rho^2 at each) are white noise a, correlated noise b and curvature C: m_s = a + b k_s / 6 + C s^4; this solves
-#: for (a, b, C).
-_STRIDES_SOLVE = np.linalg.inv(np.array([[1.0, stride_gain(s) / 6.0, s**4] for s in (1.0, 2.0, 4.0)]))
-
-
 def _correlation(rms, starts, min_samples):
     """:attr:`NoiseProfile.correlation` from the clipped RMS ``rms`` (3, nbins) of the second differences at
     strides 1, 2 and 4 and the bins' ``starts``: per bin, the mean square at stride 2 over that at stride 1 with
@@ -566,6 +559,20 @@ def reading(profile: NoiseProfile) -> float:
     if not profile.floor == profile.floor:
         return float("nan")
     return max(profile.floor, profile.smooth, quantisation(profile))
+
+
+def kappa_gain(profile: NoiseProfile) -> float:
+    """The adaptive fit's gain on its noise test's kappa for this frame: 1, up to ``CORRELATED_KAPPA_GAIN`` where the
+    noise is correlated across pixels (``correlation`` from ``CORRELATED_LOW`` to ``CORRELATED_HIGH``) and the
+    measured rho is not the scene's fine geometry (median rho from ``GEOMETRY_RHO_HIGH`` down to
+    ``GEOMETRY_RHO_LOW``); linear in both, so that the normals move continuously with the profile (see
+    :mod:`surfnorm._constants`). 1 where either is not a number."""
+    correlated = (profile.correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW)
+    noise = (GEOMETRY_RHO_HIGH - float(np.median(profile.rho))) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
+    if not (correlated == correlated and noise == noise):
+        return 1.0
+    share = min(max(correlated, 0.0), 1.0) * min(max(noise, 0.0), 1.0)
+    return 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
 
 
 def adaptive_weight(profile: NoiseProfile) -> float:

@@ -56,9 +56,15 @@ from .._constants import (
     _MAX_SPREAD,
     _SMOOTH_GAUSS,
     _SMOOTH_SAMPLES,
+    _STRIDES_SOLVE,
     _TABLE,
     ALPHA,
     CLEAN_FLOOR,
+    CORRELATED_HIGH,
+    CORRELATED_KAPPA_GAIN,
+    CORRELATED_LOW,
+    GEOMETRY_RHO_HIGH,
+    GEOMETRY_RHO_LOW,
     KAPPA,
     MAX_UNREACHED,
     MAX_WINDOW,
@@ -150,6 +156,7 @@ class NoiseTables(NamedTuple):
     terraced: torch.Tensor  # (B,) NoiseProfile.terraced
     step: torch.Tensor  # (B,) NoiseProfile.step
     smooth: torch.Tensor  # (B,) NoiseProfile.smooth
+    kappa: torch.Tensor  # (B,) the noise test's kappa: KAPPA times sensor_noise.kappa_gain
 
 
 def _samples(z, valid, f, lo, span):
@@ -311,6 +318,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
             rms = torch.where(counts > 0, _sqrt(sums / counts.clamp(min=1)), torch.zeros_like(sums))
         ms.append(rms * rms)
     rho_bins = _sqrt(torch.clamp_min(torch.maximum(16.0 * ms[0] - ms[1], 16.0 * ms[1] - ms[2]), 0.0) / 15.0)
+    correlation = _correlation(ms, member.sum(dim=-1))
     # bin centres: np.geomspace(zmin, zmax, N_BINS + 1) (its arithmetic), or all zmin
     ls, le = torch.log10(zmin_s), torch.log10(zmax_s)
     i = torch.arange(N_BINS + 1, dtype=_F64, device=dev).view(1, -1)
@@ -345,7 +353,26 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     inv_step = torch.where(
         wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0), torch.zeros_like(z0)
     )
-    return NoiseTables(z0, inv_step, radius, rho_t, floor, terraced, heights, smooth)
+    # sensor_noise.kappa_gain of each frame's profile (its median rho: NumPy's median of the bins' rho)
+    correlated = torch.clamp((correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW), 0.0, 1.0)
+    noise = (GEOMETRY_RHO_HIGH - torch.quantile(rho_bins, 0.5, dim=1)) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
+    kappa = KAPPA * (1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * (correlated * torch.clamp(noise, 0.0, 1.0)))
+    return NoiseTables(z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, kappa)
+
+
+def _correlation(ms, counts) -> torch.Tensor:
+    """``sensor_noise._correlation`` of every frame (B,): ms, the clipped mean squares (B, N_BINS) at strides 1, 2 and
+    4; counts (B, N_BINS), the samples per bin."""
+    solve = torch.as_tensor(_STRIDES_SOLVE[2], dtype=_F64, device=counts.device)
+    m0, m1, m2 = ms
+    curvature = torch.clamp_min(solve[0] * m0 + solve[1] * m1 + solve[2] * m2, 0.0)
+    c1, c2 = m0 - curvature, m1 - 16.0 * curvature
+    both = (c1 > 0.0) & (c2 > 0.0)
+    ratio = torch.where(both, c2 / torch.where(both, c1, 1.0), m1 / torch.where(m0 > 0.0, m0, 1.0))
+    used = (counts >= MIN_SAMPLES) & (m0 > 0.0)
+    n = torch.where(used, counts, torch.zeros_like(counts)).to(_F64)
+    den = n.sum(dim=1)
+    return torch.where(den > 0.0, (n * ratio).sum(dim=1) / torch.where(den > 0.0, den, 1.0), torch.ones_like(den))
 
 
 # --- the fit ---------------------------------------------------------------------------------------
@@ -451,9 +478,7 @@ def dense_sums(I_pad, pad: int, H: int, W: int, r: int, dv: int, du: int, centre
     return m.reshape(channels, -1)
 
 
-def _choose(
-    I_flat, I_pad, pad, px: _Pixels, valid, z, limit, r0, ladder, r_max: int, kappa: float, gather: bool
-) -> _Choice:
+def _choose(I_flat, I_pad, pad, px: _Pixels, valid, z, limit, r0, ladder, r_max: int, kappa, gather: bool) -> _Choice:
     """The NumPy kernel's choices for every pixel ``px`` of the batch in one ascending pass over the rungs.
 
     The centred windows of a rung are summed for all pixels at once (slices of the integral images); the
@@ -527,13 +552,14 @@ def _choose(
         sub = select(fails)
         q_mask = None if gather else fails
         z_q, lim = take(z, sub), take(limit, sub)
+        k2 = take(kappa, sub) * take(kappa, sub)
         w_p = torch.reciprocal(z_q)
         a_q, gu_q, gv_q, dof_q, rss_q = (take(t, sub) for t in (a, g_u, g_v, dof, rss))
         ok = dof_q > 0.0
         # residuals within TIE of each other tie (and those below TIE times the noise are rounding): the
         # first window in the fixed order keeps the pixel (the centred one, then the quadrants)
         best = torch.where(ok, torch.maximum(rss_q / torch.where(ok, dof_q, 1.0), TIE * lim), math.inf)
-        best_in = ok & ((a_q - w_p) * (a_q - w_p) <= kappa * kappa * torch.maximum(best, lim))
+        best_in = ok & ((a_q - w_p) * (a_q - w_p) <= k2 * torch.maximum(best, lim))
         n_min = torch.clamp_min(0.25 * take(count, sub), 6.0)
         s_q = take(shift, sub)
         x_q, y_q = take(px.x, sub), take(px.y, sub)
@@ -544,7 +570,7 @@ def _choose(
             has = (mk[0] >= n_min) & (dof_k > 0.0)
             score = torch.maximum(rss_k / torch.where(dof_k > 0.0, dof_k, 1.0), TIE * lim)
             a_p = a_k - gu_k * du - gv_k * dv
-            inside = (a_p - w_p) * (a_p - w_p) <= kappa * kappa * torch.maximum(score, lim)
+            inside = (a_p - w_p) * (a_p - w_p) <= k2 * torch.maximum(score, lim)
             better = has & ((inside & ~best_in) | ((inside == best_in) & (score < best * (1.0 - TIE))))
             if q_mask is not None:
                 better = better & q_mask
@@ -591,7 +617,8 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
         r0 = tables.radius[px.b, t]
         rho = tables.rho[px.b, t]
         zf = z_p * f[px.b]
-        s_w = KAPPA * torch.clamp_min(rho, RHO_FLOOR)
+        kappa = tables.kappa[px.b]
+        s_w = kappa * torch.clamp_min(rho, RHO_FLOOR)
         limit = (s_w * s_w) / (zf * zf)  # the noise test: rss <= limit * dof
     I = integral_images(z, valid)
     I_flat = I.permute(1, 2, 3, 0).reshape(-1, 10)  # channels last: one row per corner, for gathers
@@ -600,7 +627,7 @@ def _setup(z, valid, cam, tables: NoiseTables, *, window, max_window: int):
     with torch.no_grad():
         I_pad = F.pad(I.detach(), (pad, pad, pad, pad), mode="replicate")
         choice = _choose(
-            I_flat.detach(), I_pad, pad, px, valid.reshape(-1), z_p.detach(), limit, r0, ladder, r_max, KAPPA, gather
+            I_flat.detach(), I_pad, pad, px, valid.reshape(-1), z_p.detach(), limit, r0, ladder, r_max, kappa, gather
         )
     return px, z_p, I_flat, choice, limit
 

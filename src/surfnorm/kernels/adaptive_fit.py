@@ -272,7 +272,19 @@ def variance_row(row, fit, window, noise, cam, gains, out_row):
         cuv = select(full, 0.0, moments[3, i] - s_u * mv)
         cvv = select(full, c_full, moments[4, i] - s_v * mv)
         g_uu, g_vv, g_uv, var_a, c_u, c_v = fit_covariance(
-            rss[i] / d, n, cuu, cuv, cvv, x_row[i] - mu, y - mv, noise * noise, gains[0], gains[1], gains[2], gains[3]
+            rss[i] / d,
+            n,
+            cuu,
+            cuv,
+            cvv,
+            x_row[i] - mu,
+            y - mv,
+            noise * noise,
+            gains[0],
+            gains[1],
+            gains[2],
+            gains[3],
+            gains[4],
         )
         u = cols[i]
         nx, ny, nz = unit_normal(zp, a[i], g_u[i], g_v[i], u, v, fx, fy, cx, cy)
@@ -504,7 +516,8 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
     ``info``: (0, 0) for nothing, or (fitted rows, fitted columns) float64, where fitted pixel (v, stride i) gets its
     normal's angular variance (radians^2, :mod:`surfnorm.kernels.uncertainty`) from the fit its plane came from
     (its residual, its window's points and offset; the noise at its depth; ``gains``: the noise's variance factor,
-    the misfit's, the misfit's significance and the noise's correlated share, :mod:`surfnorm.kernels.uncertainty`),
+    the misfit's, the misfit's significance, the noise's correlated share and the noise a residual shows over the
+    profile's, :mod:`surfnorm.kernels.uncertainty`),
     NaN where it has no fit. Only written (it changes no normal). ``has``: (0, 0), or (H, W) bool, where each
     pixel of the band's rows gets whether it holds a normal (:func:`surfnorm.kernels._assembly.mark_row`).
     """
@@ -682,7 +695,7 @@ def _adaptive_fit_kernel(z, valid, tables, steps, cam, options, work, out, v0, v
 
 #: ``info`` of :func:`_adaptive_fit_kernel` when nothing is recorded, its ``gains`` and ``has`` then.
 _NO_INFO = np.empty((0, 0))
-_NO_GAINS = np.zeros(4)
+_NO_GAINS = np.zeros(5)
 _NO_HAS = np.empty((0, 0), np.bool_)
 
 
@@ -719,8 +732,9 @@ class FitPlan:
             self.info, self.gains, self.has = _NO_INFO, _NO_GAINS, _NO_HAS
         else:  # every fitted row, and every row, is written by a band
             self.info = np.empty(((H + self.stride - 1) // self.stride, (W + self.stride - 1) // self.stride))
-            # the noise's variance factor, set once the profile is known; misfit's; significance; the correlated share
-            self.gains = np.zeros(4)
+            # the noise's variance factor, set once the profile is known; misfit's; significance; the correlated share;
+            # the noise a residual shows over the profile's (kappa_gain squared)
+            self.gains = np.zeros(5)
             self.gains[1:3] = MISFIT_GAIN, MISFIT_SIGNIFICANCE
             self.has = np.empty((H, W), np.bool_)
             record.update(stride=self.stride, variance=self.info, has=self.has)
@@ -741,6 +755,7 @@ class FitPlan:
             self.record["profile"] = p
             self.gains[0] = noise_gain(p)
             self.gains[3] = correlated_share(p)
+            self.gains[4] = kappa_gain(p) ** 2
         if not fit:
             return None
         # the noise test's kappa for this frame's noise (kappa_gain: wider where the noise is correlated); set before

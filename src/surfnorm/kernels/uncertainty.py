@@ -160,13 +160,13 @@ def fit_variance(s2, n, r, o_u, o_v, noise2, gain, misfit_gain, significance):
     per axis, no cross term) and its noise white: :func:`fit_covariance` of eq. (1)."""
     spread = n * (r * (r + 1.0) / 3.0)
     var_g, _, _, var_a, c_u, c_v = fit_covariance(
-        s2, n, spread, 0.0, spread, o_u, o_v, noise2, gain, misfit_gain, significance, 0.0
+        s2, n, spread, 0.0, spread, o_u, o_v, noise2, gain, misfit_gain, significance, 0.0, 1.0
     )
     return var_g, var_a, c_u, c_v
 
 
 @pixel
-def fit_covariance(s2, n, cuu, cuv, cvv, o_u, o_v, noise2, gain, misfit_gain, significance, share):
+def fit_covariance(s2, n, cuu, cuv, cvv, o_u, o_v, noise2, gain, misfit_gain, significance, share, residual):
     """(var g_u, var g_v, cov(g_u, g_v), var_a, cov(a, g_u), cov(a, g_v)) of a fit (residual per dof s2) of n points
     whose coordinates scatter by (cuu, cuv; cuv, cvv) about their centroid, carried to a pixel offset (o_u, o_v)
     from that centroid: the frame's noise at its depth (``noise2``, times ``gain``) averaged over the n points,
@@ -174,9 +174,12 @@ def fit_covariance(s2, n, cuu, cuv, cvv, o_u, o_v, noise2, gain, misfit_gain, si
     residual of n - 3 degrees of freedom, times ``misfit_gain``), which the points do not average away. The
     slopes' covariance is (noise / n + misfit) times n (C)^-1 (eq. (1) for the full square): a window cut by a hole or the frame's border (fewer points on one side, a centroid off
     the pixel) pins its slopes less, and carries them further, than the full square would. The noise's
-    correlated part (``share`` times ``noise2``, :func:`correlated_share`) adds eq. (3) to both slopes."""
+    correlated part (``share`` times ``noise2``, :func:`correlated_share`) adds eq. (3) to both slopes. ``residual``:
+    how much more noise a residual shows than ``noise2`` (the square of the fit's
+    :func:`~surfnorm.kernels.sensor_noise.kappa_gain`: the noise test's premise for correlated noise), so that
+    the residual it lets through is not taken for misfit; 1 for white noise."""
     s = gain * noise2
-    chance = noise2 * (1.0 + significance * math.sqrt(2.0 / max(n - 3.0, 1.0)))
+    chance = residual * noise2 * (1.0 + significance * math.sqrt(2.0 / max(n - 3.0, 1.0)))
     mis = misfit_gain * max(s2 - chance, 0.0)
     q = (s + n * mis) / max(cuu * cvv - cuv * cuv, 1e-12)
     s_c = share * noise2

@@ -406,3 +406,47 @@ def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, 
     assert err.count("\n") == 0
     assert err == f"error: --block: expected an odd side of at least 5 for bm, got {block}"
     assert not out.exists()
+
+
+def _rooms_script():
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "rooms.py"
+    spec = importlib.util.spec_from_file_location("rooms", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    return script
+
+
+def test_rooms_are_planes_seen_from_the_camera():
+    """benchmarks/rooms.py's rooms: every pixel's point lies on the plane its normal names (n . P = -distance, for the
+    floor, back wall or side wall), the normals face the camera, the floor and back wall are seen, and some of the
+    surface at more than 75 degrees from the line of sight."""
+    script = _rooms_script()
+    K = script.intrinsics()
+    for pitch, height, turn, back, side in script.ROOMS:
+        depth, normals, view = script.room(pitch, height, turn, back, side)
+        assert (depth > 0).all()
+        v, u = np.mgrid[0 : script.H, 0 : script.W]
+        P = np.stack([(u - K[0, 2]) / K[0, 0] * depth, (v - K[1, 2]) / K[1, 1] * depth, depth], axis=-1)
+        offset = -(P * normals).sum(-1)  # the plane's distance from the camera, for the plane of each pixel
+        np.testing.assert_allclose(np.linalg.norm(normals, axis=-1), 1.0, rtol=1e-12)
+        assert ((P * normals).sum(-1) < 0).all()  # facing the camera
+        for distance in (height, back):  # the floor and the back wall are in every view (the side wall not always)
+            assert np.isclose(offset, distance, rtol=1e-9).sum() > 1000
+        assert (
+            np.isclose(offset, height, rtol=1e-9).sum()
+            + np.isclose(offset, back, rtol=1e-9).sum()
+            + np.isclose(offset, side, rtol=1e-9).sum()
+            == depth.size
+        )
+        assert view.max() > 75.0
+
+
+def test_rooms_refuses_an_unknown_sensor(capsys):
+    """One line naming --sensors, what it takes and what it got; exit 2."""
+    script = _rooms_script()
+    assert script.main(["--sensors", "kinect_v1,sonar", "--methods", "auto"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert err.startswith("rooms: --sensors: expected some of kinect_v1, ") and err.endswith("got sonar")

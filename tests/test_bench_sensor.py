@@ -356,11 +356,12 @@ def test_linemod_entry_is_the_sensor_benchmarks_peer_or_one_line_naming_the_scri
     ]
 
 
-def _sensor_folder_script():
+def _benchmark_script(name: str):
+    """The module of ``benchmarks/<name>.py``."""
     import importlib.util
 
-    path = Path(__file__).resolve().parent.parent / "benchmarks" / "sensor_folder.py"
-    spec = importlib.util.spec_from_file_location("sensor_folder", path)
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     return script
@@ -373,7 +374,7 @@ def test_sensor_folder_matchers_find_a_known_disparity():
     (its smoothness terms) and the block matcher gives none (``matcher`` reaches OpenCV)."""
     import cv2
 
-    script = _sensor_folder_script()
+    script = _benchmark_script("sensor_folder")
     rng = np.random.default_rng(3)
     H, W, d = 120, 200, 12.25
     texture = cv2.GaussianBlur(rng.integers(0, 256, (H, 2 * W)).astype(np.float32), (0, 0), 1.2)
@@ -397,7 +398,7 @@ def test_sensor_folder_matchers_find_a_known_disparity():
 def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, capsys):
     """An even block, or one under 5 for the block matcher: one line naming --block, what it takes and what it got;
     exit 2, nothing written."""
-    script = _sensor_folder_script()
+    script = _benchmark_script("sensor_folder")
     out = tmp_path / "frame"
     argv = ["stereo", str(out), "l.png", "r.png", "gt.png", "--fx", "450", "--baseline", "0.16"]
     argv += ["--matcher", "bm", "--block", block, "--source", "test"]
@@ -408,21 +409,11 @@ def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, 
     assert not out.exists()
 
 
-def _rooms_script():
-    import importlib.util
-
-    path = Path(__file__).resolve().parent.parent / "benchmarks" / "rooms.py"
-    spec = importlib.util.spec_from_file_location("rooms", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    return script
-
-
 def test_rooms_are_planes_seen_from_the_camera():
     """benchmarks/rooms.py's rooms: every pixel's point lies on the plane its normal names (n . P = -distance, for the
     floor, back wall or side wall), the normals face the camera, the floor and back wall are seen, and some of the
     surface at more than 75 degrees from the line of sight."""
-    script = _rooms_script()
+    script = _benchmark_script("rooms")
     K = script.intrinsics()
     for pitch, height, turn, back, side in script.ROOMS:
         depth, normals, view = script.room(pitch, height, turn, back, side)
@@ -445,7 +436,7 @@ def test_rooms_are_planes_seen_from_the_camera():
 
 def test_rooms_refuses_an_unknown_sensor(capsys):
     """One line naming --sensors, what it takes and what it got; exit 2."""
-    script = _rooms_script()
+    script = _benchmark_script("rooms")
     assert script.main(["--sensors", "kinect_v1,sonar", "--methods", "auto"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0

@@ -572,7 +572,7 @@ def kappa_gain(profile: NoiseProfile) -> float:
     if not (correlated == correlated and noise == noise):
         return 1.0
     share = min(max(correlated, 0.0), 1.0) * min(max(noise, 0.0), 1.0)
-    return 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
+    return float(1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share)
 
 
 def adaptive_weight(profile: NoiseProfile) -> float:

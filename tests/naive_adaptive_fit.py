@@ -91,10 +91,20 @@ def correlation(ms, counts, min_samples, width=1.5):
     return total / weight if weight else 1.0
 
 
-def kappa_gain(corr, rho_bins):
+def kappa_gain(corr, rho_bins, weight):
     """The noise test's kappa is doubled for noise correlated across pixels (correlation 3 and more, none at 2 and
-    less) where rho is noise (median 1.5 point spacings and less), not fine geometry (2.5 and more); linear between."""
-    return 1 + float(np.clip(corr - 2, 0, 1) * np.clip((2.5 - np.median(rho_bins)) / 1.0, 0, 1))
+    less) where rho is noise (median 1.5 point spacings and less), not fine geometry (2.5 and more), times the
+    frame's weight as sensor depth (``weight``: 0 for clean depth); linear between."""
+    return 1 + float(np.clip(corr - 2, 0, 1) * np.clip((2.5 - np.median(rho_bins)) / 1.0, 0, 1) * weight)
+
+
+def sensor_weight(floor, terraced, step, smooth):
+    """auto's weight of the adaptive fit: its noise reading (the largest of the floor, the smooth noise and the
+    terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3) from 0.1 (clean) to 0.2."""
+    if floor != floor:
+        return 1.0
+    quantisation = float(np.clip((terraced - 0.15) / 0.15, 0, 1)) * step / math.sqrt(12)
+    return float(np.clip((max(floor, smooth, quantisation) - 0.1) / 0.1, 0, 1))
 
 
 def _fit(z, valid, v, u, vc, uc, r):
@@ -145,8 +155,9 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
     fx, fy, cx, cy = K[0][0], K[1][1], K[0][2], K[1][2]
     f = math.sqrt(fx * fy)
     z32 = z.astype(np.float32).astype(np.float64)
-    centres, rho_bins, _, corr = noise_profile(z32, valid, f)
-    kappa = kappa * kappa_gain(corr, rho_bins)
+    centres, rho_bins, floor, corr = noise_profile(z32, valid, f)
+    terraced, step, smooth = noise_extras(z32, valid, f)
+    kappa = kappa * kappa_gain(corr, rho_bins, sensor_weight(floor, terraced, step, smooth))
     r_max = (max_window - 1) // 2
     zs = np.linspace(centres[0], centres[-1], table)
     rho_t = np.interp(np.log(zs), np.log(centres), rho_bins)

@@ -521,8 +521,8 @@ def test_bands_balanced_by_their_times_give_the_same_bits():
 
 def test_kappa_gain_doubles_kappa_for_correlated_noise_not_for_fine_geometry():
     """kappa_gain: 1 for noise independent from pixel to pixel (correlation up to 2), 2 from correlation 3 on where
-    rho is noise (median 1.5 point spacings and less), none where rho is 2.5 or more (fine geometry), linear
-    between; 1 where the correlation is not a number."""
+    rho is noise (median 1.5 point spacings and less), none where rho is 2.5 or more (fine geometry) or the depth is
+    clean (auto's weight), linear between; 1 where the correlation is not a number."""
     from surfnorm.kernels.sensor_noise import NoiseProfile, kappa_gain
 
     def gain(correlation, rho):
@@ -534,6 +534,10 @@ def test_kappa_gain_doubles_kappa_for_correlated_noise_not_for_fine_geometry():
     assert gain(4.0, 2.0) == pytest.approx(1.5)
     assert gain(4.0, 2.5) == gain(4.0, 9.0) == 1.0
     assert gain(float("nan"), 0.5) == 1.0
+    # clean depth (no noise floor, no smooth noise, no terraces: auto's weight 0) reads any correlation without noise
+    clean = NoiseProfile(np.ones(3), np.full(3, 0.1), 0.0, correlation=11.0)
+    assert kappa_gain(clean) == 1.0
+    assert kappa_gain(clean._replace(floor=0.15)) == pytest.approx(1.5)  # half-way between clean and sensor
     # the median of the bins' rho: one loud bin does not switch it off
     assert kappa_gain(NoiseProfile(np.ones(3), np.array([0.5, 0.5, 9.0]), 0.5, correlation=4.0)) == 2.0
 

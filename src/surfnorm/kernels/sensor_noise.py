@@ -563,15 +563,16 @@ def reading(profile: NoiseProfile) -> float:
 
 def kappa_gain(profile: NoiseProfile) -> float:
     """The adaptive fit's gain on its noise test's kappa for this frame: 1, up to ``CORRELATED_KAPPA_GAIN`` where the
-    noise is correlated across pixels (``correlation`` from ``CORRELATED_LOW`` to ``CORRELATED_HIGH``) and the
+    noise is correlated across pixels (``correlation`` from ``CORRELATED_LOW`` to ``CORRELATED_HIGH``), the
     measured rho is not the scene's fine geometry (median rho from ``GEOMETRY_RHO_HIGH`` down to
-    ``GEOMETRY_RHO_LOW``); linear in both, so that the normals move continuously with the profile (see
-    :mod:`surfnorm._constants`). 1 where either is not a number."""
+    ``GEOMETRY_RHO_LOW``) and the frame is sensor depth (:func:`adaptive_weight`: on clean depth there is no noise
+    whose correlation a ratio of second differences could tell); linear in each, so that the normals move
+    continuously with the profile (see :mod:`surfnorm._constants`). 1 where a measure is not a number."""
     correlated = (profile.correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW)
     noise = (GEOMETRY_RHO_HIGH - float(np.median(profile.rho))) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
     if not (correlated == correlated and noise == noise):
         return 1.0
-    share = min(max(correlated, 0.0), 1.0) * min(max(noise, 0.0), 1.0)
+    share = min(max(correlated, 0.0), 1.0) * min(max(noise, 0.0), 1.0) * adaptive_weight(profile)
     return float(1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share)
 
 

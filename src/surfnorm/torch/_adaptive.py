@@ -353,11 +353,13 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     inv_step = torch.where(
         wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0), torch.zeros_like(z0)
     )
-    # sensor_noise.kappa_gain of each frame's profile (its median rho: NumPy's median of the bins' rho)
+    # sensor_noise.kappa_gain of each frame's profile (its median rho: NumPy's median of the bins' rho; its weight
+    # as sensor depth: adaptive_weight below)
     correlated = torch.clamp((correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW), 0.0, 1.0)
     noise = (GEOMETRY_RHO_HIGH - torch.quantile(rho_bins, 0.5, dim=1)) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
-    kappa = KAPPA * (1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * (correlated * torch.clamp(noise, 0.0, 1.0)))
-    return NoiseTables(z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, kappa)
+    tables = NoiseTables(z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, torch.full_like(z0, KAPPA))
+    share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
+    return tables._replace(kappa=KAPPA * (1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share))
 
 
 def _correlation(ms, counts) -> torch.Tensor:

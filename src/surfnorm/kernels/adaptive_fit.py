@@ -751,17 +751,19 @@ class FitPlan:
     def tables(self, p: NoiseProfile, fit: bool = True):
         """The radius and noise tables of profile ``p`` (:func:`radius_table`), or None where not ``fit``; either way
         ``p`` is recorded (``record``)."""
+        if self.record is None and not fit:
+            return None
+        gain = kappa_gain(p)  # the noise test's kappa for this frame's noise: wider where the noise is correlated
         if self.record is not None:
             self.record["profile"] = p
             self.gains[0] = noise_gain(p)
             self.gains[3] = correlated_share(p)
-            self.gains[4] = kappa_gain(p) ** 2
+            self.gains[4] = gain * gain
         if not fit:
             return None
-        # the noise test's kappa for this frame's noise (kappa_gain: wider where the noise is correlated); set before
-        # the bands fit, which wait for these tables
+        # set before the bands fit, which wait for these tables
         n_widen, _, rho_floor, r_max, fill = self.options
-        self.options = (n_widen, self.kappa * kappa_gain(p), rho_floor, r_max, fill)
+        self.options = (n_widen, self.kappa * gain, rho_floor, r_max, fill)
         return radius_table(p.depths, p.rho, alpha=self.alpha, window=self.window, max_window=self.max_window)
 
     def fit(self, v0: int, v1: int, work, tables) -> None:

@@ -463,6 +463,45 @@ def test_depth_range_from_the_bits_is_the_plain_one():
     assert depth_range(np.zeros((3, 4), np.float32), np.zeros((3, 4), bool)) == (np.inf, 0.0)
 
 
+@pytest.mark.parametrize("size", [(120, 96), (131, 77), (383, 434)])  # sampled at step 1, 1 and 5; odd rows
+def test_noise_samples_split_between_two_threads_are_those_of_one_sweep(size, monkeypatch):
+    """With a waiting band (``offers``), the lower half of the sampled rows is swept on its thread and its samples
+    moved up behind the upper half's: the same arrays, in the same order, as one sweep on one thread."""
+    import threading
+
+    from surfnorm._bands import Offers
+    from surfnorm.kernels import sensor_noise as S
+
+    z, K = scene(5, *size, holes=0.05)
+    valid = z > 0
+    f = math.sqrt(K[0, 0] * K[1, 1])
+    one = S._samples(z, valid, f)
+    swept = []
+    sweep = S._second_differences
+
+    def recorded(*args):
+        swept.append((threading.get_ident(), args[7]))
+        return sweep(*args)
+
+    monkeypatch.setattr(S, "_second_differences", recorded)
+    offers = Offers()
+    offers.open()
+    helper = threading.Thread(target=offers.help)
+    helper.start()
+    try:
+        two = S._samples(z, valid, f, offers=offers)
+    finally:
+        offers.close()
+        helper.join(timeout=5)
+    H = size[0]
+    assert sorted(rows for _, rows in swept) == [(0, swept[0][1][1]), (swept[0][1][1], H)]  # two halves
+    assert {thread for thread, _ in swept} == {threading.get_ident(), helper.ident}  # one of them on the helper
+    assert one[:2] == two[:2] and one[5] == two[5]
+    for a, b in zip(one[2:5], two[2:5]):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+
+
 def test_noise_measured_by_one_band_while_the_others_make_their_rows():
     """The profile given, measured here, or measured by the first band that needs it (while the others make
     the integral rows above their own) gives the same bits on one band and on several; tables declined once the

@@ -250,6 +250,17 @@ def test_a_part_runs_once_on_whichever_thread_takes_it_first_and_its_owner_runs_
     helper.join(timeout=5)
     assert helped == ["returned"]  # help returns once the offers are closed
 
+    # a part the measuring band waits for soonest goes first; not waiting, a band runs what is offered and returns
+    order = []
+    offers = Offers()
+    offers.open()
+    offers.offer(Part(lambda: order.append("rows")))
+    offers.offer(Part(lambda: order.append("samples")), first=True)
+    offers.help(wait=False)
+    assert order == ["samples", "rows"]
+    offers.help(wait=False)  # nothing left, measuring still open: returns at once
+    offers.close()
+
 
 def test_a_finished_part_runs_nowhere_after_finish_returns():
     """``finish``: a part that nobody took is given up (never run); one that runs elsewhere is waited for (the

@@ -209,9 +209,11 @@ class Offers:
         with self._cond:
             self._open = True
 
-    def offer(self, part: Part) -> Part:
+    def offer(self, part: Part, first: bool = False) -> Part:
+        """Hand ``part`` to a waiting band: after the parts offered before it, or before them (``first``: a part the
+        measuring band will wait for soonest)."""
         with self._cond:
-            self._parts.append(part)
+            self._parts.insert(0 if first else len(self._parts), part)
             self._cond.notify()
         return part
 
@@ -220,10 +222,11 @@ class Offers:
             self._closed = True
             self._cond.notify_all()
 
-    def help(self) -> None:
+    def help(self, wait: bool = True) -> None:
+        """Run the parts offered until the measuring ends (or, not ``wait``: those offered already, then return)."""
         while True:
             with self._cond:
-                while not self._parts and self._open and not self._closed:
+                while wait and not self._parts and self._open and not self._closed:
                     self._cond.wait()
                 if not self._parts:
                     return

@@ -223,6 +223,8 @@ def run_bands(frame, bands, tables=None) -> bool:
                 return made
 
             if v0 > 0:
+                if offers is not None:  # the measuring's first parts, which it waits for, before this band's own rows
+                    offers.help(wait=False)
                 made = primer()
                 if offers is not None:
                     offers.help()

@@ -373,7 +373,7 @@ def _working_set(size: int) -> tuple:
     return np.empty((3, size)), np.empty(size, np.int64), np.empty(size), np.empty((3, size)), np.empty(size)
 
 
-#: Sampled rows below which the second differences are not split between two threads.
+#: Sampled rows that each half needs for the second differences to be split between two threads.
 _SPLIT_ROWS = 16
 
 

@@ -441,3 +441,58 @@ def test_rooms_refuses_an_unknown_sensor(capsys):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
     assert err.startswith("rooms: --sensors: expected some of kinect_v1, ") and err.endswith("got sonar")
+
+
+def test_families_deliver_what_they_say():
+    """benchmarks/families.py's families on a tilted plane: upsampling keeps the low sensor's depth at the pixels it
+    was taken from (bilinearly: between them the depth is linear along a row; to the nearest pixel: constant over a
+    cell); the low sensor's intrinsics put those pixels' points where the frame's put them; the millimetre families
+    are whole millimetres; the warp is a relative error of about 0.2 % RMS; invalid pixels stay invalid."""
+    script = _benchmark_script("families")
+    H, W, k = 96, 120, 3
+    K = np.array([[100.0, 0.0, 59.5], [0.0, 100.0, 47.5], [0.0, 0.0, 1.0]])
+    v, u = np.mgrid[0:H, 0:W]
+    z = (2.0 / (1.0 + 0.002 * (u - 60) + 0.001 * (v - 48))).astype(np.float32)  # a plane
+    valid = np.ones(z.shape, bool)
+    valid[:5, :7] = False
+    low = script.low_resolution(np.where(valid, z, 0.0), k, np.random.default_rng(0))
+    assert low.shape == (H // k, W // k)
+    for family in ("upsampled_linear", "upsampled_nearest"):
+        got = script.degrade(family, k, z, valid, np.random.default_rng(0))
+        assert got.dtype == np.float32 and (got[~valid] == 0).all()
+        inner = got[k + k // 2 : -k : k, k + k // 2 : -k : k]  # away from the invalid corner and the borders
+        np.testing.assert_allclose(inner, low[1:-1, 1:-1], rtol=1e-6)
+    linear = script.degrade("upsampled_linear", k, z, valid, np.random.default_rng(0))
+    row = linear[40, 10:100].astype(np.float64)
+    second = row[:-2] - 2 * row[1:-1] + row[2:]
+    assert (np.abs(second) < 1e-5).mean() > 0.6  # linear inside each cell; kinks where the cells meet
+    nearest = script.degrade("upsampled_nearest", k, z, valid, np.random.default_rng(0))
+    assert (nearest[30:33, 30:33] == nearest[31, 31]).all()  # one cell, one depth
+    Kn = script.native_camera(K, k)
+    i, j = 7, 11  # low pixel (row i, column j) is the frame's (i k + k // 2, j k + k // 2)
+    np.testing.assert_allclose(
+        [(j - Kn[0, 2]) / Kn[0, 0], (i - Kn[1, 2]) / Kn[1, 1]],
+        [(j * k + k // 2 - K[0, 2]) / K[0, 0], (i * k + k // 2 - K[1, 2]) / K[1, 1]],
+        rtol=1e-12,
+    )
+    for family in ("median_mm", "tof_mm"):
+        got = script.degrade(family, 0, z, valid, np.random.default_rng(0)).astype(np.float64)
+        mm = got[valid] * 1000.0
+        np.testing.assert_allclose(mm, np.round(mm), atol=1e-3)
+        assert (got[~valid] == 0).all()
+    warp = script.degrade("smooth_warp", 0, z, valid, np.random.default_rng(0))
+    relative = warp[valid] / z[valid] - 1.0
+    assert 0.0015 < relative.std() < 0.0025
+
+
+def test_families_refuses_an_unknown_family_or_factor(capsys):
+    """One line naming --families, what it takes and what it got; exit 2."""
+    script = _benchmark_script("families")
+    for arg, tail in (
+        ("median_mm,sonar", "got 'sonar'"),
+        ("upsampled_linear:1", "with K from 2 to 16, got 'upsampled_linear:1'"),
+        ("tof_mm:2", "tof_mm takes no factor, got 'tof_mm:2'"),
+    ):
+        assert script.main(["--families", arg, "--methods", "auto"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and err.startswith("families: --families: ") and err.endswith(tail), err

@@ -1,0 +1,145 @@
+"""Families of depth made apart from the simulator's sensors: the default, its two estimators and the peers.
+
+    PYTHONPATH=src python benchmarks/families.py
+    PYTHONPATH=src python benchmarks/families.py --families upsampled_linear:8,median_mm --frames 4
+
+`surfnorm.bench.simulate` models sensors from their physics. The families here are what processing does to depth
+after the sensor, each from a few lines of OpenCV and NumPy, on the 3F2N frames (tests/data/3f2n-sample, 12 frames;
+depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's index):
+
+- ``upsampled_linear:K``: a sensor of 1/K the resolution (every K-th pixel), 0.4 % depth noise there, resized back
+  to the frame bilinearly (a low-resolution time-of-flight or phone LiDAR registered to a colour camera, or a depth
+  completion's output);
+- ``upsampled_nearest:K``: the same, resized back to the nearest pixel;
+- ``median_mm``: 0.2 % noise, whole millimetres, then a 5x5 median filter (a common clean-up);
+- ``tof_mm``: 2 mm + 0.1 % of depth of noise, whole millimetres;
+- ``smooth_warp``: a relative error of 0.2 % RMS smooth over about 15 pixels (a learned depth's, say).
+
+Per family and method: e_A in degrees (mean over the frames of the mean angle to the exact normals over the object's
+pixels with depth and a normal). For the upsampled families also the default run at the sensor's own resolution
+(on the 1/K depth, with the intrinsics scaled), its normals resized back to the nearest pixel: ``auto (native)``.
+Every library runs on one thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+FAMILIES = ("upsampled_linear", "upsampled_nearest", "median_mm", "tof_mm", "smooth_warp")
+DEFAULT = "upsampled_linear:4,upsampled_linear:8,upsampled_nearest:8,median_mm,tof_mm,smooth_warp"
+
+
+def parse_family(text: str) -> tuple[str, int]:
+    """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); other families take no factor (0)."""
+    from surfnorm.errors import InputError
+
+    name, _, factor = text.partition(":")
+    if name not in FAMILIES:
+        raise InputError(f"--families: expected some of {', '.join(FAMILIES)}, got {text!r}")
+    if not name.startswith("upsampled"):
+        if factor:
+            raise InputError(f"--families: {name} takes no factor, got {text!r}")
+        return name, 0
+    if not factor.isdigit() or not 2 <= int(factor) <= 16:
+        raise InputError(f"--families: expected {name}:K with K from 2 to 16, got {text!r}")
+    return name, int(factor)
+
+
+def low_resolution(z: np.ndarray, k: int, rng) -> np.ndarray:
+    """Every k-th pixel of ``z`` (0 where invalid), with 0.4 % multiplicative noise: the sensor of 1/k resolution."""
+    low = z[k // 2 :: k, k // 2 :: k].astype(np.float32)
+    return np.where(low > 0, low * (1.0 + 0.004 * rng.standard_normal(low.shape)), 0.0).astype(np.float32)
+
+
+def degrade(family: str, k: int, z: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
+    """Depth ``z`` (metres, float32; ``valid``) as ``family`` delivers it: float32, 0 where it has none."""
+    import cv2
+
+    H, W = z.shape
+    if family.startswith("upsampled"):
+        low = low_resolution(np.where(valid, z, 0.0), k, rng)
+        interpolation = cv2.INTER_LINEAR if family == "upsampled_linear" else cv2.INTER_NEAREST
+        # the low pixel i sits at i k + k // 2; bilinear resizing puts it at (i + 0.5) k - 0.5: the same for odd k
+        out = cv2.resize(low, (W, H), interpolation=interpolation)
+    elif family == "median_mm":
+        noisy = np.round(z * (1.0 + 0.002 * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
+        out = cv2.medianBlur(np.where(valid, noisy, 0.0).astype(np.float32), 5)
+    elif family == "tof_mm":
+        out = np.round((z + (0.002 + 0.001 * z) * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
+    else:  # smooth_warp
+        field = cv2.GaussianBlur(rng.standard_normal(z.shape).astype(np.float32), (0, 0), 15.0)
+        out = z * (1.0 + 0.002 * field / field.std())
+    return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
+
+
+def native_camera(K: np.ndarray, k: int) -> np.ndarray:
+    """The intrinsics of the 1/k sensor of :func:`low_resolution` (its pixel i is the frame's pixel i k + k // 2)."""
+    Kn = np.array(K, np.float64)
+    Kn[0, 0] /= k
+    Kn[1, 1] /= k
+    Kn[0, 2] = (K[0, 2] - k // 2) / k
+    Kn[1, 2] = (K[1, 2] - k // 2) / k
+    return Kn
+
+
+def main(argv=None) -> int:
+    from surfnorm.bench.peers import single_thread
+
+    single_thread()  # before any peer library is imported
+    import cv2
+
+    from surfnorm import estimate
+    from surfnorm.bench.sensor import make_entries
+    from surfnorm.bench.simulate import SENSORS, metres_per_unit
+    from surfnorm.errors import SurfnormError
+    from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+    from surfnorm.metrics import mean_angular_error
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("root", nargs="?", default=None, help="3F2N frames; default tests/data/3f2n-sample")
+    ap.add_argument("--families", default=DEFAULT, help=f"comma-separated among {', '.join(FAMILIES)}")
+    ap.add_argument("--methods", default="auto,adaptive_fit,d2nt_v3,opencv_linemod_w5,opencv_fals_w5,open3d_knn30")
+    ap.add_argument("--frames", type=int, default=None, help="the first N frames only")
+    args = ap.parse_args(argv)
+    try:
+        families = [parse_family(f) for f in args.families.split(",")]
+        entries, missing = make_entries(args.methods.split(","))
+    except SurfnormError as exc:
+        print(f"families: {exc}", file=sys.stderr)
+        return 2
+    for name, why in missing.items():
+        print(f"(left out: {name}: {why})")
+    shipped = REPO / "tests" / "data" / "3f2n-sample"
+    root = Path(args.root) if args.root else (shipped if shipped.is_dir() else sample_root())
+    names = find_frames(root)[: args.frames]
+    frames = [read_frame(root, name) for name in names]
+    print("| family | " + " | ".join(e.label for e in entries) + " | auto (native) |")
+    print("|" + "---|" * (len(entries) + 2))
+    for family, k in families:
+        errors: dict[str, list[float]] = {e.label: [] for e in entries}
+        native: list[float] = []
+        for i, frame in enumerate(frames):
+            z = (frame.depth * metres_per_unit(frame.depth, SENSORS["kinect_v1"], frame.mask)).astype(np.float32)
+            valid = np.isfinite(z) & (z > 0)
+            got = degrade(family, k, z, valid, np.random.default_rng(i))
+            scored = frame.mask & (got > 0)
+            for e in entries:
+                errors[e.label].append(mean_angular_error(e.normals(got, frame.K, got > 0), frame.normals, scored))
+            if family.startswith("upsampled"):
+                low = low_resolution(np.where(valid, z, 0.0), k, np.random.default_rng(i))
+                n = estimate(low, native_camera(frame.K.matrix, k), threads=1)
+                n = cv2.resize(n, z.shape[::-1], interpolation=cv2.INTER_NEAREST)
+                native.append(mean_angular_error(n, frame.normals, scored))
+        label = family + (f":{k}" if k else "")
+        cells = [f"{np.mean(v):.2f}" for v in errors.values()] + [f"{np.mean(native):.2f}" if native else "-"]
+        print(f"| {label} | " + " | ".join(cells) + " |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

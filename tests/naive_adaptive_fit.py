@@ -99,12 +99,13 @@ def kappa_gain(corr, rho_bins, weight):
 
 
 def sensor_weight(floor, terraced, step, smooth):
-    """auto's weight of the adaptive fit: its noise reading (the largest of the floor, the smooth noise and the
-    terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3) from 0.1 (clean) to 0.2."""
+    """auto's weight of the adaptive fit: its noise reading (the largest of the floor, the smooth noise, the
+    terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3, and 0.2 times that share)
+    from 0.1 (clean) to 0.2."""
     if floor != floor:
         return 1.0
-    quantisation = float(np.clip((terraced - 0.15) / 0.15, 0, 1)) * step / math.sqrt(12)
-    return float(np.clip((max(floor, smooth, quantisation) - 0.1) / 0.1, 0, 1))
+    share = float(np.clip((terraced - 0.15) / 0.15, 0, 1))
+    return float(np.clip((max(floor, smooth, share * step / math.sqrt(12), 0.2 * share) - 0.1) / 0.1, 0, 1))
 
 
 def _fit(z, valid, v, u, vc, uc, r):

@@ -91,7 +91,35 @@ def test_the_reading_is_the_largest_measurement_and_terraces_count_by_their_shar
     assert math.isnan(reading(base._replace(floor=float("nan"), smooth=5.0)))
     assert adaptive_weight(base._replace(floor=float("nan"))) == 1.0
     assert adaptive_weight(base._replace(smooth=NOISY_FLOOR)) == 1.0
-    assert adaptive_weight(base._replace(terraced=1.0, step=math.sqrt(12) * CLEAN_FLOOR)) == pytest.approx(0.0)
+    # terraces count whatever their height: in full, a frame with tiny steps reads as sensor depth; in part, in part
+    tiny = base._replace(terraced=1.0, step=math.sqrt(12) * CLEAN_FLOOR)
+    assert quantisation(tiny) == pytest.approx(CLEAN_FLOOR)
+    assert reading(tiny) == pytest.approx(NOISY_FLOOR) and adaptive_weight(tiny) == pytest.approx(1.0)
+    assert reading(half._replace(step=0.0)) == pytest.approx(0.5 * NOISY_FLOOR)
+    assert reading(base._replace(terraced=TERRACED_LOW, step=0.0)) == 0.05
+
+
+def test_a_median_filter_over_millimetres_reads_as_sensor_depth_by_its_terraces():
+    """Millimetre depth with 0.2 % noise, then a 5x5 median filter: the filter takes the noise away (floor, smooth
+    noise and the steps' quantisation all read under NOISY_FLOOR), but the frame is terraced in full, which no
+    float render is, and reads as sensor depth; adaptive_fit is 10x better than d2nt_v3 there."""
+    import cv2
+
+    from surfnorm.metrics import mean_angular_error
+
+    K = camera(320, 240, fov_deg=40)
+    z1, n1, _ = plane(K, 240, 320, [0.3, -0.2, -1], 2.5)
+    zs, ns, hit = sphere(K, 240, 320, [0.1, 0.0, 2.2], 0.5)
+    front = hit & (zs < z1)
+    z, normals = np.where(front, zs, z1), np.where(front[..., None], ns, n1)
+    noisy = np.round(z * (1 + 0.002 * np.random.default_rng(0).standard_normal(z.shape)) * 1000) / 1000
+    filtered = cv2.medianBlur(noisy.astype(np.float32), 5)
+    p = noise_profile(filtered, filtered > 0, math.sqrt(K[0, 0] * K[1, 1]))
+    assert p.terraced >= TERRACED_HIGH
+    assert max(p.floor, p.smooth, quantisation(p)) < NOISY_FLOOR  # what the other measurements read
+    assert reading(p) == pytest.approx(NOISY_FLOOR) and adaptive_weight(p) == 1.0
+    errors = {m: mean_angular_error(surfnorm.estimate(filtered, K, method=m), normals) for m in ("auto", "d2nt_v3")}
+    assert errors["auto"] < 1.5 and errors["d2nt_v3"] > 5.0
 
 
 # --- the simulated families against what real frames of each family measure ---------------------------------

@@ -581,8 +581,9 @@ def folder_markdown(result: dict) -> str:
             "## What the default ran",
             "",
             "`auto` decides per frame on its noise reading (point spacings z / f): the largest of the noise floor, "
-            "the smooth noise and the terraces' quantisation noise; `d2nt_v3` at or below 0.10, `adaptive_fit` at "
-            "or above 0.20, their blend between (`surfnorm.auto_decision`).",
+            "the smooth noise and the terraces' quantisation noise, and at least 0.20 where the depth is terraced in "
+            "full; `d2nt_v3` at or below 0.10, `adaptive_fit` at or above 0.20, their blend between "
+            "(`surfnorm.auto_decision`).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation |",
             "|---|---|---|---|---|---|---|---|---|",

@@ -23,7 +23,12 @@ the point spacing z / f, the largest of three measurements of
   median second difference there is exactly 0, so the floor alone reads such
   frames as clean, but the steps are 1-5 point spacings high. Such frames measure
   ``terraced`` 0.4-0.9; rendered depth 0.00-0.10 (exactly equal neighbours only
-  on fronto-parallel surfaces, which are flat on both sides, not a step);
+  on fronto-parallel surfaces, which are flat on both sides, not a step). Terraces
+  also count whatever their height: depth stored in steps is not a float render,
+  so a frame terraced in full reads at least ``NOISY_FLOOR`` (in proportion to the
+  same share: millimetre depth smoothed by a median filter has steps of a quarter
+  of a point spacing and its noise filtered away, and ``adaptive_fit`` does 1.2x
+  better on it than the blend that its other measurements led to);
 * the smooth noise: the noise at strides 2 and 4 in the quietest tenth of the
   samples, for error smooth over a few pixels without steps (a float-valued
   stereo output), which shows little at the pixel scale. Curvature raises one of
@@ -99,7 +104,8 @@ class Decision(NamedTuple):
     weight : float
         ``adaptive_fit``'s weight in the blend: 0 for ``d2nt_v3`` alone, 1 for ``adaptive_fit`` alone.
     reading : float
-        The noise level decided on (point spacings): the largest of ``floor``, ``smooth`` and ``quantisation``;
+        The noise level decided on (point spacings): the largest of ``floor``, ``smooth``, ``quantisation`` and
+        ``NOISY_FLOOR`` times the share in which the frame counts as terraced (:func:`reading`);
         NaN when too few pixels have valid neighbours (sparse depth: ``adaptive_fit``).
     floor, smooth, terraced, step : float
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s.

@@ -826,11 +826,11 @@ def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float, stride=N
 
 
 def reading(tables: NoiseTables) -> torch.Tensor:
-    """``auto.reading`` per frame: the largest of the noise floor, the smooth noise and the terraces'
-    quantisation noise (NaN with the floor)."""
+    """``auto.reading`` per frame: the largest of the noise floor, the smooth noise, the terraces' quantisation
+    noise and NOISY_FLOOR times the share in which the frame counts as terraced (NaN with the floor)."""
     share = ((tables.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW)).clamp(0.0, 1.0)
     quantisation = share * tables.step / math.sqrt(12.0)
-    level = torch.maximum(torch.maximum(tables.floor, tables.smooth), quantisation)
+    level = torch.maximum(torch.maximum(tables.floor, tables.smooth), torch.maximum(quantisation, NOISY_FLOOR * share))
     return torch.where(torch.isnan(tables.floor), tables.floor, level)
 
 

@@ -56,17 +56,25 @@ def low_resolution(z: np.ndarray, k: int, rng) -> np.ndarray:
     return np.where(low > 0, low * (1.0 + 0.004 * rng.standard_normal(low.shape)), 0.0).astype(np.float32)
 
 
+def resized(family: str, low: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The low sensor's depth ``low`` resized to the frame (``valid``'s shape) as ``family`` does it, 0 where the
+    frame had no depth."""
+    import cv2
+
+    H, W = valid.shape
+    interpolation = cv2.INTER_LINEAR if family == "upsampled_linear" else cv2.INTER_NEAREST
+    # the low pixel i sits at i k + k // 2; bilinear resizing puts it at (i + 0.5) k - 0.5: the same for odd k
+    out = cv2.resize(low, (W, H), interpolation=interpolation)
+    return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
+
+
 def degrade(family: str, k: int, z: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
     """Depth ``z`` (metres, float32; ``valid``) as ``family`` delivers it: float32, 0 where it has none."""
     import cv2
 
-    H, W = z.shape
     if family.startswith("upsampled"):
-        low = low_resolution(np.where(valid, z, 0.0), k, rng)
-        interpolation = cv2.INTER_LINEAR if family == "upsampled_linear" else cv2.INTER_NEAREST
-        # the low pixel i sits at i k + k // 2; bilinear resizing puts it at (i + 0.5) k - 0.5: the same for odd k
-        out = cv2.resize(low, (W, H), interpolation=interpolation)
-    elif family == "median_mm":
+        return resized(family, low_resolution(np.where(valid, z, 0.0), k, rng), valid)
+    if family == "median_mm":
         noisy = np.round(z * (1.0 + 0.002 * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
         out = cv2.medianBlur(np.where(valid, noisy, 0.0).astype(np.float32), 5)
     elif family == "tof_mm":
@@ -126,12 +134,16 @@ def main(argv=None) -> int:
         for i, frame in enumerate(frames):
             z = (frame.depth * metres_per_unit(frame.depth, SENSORS["kinect_v1"], frame.mask)).astype(np.float32)
             valid = np.isfinite(z) & (z > 0)
-            got = degrade(family, k, z, valid, np.random.default_rng(i))
+            low = None
+            if family.startswith("upsampled"):  # made once: the frame resized from it, and the default on it
+                low = low_resolution(np.where(valid, z, 0.0), k, np.random.default_rng(i))
+                got = resized(family, low, valid)
+            else:
+                got = degrade(family, k, z, valid, np.random.default_rng(i))
             scored = frame.mask & (got > 0)
             for e in entries:
                 errors[e.label].append(mean_angular_error(e.normals(got, frame.K, got > 0), frame.normals, scored))
-            if family.startswith("upsampled"):
-                low = low_resolution(np.where(valid, z, 0.0), k, np.random.default_rng(i))
+            if low is not None:
                 n = estimate(low, native_camera(frame.K.matrix, k), threads=1)
                 n = cv2.resize(n, z.shape[::-1], interpolation=cv2.INTER_NEAREST)
                 native.append(mean_angular_error(n, frame.normals, scored))

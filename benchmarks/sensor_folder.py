@@ -195,18 +195,15 @@ def main(argv=None) -> int:
         return 2
     gt = (gt[..., 0] if gt.ndim == 3 else gt).astype(np.float64) / args.gt_scale
     K = intrinsics(*gt.shape)
-    disparity = stereo_disparity(left, right, float(gt.max()), args.matcher, args.block)
+    block = BLOCKS[args.matcher] if args.block is None else args.block
+    disparity = stereo_disparity(left, right, float(gt.max()), args.matcher, block)
     fb = K["fx"] * args.baseline
     depth = np.where(disparity > 0, fb / np.where(disparity > 0, disparity, 1.0), 0.0)
     gt_depth = np.where(gt > 0, fb / np.where(gt > 0, gt, 1.0), 0.0).astype(np.float32)
     raw = {f"raw_{k}{p.suffix}": p for k, p in (("left", args.left), ("right", args.right), ("gt", args.gt))}
-    block = BLOCKS[args.matcher] if args.block is None else args.block
     name = {"sgbm": "SGBM", "bm": "StereoBM"}[args.matcher]
-    meta = {
-        "source": args.source,
-        "depth": f"OpenCV {name}, {block}x{block} blocks (benchmarks/sensor_folder.py), f B / d",
-    }
-    meta["K"] = K
+    depth_text = f"OpenCV {name}, {block}x{block} blocks (benchmarks/sensor_folder.py), f B / d"
+    meta = {"source": args.source, "depth": depth_text, "K": K}
     write(args.out, depth, K, gt_depth, raw, meta)
     np.save(args.out / "gt_depth.npy", gt_depth)
     return 0

@@ -478,9 +478,14 @@ def test_noise_samples_split_between_two_threads_are_those_of_one_sweep(size, mo
     one = S._samples(z, valid, f)
     swept = []
     sweep = S._second_differences
+    helper_started = threading.Event()
 
     def recorded(*args):
         swept.append((threading.get_ident(), args[7]))
+        if threading.get_ident() == helper.ident:
+            helper_started.set()
+        else:  # the measuring thread waits for the helper to take its half (else it would sweep both itself)
+            assert helper_started.wait(5)
         return sweep(*args)
 
     monkeypatch.setattr(S, "_second_differences", recorded)

@@ -13,7 +13,17 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 - ``upsampled_nearest:K``: the same, resized back to the nearest pixel;
 - ``median_mm``: 0.2 % noise, whole millimetres, then a 5x5 median filter (a common clean-up);
 - ``tof_mm``: 2 mm + 0.1 % of depth of noise, whole millimetres;
-- ``smooth_warp``: a relative error of 0.2 % RMS smooth over about 15 pixels (a learned depth's, say).
+- ``smooth_warp``: a relative error of 0.2 % RMS smooth over about 15 pixels (a learned depth's, say);
+- ``white:P``: independent Gaussian noise of P % of the depth, nothing else (P from 0 to 5: 0.01 is 0.25 mm at
+  2.5 m, a tenth of the distance between neighbouring pixels' points there);
+- ``mm``: the exact depth stored in whole millimetres, no noise (a renderer's or a dataset's 16-bit PNG);
+- ``outliers``: 0.2 % noise, and 1 % of the pixels anywhere in 0.8-1.2 times their depth (multipath, specks);
+- ``bilateral``: 0.4 % noise, then OpenCV's bilateral filter (7 pixels, 3 cm, 3 pixels): an edge-keeping clean-up;
+- ``flying``: 0.2 % noise, and every pixel at a depth edge (its 3x3 mean off its depth by over 2 %) at that mean
+  (mixed pixels: a time-of-flight camera's, or a filter's, between the two sides);
+- ``blurred``: the exact depth smoothed by a Gaussian of 1.5 pixels over the valid pixels (a resampling's blur).
+
+The scene's background is no depth (0), as the simulator's sensors see it; every family keeps invalid pixels invalid.
 
 Per family and method: e_A in degrees (mean over the frames of the mean angle to the exact normals over the object's
 pixels with depth and a normal). For the upsampled families also the default run at the sensor's own resolution
@@ -30,17 +40,41 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
-FAMILIES = ("upsampled_linear", "upsampled_nearest", "median_mm", "tof_mm", "smooth_warp")
-DEFAULT = "upsampled_linear:4,upsampled_linear:8,upsampled_nearest:8,median_mm,tof_mm,smooth_warp"
+FAMILIES = (
+    "upsampled_linear",
+    "upsampled_nearest",
+    "median_mm",
+    "tof_mm",
+    "smooth_warp",
+    "white",
+    "mm",
+    "outliers",
+    "bilateral",
+    "flying",
+    "blurred",
+)
+DEFAULT = (
+    "upsampled_linear:4,upsampled_linear:8,upsampled_nearest:8,median_mm,tof_mm,smooth_warp,"
+    "white:0.01,white:0.02,white:0.05,white:0.2,mm,outliers,bilateral,flying,blurred"
+)
 
 
-def parse_family(text: str) -> tuple[str, int]:
-    """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); other families take no factor (0)."""
+def parse_family(text: str) -> tuple[str, float]:
+    """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); ``"white:0.05"`` -> ("white", 0.05) (percent); other
+    families take no factor (0)."""
     from surfnorm.errors import InputError
 
     name, _, factor = text.partition(":")
     if name not in FAMILIES:
         raise InputError(f"--families: expected some of {', '.join(FAMILIES)}, got {text!r}")
+    if name == "white":
+        try:
+            percent = float(factor)
+        except ValueError:
+            percent = float("nan")
+        if not 0.0 < percent <= 5.0:
+            raise InputError(f"--families: expected white:P with P a percent above 0 and at most 5, got {text!r}")
+        return name, percent
     if not name.startswith("upsampled"):
         if factor:
             raise InputError(f"--families: {name} takes no factor, got {text!r}")
@@ -68,20 +102,43 @@ def resized(family: str, low: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
 
 
-def degrade(family: str, k: int, z: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
-    """Depth ``z`` (metres, float32; ``valid``) as ``family`` delivers it: float32, 0 where it has none."""
+def _valid_mean(z: np.ndarray, valid: np.ndarray, blur) -> np.ndarray:
+    """``blur`` (a linear filter) of the valid pixels' depth over the valid pixels only (normalised convolution:
+    invalid pixels neither pull a mean towards 0 nor count)."""
+    weight = blur(valid.astype(np.float32))
+    return blur(np.where(valid, z, 0.0).astype(np.float32)) / np.maximum(weight, 1e-6)
+
+
+def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
+    """Depth ``z`` (metres, float32; ``valid``) as ``family`` delivers it (``k``: its factor, see
+    :func:`parse_family`): float32, 0 where it has none."""
     import cv2
 
     if family.startswith("upsampled"):
-        return resized(family, low_resolution(np.where(valid, z, 0.0), k, rng), valid)
+        return resized(family, low_resolution(np.where(valid, z, 0.0), int(k), rng), valid)
     if family == "median_mm":
         noisy = np.round(z * (1.0 + 0.002 * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
         out = cv2.medianBlur(np.where(valid, noisy, 0.0).astype(np.float32), 5)
     elif family == "tof_mm":
         out = np.round((z + (0.002 + 0.001 * z) * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
-    else:  # smooth_warp
+    elif family == "smooth_warp":
         field = cv2.GaussianBlur(rng.standard_normal(z.shape).astype(np.float32), (0, 0), 15.0)
         out = z * (1.0 + 0.002 * field / field.std())
+    elif family == "white":
+        out = z * (1.0 + 0.01 * k * rng.standard_normal(z.shape))
+    elif family == "mm":
+        out = np.round(z * 1000.0) / 1000.0
+    elif family == "outliers":
+        out = z * (1.0 + 0.002 * rng.standard_normal(z.shape))
+        out = np.where(rng.random(z.shape) < 0.01, z * rng.uniform(0.8, 1.2, z.shape), out)
+    elif family == "bilateral":
+        noisy = np.where(valid, z * (1.0 + 0.004 * rng.standard_normal(z.shape)), 0.0).astype(np.float32)
+        out = cv2.bilateralFilter(noisy, 7, 0.03, 3.0)
+    elif family == "flying":
+        mean = _valid_mean(z, valid, lambda a: cv2.blur(a, (3, 3)))
+        out = np.where(np.abs(mean - z) > 0.02 * z, mean, z * (1.0 + 0.002 * rng.standard_normal(z.shape)))
+    else:  # blurred
+        out = _valid_mean(z, valid, lambda a: cv2.GaussianBlur(a, (0, 0), 1.5))
     return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
 
 
@@ -133,10 +190,11 @@ def main(argv=None) -> int:
         native: list[float] = []
         for i, frame in enumerate(frames):
             z = (frame.depth * metres_per_unit(frame.depth, SENSORS["kinect_v1"], frame.mask)).astype(np.float32)
-            valid = np.isfinite(z) & (z > 0)
+            valid = np.isfinite(z) & (z > 0) & frame.mask  # the background: no depth, as the simulator's sensors
+            z = np.where(valid, z, 0.0).astype(np.float32)
             low = None
             if family.startswith("upsampled"):  # made once: the frame resized from it, and the default on it
-                low = low_resolution(np.where(valid, z, 0.0), k, np.random.default_rng(i))
+                low = low_resolution(z, int(k), np.random.default_rng(i))
                 got = resized(family, low, valid)
             else:
                 got = degrade(family, k, z, valid, np.random.default_rng(i))
@@ -144,10 +202,10 @@ def main(argv=None) -> int:
             for e in entries:
                 errors[e.label].append(mean_angular_error(e.normals(got, frame.K, got > 0), frame.normals, scored))
             if low is not None:
-                n = estimate(low, native_camera(frame.K.matrix, k), threads=1)
+                n = estimate(low, native_camera(frame.K.matrix, int(k)), threads=1)
                 n = cv2.resize(n, z.shape[::-1], interpolation=cv2.INTER_NEAREST)
                 native.append(mean_angular_error(n, frame.normals, scored))
-        label = family + (f":{k}" if k else "")
+        label = family + (f":{k:g}" if k else "")
         cells = [f"{np.mean(v):.2f}" for v in errors.values()] + [f"{np.mean(native):.2f}" if native else "-"]
         print(f"| {label} | " + " | ".join(cells) + " |", flush=True)
     return 0

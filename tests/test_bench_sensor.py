@@ -485,6 +485,41 @@ def test_families_deliver_what_they_say():
     assert 0.0015 < relative.std() < 0.0025
 
 
+def test_families_of_noise_filters_and_mixed_pixels():
+    """The families after the sensor on a plane beside a step: white noise of the percent asked for; whole
+    millimetres without noise; 1 % of outliers far beyond the noise; the bilateral filter keeps the step and
+    removes most of the noise; mixed pixels lie between the two sides at the step and nowhere else; the blur moves
+    the plane by nothing beyond rounding away from the step and never mixes an invalid pixel's 0 into a valid one."""
+    script = _benchmark_script("families")
+    H, W = 80, 100
+    v, u = np.mgrid[0:H, 0:W]
+    plane = 2.0 / (1.0 + 0.002 * (u - 50) + 0.001 * (v - 40))
+    z = np.where(u < 50, plane, 1.5 * plane).astype(np.float32)  # a step of half the depth at column 50
+    valid = np.ones(z.shape, bool)
+    valid[:6, :8] = False
+    z = np.where(valid, z, 0.0).astype(np.float32)
+    rng = np.random.default_rng
+    for percent in (0.01, 0.2):
+        relative = script.degrade("white", percent, z, valid, rng(0))[valid] / z[valid] - 1.0
+        assert 0.9 * percent < 100.0 * relative.std() < 1.1 * percent
+    mm = script.degrade("mm", 0, z, valid, rng(0)).astype(np.float64)
+    np.testing.assert_allclose(mm[valid] * 1000.0, np.round(z[valid] * 1000.0), atol=2e-3)
+    relative = np.abs(script.degrade("outliers", 0, z, valid, rng(0))[valid] / z[valid] - 1.0)
+    assert 0.005 < (relative > 0.02).mean() < 0.015 and relative.max() < 0.2 + 1e-6
+    away = valid & (np.abs(u - 50) > 4) & (v > 8) & (v < H - 4) & (u > 10) & (u < W - 4)
+    filtered = script.degrade("bilateral", 0, z, valid, rng(0))
+    assert (np.abs(filtered[away] / z[away] - 1.0)).std() < 0.5 * 0.004
+    assert (filtered[40, 46] < 1.05 * z[40, 46]) and (filtered[40, 54] > 0.95 * z[40, 54])  # the step kept
+    flying = script.degrade("flying", 0, z, valid, rng(0))
+    mixed = valid & (np.abs(flying / np.where(valid, z, 1.0) - 1.0) > 0.02)
+    assert (flying[~valid] == 0).all() and mixed.any() and (np.abs(u[mixed] - 50) <= 1).all()
+    assert (flying[mixed] > z[:, 49].min() * 0.99).all() and (flying[mixed] < z[:, 50].max() * 1.01).all()
+    blurred = script.degrade("blurred", 0, z, valid, rng(0))
+    far = away & (np.abs(u - 50) > 7)  # beyond the Gaussian's reach of the step
+    np.testing.assert_allclose(blurred[far], z[far], rtol=1e-4)
+    assert (blurred[~valid] == 0).all() and blurred[6, 0] > 0.99 * z[6, 0]  # next to the hole: not pulled to 0
+
+
 def test_families_refuses_an_unknown_family_or_factor(capsys):
     """One line naming --families, what it takes and what it got; exit 2."""
     script = _benchmark_script("families")
@@ -492,6 +527,9 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         ("median_mm,sonar", "got 'sonar'"),
         ("upsampled_linear:1", "with K from 2 to 16, got 'upsampled_linear:1'"),
         ("tof_mm:2", "tof_mm takes no factor, got 'tof_mm:2'"),
+        ("white:0", "with P a percent above 0 and at most 5, got 'white:0'"),
+        ("white:x", "with P a percent above 0 and at most 5, got 'white:x'"),
+        ("white", "with P a percent above 0 and at most 5, got 'white'"),
     ):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()

@@ -30,6 +30,22 @@ def sampling_step(H, W, samples=12_000):
 
 
 def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
+    xs, bins, zmin, zmax = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
+    return _profile(xs, bins, zmin, zmax, n_bins, min_samples)
+
+
+def bin_floors(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
+    """NoiseProfile.floors: per depth bin, the median |x_1| of its samples over 0.6745, NaN with too few."""
+    xs, bins, _, _ = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
+    out = np.full(n_bins, np.nan)
+    for b in range(n_bins):
+        x = xs[bins == b, 0]
+        if x.size >= min_samples:
+            out[b] = np.median(np.abs(x)) / 0.6745
+    return out
+
+
+def samples_and_bins(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4):
     H, W = z.shape
     zmin, zmax = float(z[valid].min()), float(z[valid].max())
     step = sampling_step(H, W, samples)
@@ -53,7 +69,10 @@ def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_sampl
                         xs.append(x)
                         bins.append(b)
                         break
-    xs, bins = np.array(xs).reshape(-1, 3), np.array(bins, dtype=int)
+    return np.array(xs).reshape(-1, 3), np.array(bins, dtype=int), zmin, zmax
+
+
+def _profile(xs, bins, zmin, zmax, n_bins, min_samples):
     floor = float(np.median(np.abs(xs[:, 0]))) / 0.6745 if len(xs) >= min_samples else float("nan")
     ms = np.zeros((3, n_bins))
     for i in range(3):
@@ -62,24 +81,30 @@ def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_sampl
             rms = np.inf
             for _ in range(6):
                 kept = x[np.abs(x) <= 5.0 * rms]
-                rms = math.sqrt(np.mean(kept ** 2)) if kept.size else 0.0
-            ms[i, b] = rms ** 2
+                rms = math.sqrt(np.mean(kept**2)) if kept.size else 0.0
+            ms[i, b] = rms**2
     rho = np.sqrt(np.maximum(np.maximum(16 * ms[0] - ms[1], 16 * ms[1] - ms[2]), 0) / 15)
     edges = np.geomspace(zmin, zmax, n_bins + 1)
     centres = np.sqrt(edges[:-1] * edges[1:])
     counts = np.bincount(bins, minlength=n_bins)
     ok = counts >= min_samples
-    return centres, np.interp(np.log(centres), np.log(centres[ok]), rho[ok]), floor, correlation(ms, counts, min_samples)
+    return (
+        centres,
+        np.interp(np.log(centres), np.log(centres[ok]), rho[ok]),
+        floor,
+        correlation(ms, counts, min_samples),
+    )
 
 
 def correlation(ms, counts, min_samples, width=1.5):
     """How much more the noise shows at stride 2 than at stride 1: per bin, m_s = a + b k_s / 6 + C s^4 solved for
     white noise a, noise b correlated over ``width`` pixels (k_s: the mean square of its second difference at stride s)
     and curvature C; then (m_2 - 16 C) / (m_1 - C), averaged over the bins weighted by their samples."""
+
     def k(s):
         return 6 - 8 * math.exp(-s * s / (4 * width * width)) + 2 * math.exp(-s * s / (width * width))
 
-    A = np.array([[1.0, k(s) / 6, s ** 4] for s in (1, 2, 4)])
+    A = np.array([[1.0, k(s) / 6, s**4] for s in (1, 2, 4)])
     total = weight = 0.0
     for b in range(ms.shape[1]):
         if counts[b] < min_samples or not ms[0, b] > 0:
@@ -112,7 +137,7 @@ def _fit(z, valid, v, u, vc, uc, r):
     """Plane of w over the valid pixels of the window centred (vc, uc), radius r, clipped.
     Returns (n, ok, a at (v, u), g_u, g_v, rss)."""
     H, W = z.shape
-    vs, us = np.mgrid[max(vc - r, 0):min(vc + r + 1, H), max(uc - r, 0):min(uc + r + 1, W)]
+    vs, us = np.mgrid[max(vc - r, 0) : min(vc + r + 1, H), max(uc - r, 0) : min(uc + r + 1, W)]
     sel = valid[vs, us]
     vs, us = vs[sel], us[sel]
     n = len(vs)
@@ -121,7 +146,7 @@ def _fit(z, valid, v, u, vc, uc, r):
     du, dv = (us - u).astype(float), (vs - v).astype(float)
     cuu, cvv = np.sum((du - du.mean()) ** 2), np.sum((dv - dv.mean()) ** 2)
     cuv = np.sum((du - du.mean()) * (dv - dv.mean()))
-    if not (cuu > 0 and cvv > 0 and cuu * cvv - cuv ** 2 > 1e-6 * cuu * cvv):
+    if not (cuu > 0 and cvv > 0 and cuu * cvv - cuv**2 > 1e-6 * cuu * cvv):
         return n, False, 0.0, 0.0, 0.0, 0.0
     A = np.stack([np.ones(n), du, dv], axis=1)
     w = 1.0 / z[vs, us]
@@ -148,8 +173,21 @@ def stride_for(valid, max_unreached=0.01):
     return 2 if unreached <= max_unreached * max(total, 1) else 1
 
 
-def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_window=31, n_widen=3,
-                 min_points=12, table=512, fill=0.0, stride=None):
+def adaptive_fit(
+    z,
+    K,
+    *,
+    valid=None,
+    alpha=1.0,
+    kappa=3.0,
+    rho_floor=0.25,
+    max_window=31,
+    n_widen=3,
+    min_points=12,
+    table=512,
+    fill=0.0,
+    stride=None,
+):
     z = np.asarray(z, dtype=np.float64)
     valid = (np.isfinite(z) & (z > 0)) if valid is None else valid
     H, W = z.shape
@@ -194,13 +232,13 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                 wp = 1.0 / zp
                 # residuals far below the noise (a thousandth of its level) are rounding: they tie
                 best = max(rss / (n - 3), 1e-3 * limit) if ok else np.inf
-                best_in = ok and (a - wp) ** 2 <= kappa ** 2 * max(best, limit)
+                best_in = ok and (a - wp) ** 2 <= kappa**2 * max(best, limit)
                 for dv, du in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
                     nk, okk, ak, guk, gvk, rssk = _fit(z32, valid, v, u, v + dv * r, u + du * r, r)
                     if nk < max(6, 0.25 * n) or not okk:
                         continue
                     score = max(rssk / (nk - 3), 1e-3 * limit)
-                    inside = (ak - wp) ** 2 <= kappa ** 2 * max(score, limit)
+                    inside = (ak - wp) ** 2 <= kappa**2 * max(score, limit)
                     # a better class, or the same class with a residual lower by more than the tie margin
                     if inside > best_in or (inside == best_in and score < (1 - 1e-3) * best):
                         best, best_in, ok, a, gu, gv = score, inside, True, ak, guk, gvk
@@ -220,7 +258,12 @@ def adaptive_fit(z, K, *, valid=None, alpha=1.0, kappa=3.0, rho_floor=0.25, max_
                 a, gu, gv, _ = planes[v, u]
             else:
                 wp = 1.0 / z32[v, u]
-                first = [(v + dv, u + du) for dv in (-1, 0, 1) for du in (-1, 0, 1) if (v + dv) % 2 == 0 and (u + du) % 2 == 0]
+                first = [
+                    (v + dv, u + du)
+                    for dv in (-1, 0, 1)
+                    for du in (-1, 0, 1)
+                    if (v + dv) % 2 == 0 and (u + du) % 2 == 0
+                ]
                 if v % 2 == 0:
                     further = [(v - 2, u - 1), (v - 2, u + 1), (v + 2, u - 1), (v + 2, u + 1)]
                 elif u % 2 == 0:
@@ -319,3 +362,23 @@ def noise_extras(z, valid, f, *, samples=12_000, max_gap=4, min_samples=64):
         k = int(0.1 * (len(second) - 1))
         smooth = math.sqrt(float(np.sort(second)[k]) * float(np.sort(fourth)[k])) / 0.12566
     return terraced, step_h, smooth
+
+
+def consistency(a, b, z, edges, limits, t, fill):
+    """auto's consistency check, pixel by pixel: where both maps have a normal and the angle between them exceeds the
+    limit of the pixel's depth bin (bins split at ``edges``), b's normal is replaced by a's; then the blend of a and
+    that with weight t (:func:`blend`), or at t = 1 the normal itself. Returns (normals, where a replaced b)."""
+    r = b.copy()
+    took = np.zeros(a.shape[:-1], bool)
+    for idx in np.ndindex(a.shape[:-1]):
+        pa, pb = a[idx].astype(np.float64), b[idx].astype(np.float64)
+        if np.isnan(pa[0]) or np.isnan(pb[0]):
+            continue
+        k = int(np.searchsorted(edges, z[idx], side="right"))
+        if math.degrees(math.acos(min(1.0, max(-1.0, float(pa @ pb))))) > math.degrees(limits[k]):
+            r[idx] = a[idx]
+            took[idx] = True
+    if t == 1.0:
+        out = np.where(np.isnan(r[..., :1]), np.where(np.isnan(a[..., :1]), np.float32(fill), a), r)
+        return out.astype(np.float32), took
+    return blend(a, r, t, fill), took

@@ -17,10 +17,12 @@ from surfnorm.kernels.auto import (
     TERRACED_HIGH,
     TERRACED_LOW,
     adaptive_weight,
+    consistency,
+    consistency_limits,
     quantisation,
     reading,
 )
-from surfnorm.kernels.sensor_noise import NoiseProfile, noise_profile
+from surfnorm.kernels.sensor_noise import NoiseProfile, kappa_gain, noise_profile
 
 from . import naive_adaptive_fit as naive
 from .conftest import SAMPLE
@@ -300,3 +302,145 @@ def test_real_raw_kinect_frames_get_adaptive_fit_and_its_accuracy(name):
     err_auto, cov = plane_error(auto, planes["normals"], planes["masks"])
     err_d2nt, _ = plane_error(surfnorm.estimate(depth, K, method="d2nt_v3"), planes["normals"], planes["masks"])
     assert cov >= 0.97 and err_auto < 0.5 * err_d2nt, (err_auto, err_d2nt, cov)
+
+
+# --- the consistency check: adaptive_fit's normals against d2nt_v3's where the depth is not terraced ----------------
+
+
+def tree_crop(noise=1e-4, seed=0):
+    """The middle of 3F2N's tree (its leaves: fine detail that adaptive_fit's windows span), at 2.5 m median as the
+    simulator's Kinect v1 puts it, with white noise of ``noise`` times the depth; (depth, K, exact normals)."""
+    from surfnorm.bench.simulate import metres_per_unit
+
+    f = read_frame(SAMPLE, "Hard/tree/000001")
+    z = f.depth * metres_per_unit(f.depth, SENSORS["kinect_v1"], f.mask)
+    z = np.where(f.mask, z * (1 + noise * np.random.default_rng(seed).standard_normal(z.shape)), 0.0)
+    y0, x0 = 216, 435
+    K = f.K.matrix.copy()
+    K[0, 2] -= x0
+    K[1, 2] -= y0
+    crop = np.s_[y0 : y0 + 96, x0 : x0 + 128]
+    return np.ascontiguousarray(z[crop], dtype=np.float32), K, f.normals[crop]
+
+
+def check_profile(floors, floor=0.25, **kw):
+    return NoiseProfile(np.geomspace(1.0, 3.0, 8), np.full(8, 0.3), floor, floors=np.asarray(floors, float), **kw)
+
+
+def test_consistency_limits_on_closed_forms():
+    """Each depth bin's limit is CONSISTENT times 2 rho times kappa_gain over 1 - the terraced share, rho the bin's
+    floor (the frame's where the bin has too few samples) or, where the noise is correlated, the smooth noise in
+    kappa_gain's share of it; no check on a frame terraced in full, without floors or a reading, or whose limits all
+    reach CONSISTENT_MAX."""
+    from surfnorm._constants import CONSISTENT, CONSISTENT_MAX
+
+    p = check_profile([0.1, 0.2, np.nan, 0.3, 0.1, 0.1, 0.1, 0.1])
+    rho = np.array([0.1, 0.2, 0.25, 0.3, 0.1, 0.1, 0.1, 0.1])
+    edges, limits = consistency_limits(p)
+    np.testing.assert_allclose(edges, np.sqrt(p.depths[:-1] * p.depths[1:]))
+    np.testing.assert_allclose(limits, 2 * CONSISTENT * rho)
+    half = p._replace(terraced=(TERRACED_LOW + TERRACED_HIGH) / 2)
+    np.testing.assert_allclose(consistency_limits(half)[1], 2 * limits)
+    for off in (p._replace(terraced=TERRACED_HIGH), p._replace(floors=None), p._replace(floor=float("nan"))):
+        assert consistency_limits(off) is None
+    loud = p._replace(floors=np.full(8, 1.01 * CONSISTENT_MAX / (2 * CONSISTENT)))
+    assert consistency_limits(loud) is None
+    correlated = p._replace(correlation=3.0, smooth=0.15)
+    assert kappa_gain(correlated) == 2.0
+    np.testing.assert_allclose(consistency_limits(correlated)[1], 2 * CONSISTENT * 2.0 * np.maximum(rho, 0.15))
+
+
+def test_the_noise_profile_measures_each_bins_floor_where_not_terraced_in_full():
+    """NoiseProfile.floors against the naive reference (each bin's median |x_1| over 0.6745) on a plane and a sphere
+    with noise that grows with depth; None on terraced depth."""
+    K = camera(160, 120, fov_deg=50)
+    z1, _, _ = plane(K, 120, 160, [0.3, -0.2, -1], 2.5)
+    zs, _, hit = sphere(K, 120, 160, [0.1, 0.0, 1.6], 0.5)
+    z = np.where(hit & (zs < z1), zs, z1)
+    z = (z * (1 + 0.001 * z * np.random.default_rng(0).standard_normal(z.shape))).astype(np.float32)
+    f = math.sqrt(K[0, 0] * K[1, 1])
+    p = noise_profile(z, z > 0, f)
+    ref = naive.bin_floors(z.astype(np.float64), z > 0, f)  # the kernel's arithmetic on the same values
+    assert np.isfinite(ref).sum() >= 3  # otherwise this shows little
+    np.testing.assert_allclose(p.floors, ref, rtol=1e-9, equal_nan=True)
+    steps = terraced(z, K)
+    assert noise_profile(steps, steps > 0, f).floors is None
+
+
+@pytest.mark.parametrize("t", [0.3, 0.7, 1.0])
+def test_consistency_matches_the_naive_check_pixel_by_pixel(t):
+    """The check's kernel against the naive one: the same pixels take a's normal, the same bits, in place too."""
+    rng = np.random.default_rng(2)
+    H, W = 30, 40
+
+    def normals(x):
+        x[..., 2] = -np.abs(x[..., 2]) - 0.3
+        return (x / np.linalg.norm(x, axis=-1, keepdims=True)).astype(np.float32)
+
+    a = normals(rng.standard_normal((H, W, 3)))
+    b = normals(a + 0.6 * rng.standard_normal((H, W, 3)))
+    a[rng.random((H, W)) < 0.05] = np.nan
+    b[rng.random((H, W)) < 0.05] = np.nan
+    z = rng.uniform(1.0, 3.0, (H, W)).astype(np.float32)
+    limits = (np.array([1.5, 2.0, 2.5]), np.array([0.2, 0.4, 0.6, 0.8]))
+    took = np.empty((H, W), bool)
+    got = consistency(a, b, z, limits, t, 0.0, np.empty_like(a), took)
+    ref, ref_took = naive.consistency(a, b, z, *limits, t, 0.0)
+    assert 0.1 < took.mean() < 0.9  # otherwise this shows little
+    np.testing.assert_array_equal(took, ref_took)
+    np.testing.assert_array_equal(got, ref)
+    in_place = b.copy()
+    consistency(a, in_place, z, limits, t, 0.0, in_place)
+    np.testing.assert_array_equal(in_place, ref)
+
+
+def test_the_check_keeps_fine_detail_and_leaves_noise_alone(monkeypatch):
+    """On 3F2N's tree with white noise of 0.01 % (leaves that adaptive_fit's windows span), the check takes d2nt_v3's
+    normal at most pixels and the error falls by half and more against auto without it; on a plane and a sphere with
+    white noise from 0.03 to 0.1 % it takes none (the two estimators differ there only by the noise)."""
+    from surfnorm.camera import Intrinsics
+    from surfnorm.kernels import auto as auto_module
+    from surfnorm.metrics import mean_angular_error
+
+    z, K, exact = tree_crop()
+    record: dict = {}
+    got = auto_module.auto(z, z > 0, Intrinsics.from_matrix(K), np.empty(z.shape + (3,), np.float32), record=record)
+    assert record["weight"] == 1.0 and record["took_d2nt"].mean() > 0.3
+    monkeypatch.setattr(auto_module, "CONSISTENT_MAX", 0.0)  # no check
+    unchecked = surfnorm.estimate(z, K)
+    monkeypatch.undo()
+    e_got, e_unchecked = (mean_angular_error(n, exact, z > 0) for n in (got, unchecked))
+    assert e_got < 0.5 * e_unchecked, (e_got, e_unchecked)
+    np.testing.assert_array_equal(surfnorm.estimate(z, K), got)
+    Kc = camera(320, 240, fov_deg=50)
+    z1, _, _ = plane(Kc, 240, 320, [0.3, -0.2, -1], 2.5)
+    zs, _, hit = sphere(Kc, 240, 320, [0.1, 0.0, 2.2], 0.5)
+    zz = np.where(hit & (zs < z1), zs, z1)
+    for percent in (0.03, 0.1):
+        noisy = (zz * (1 + percent / 100 * np.random.default_rng(1).standard_normal(zz.shape))).astype(np.float32)
+        record = {}
+        auto_module.auto(
+            noisy, noisy > 0, Intrinsics.from_matrix(Kc), np.empty(zz.shape + (3,), np.float32), record=record
+        )
+        assert record["weight"] > 0.0 and record["took_d2nt"].sum() == 0, percent
+
+
+def test_the_check_sigma_is_d2nt_v3s_where_it_took_d2nt_v3():
+    """uncertainty=True after the check: d2nt_v3's sigma at the pixels that took its normal."""
+    from surfnorm.camera import Intrinsics
+    from surfnorm.kernels import auto as auto_module
+    from surfnorm.kernels._windows import radius_table
+    from surfnorm.kernels.sensor_noise import noise_profile as profile_of
+    from surfnorm.kernels.uncertainty import d2nt_sigma
+
+    z, K, _ = tree_crop()
+    cam = Intrinsics.from_matrix(K)
+    record: dict = {}
+    normals = auto_module.auto(z, z > 0, cam, np.empty(z.shape + (3,), np.float32), record=record)
+    took = record["took_d2nt"]
+    n, sigma = surfnorm.estimate(z, K, uncertainty=True)
+    np.testing.assert_array_equal(n, normals)
+    z0, inv_step, _, rho = radius_table(*profile_of(z, z > 0, math.sqrt(cam.fx * cam.fy))[:2])
+    ref = d2nt_sigma(z, z > 0, cam, normals, (z0, inv_step, rho), clean=False)
+    np.testing.assert_array_equal(sigma[took], ref[took])
+    assert np.isfinite(sigma[z > 0]).mean() > 0.99

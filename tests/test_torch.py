@@ -380,8 +380,40 @@ class TestAdaptive:
         depth, Ks = np.stack([clean, noisy, between, clean]), np.stack([Kc, Kc, Kc, Kc])
         got = assert_parity(depth, None, Ks, "auto", {}, ["clean", "noisy", "between", "clean again"])
         np.testing.assert_array_equal(got[0], nchw(st.estimate(torch.from_numpy(clean), Kc, method="d2nt_v3"))[0])
-        np.testing.assert_array_equal(got[1], nchw(st.estimate(torch.from_numpy(noisy), Kc, method="adaptive_fit"))[0])
+        # noisy: adaptive_fit's normals, but where the consistency check took d2nt_v3's (the same pixels as NumPy's)
+        from surfnorm.kernels import auto as auto_module
+
+        record: dict = {}
+        auto_module.auto(noisy, noisy > 0, cam, np.empty(noisy.shape + (3,), np.float32), record=record)
+        took = record.get("took_d2nt", np.zeros(noisy.shape, bool))
+        fitted = nchw(st.estimate(torch.from_numpy(noisy), Kc, method="adaptive_fit"))[0]
+        detail = nchw(st.estimate(torch.from_numpy(noisy), Kc, method="d2nt_v3"))[0]
+        np.testing.assert_array_equal(got[1], np.where(took[..., None], detail, fitted))
         np.testing.assert_array_equal(got[3], got[0])
+
+    def test_auto_checks_its_estimators_as_numpy_does(self, monkeypatch):
+        # the consistency check (surfnorm.kernels.auto.consistency): the same pixels take d2nt_v3's normal, on the
+        # gathered path and the masked one, with the blend's weight and without
+        from surfnorm.camera import Intrinsics
+        from surfnorm.kernels import auto as auto_module
+        from surfnorm.torch import _adaptive
+
+        from .test_auto import tree_crop
+
+        frames = [tree_crop(noise, seed)[:2] for noise, seed in ((1e-4, 0), (4e-5, 1), (0.0, 2))]
+        weights = []
+        for z, Kc in frames:
+            record: dict = {}
+            out = np.empty(z.shape + (3,), np.float32)
+            auto_module.auto(z, z > 0, Intrinsics.from_matrix(Kc), out, record=record)
+            weights.append((record["weight"], float(record.get("took_d2nt", np.zeros(1)).mean())))
+        # at t 1 and inside the blend band (the crop without noise reads 0.11), each with pixels taken
+        assert weights[0][0] == 1.0 and 0.0 < weights[2][0] < 1.0, weights
+        assert min(took for _, took in weights) > 0.1, weights
+        depth, Ks = np.stack([z for z, _ in frames]), np.stack([Kc for _, Kc in frames])
+        gathered = assert_parity(depth, None, Ks, "auto", {}, ["checked", "lower noise", "without noise"])
+        monkeypatch.setattr(_adaptive, "_GATHER_ON_CPU", False)
+        np.testing.assert_array_equal(torch_normals(depth, Ks, "auto", fill=0.0), gathered)
 
     @pytest.mark.slow
     @pytest.mark.parametrize("method", ["adaptive_fit", "auto"])

@@ -127,6 +127,17 @@ TERRACED_LOW = 0.15
 #: ``NoiseProfile.terraced`` at or above which the steps count in full. Raw structured light and stereo matchers
 #: measure 0.4-0.9, and so do registered Kinect v1, RealSense and float16 depth (their floors read noisy already).
 TERRACED_HIGH = 0.30
+#: The consistency check (``auto.consistency_limits``): where its two estimators' normals at a pixel are further
+#: apart than CONSISTENT times 2 rho radians (rho: the noise floor at the pixel's depth, in point spacings), the
+#: difference is the scene's, not the noise's: adaptive_fit's window spans detail that d2nt_v3's one-sided
+#: differences keep apart (leaves, columns), and the pixel takes d2nt_v3's normal. On white noise over the simple
+#: shapes of 3F2N (cube, torus, android, bunny, penguin, the room) the two differ by 0.5-4 rho radians at the 99th
+#: percentile (the most at the lowest noise, where curvature adds to it), so CONSISTENT 2 leaves the noise alone.
+#: The check runs where some limit is under CONSISTENT_MAX radians and the frame is not terraced in full. Set on the
+#: families of benchmarks/families.py (CONSISTENT 1.5 and 2, and rho the larger of the bin's floor and the frame's
+#: reading, were tried: see docs/choosing.md) and checked on the simulated sensors, the rooms and the real frames.
+CONSISTENT = 2.0
+CONSISTENT_MAX = math.pi / 2
 
 # --- the plane fits (surfnorm.kernels.plane_fit, surfnorm.torch._plane_fit) ---------------------------
 

@@ -583,17 +583,19 @@ def folder_markdown(result: dict) -> str:
             "`auto` decides per frame on its noise reading (point spacings z / f): the largest of the noise floor, "
             "the smooth noise and the terraces' quantisation noise, and at least 0.20 where the depth is terraced in "
             "full; `d2nt_v3` at or below 0.10, `adaptive_fit` at or above 0.20, their blend between "
-            "(`surfnorm.auto_decision`).",
+            "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
+            "pixel (depth not terraced in full, at low noise).",
             "",
-            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation | checked |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:
             d = result["decisions"].get(f)
             if d is None:
                 continue
             nums = [_fmt(d[k], 3) for k in ("weight", "reading", "floor", "smooth", "terraced", "step", "quantisation")]
-            out.append(f"| {f} | {d['method']} | " + " | ".join(nums) + " |")
+            checked = "yes" if d.get("checked") else "no"
+            out.append(f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} |")
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):
         out += ["", "## Absent peers (library not installed)", ""]

@@ -363,6 +363,23 @@ def _median_abs(x, mags):
     return _median_of(mags)
 
 
+@ahead_of_time
+@njit
+def _bin_floors(x, starts, min_samples, mags):
+    """Per bin b: np.median(np.abs(x[starts[b]:starts[b + 1]])) (each bin's samples together: :func:`_by_bin`), NaN
+    where the bin has fewer than ``min_samples``; ``mags`` (the size of ``x``) for the magnitudes."""
+    nbins = starts.shape[0] - 1
+    out = np.full(nbins, np.nan)
+    for b in range(nbins):
+        lo, hi = starts[b], starts[b + 1]
+        if hi - lo < min_samples:
+            continue
+        for i in range(lo, hi):
+            mags[i] = abs(x[i])
+        out[b] = _median_of(mags[lo:hi])
+    return out
+
+
 #: The measurement's working arrays (:func:`_working_set`), kept for the next frame of the same size: made new for
 #: every frame, they came from fresh pages wherever another library had just freed large blocks (about 140 page
 #: faults on a 450x375 frame after OpenCV's LINEMOD, 2.4 us each on a 2-core VM).
@@ -452,6 +469,11 @@ class NoiseProfile(NamedTuple):
         neighbours' errors go together (a matcher's window, a spatial filter: about 1.3 for the simulated raw
         Kinect v1, 3 for SGBM, 10 for error smooth over 2 pixels), where a fitted slope moves more than its
         residual says. 1 without enough samples.
+    floors : ndarray or None
+        The floor of each depth bin (the bins of ``depths``: the median |x_1| of its samples over 0.6745), NaN
+        where a bin has fewer than ``MIN_SAMPLES``; where the noise grows with depth, the far bins' floors exceed
+        the frame's. Measured only where the frame is not terraced in full (:func:`terraced_share` under 1: the
+        frames on which ``auto`` checks its two estimators against each other); None elsewhere.
     """
 
     depths: np.ndarray
@@ -461,6 +483,7 @@ class NoiseProfile(NamedTuple):
     step: float = 0.0
     smooth: float = 0.0
     correlation: float = 1.0
+    floors: np.ndarray | None = None
 
 
 def _correlation(rms, starts, min_samples):
@@ -530,7 +553,11 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
     terraced, step = terraces.result()
     correlation = _correlation(ms, starts, MIN_SAMPLES)
-    profile = NoiseProfile(centres, rho, median.result() / 0.6745, terraced, step, smooth.result(), correlation)
+    floor = median.result() / 0.6745  # before its scratch is used again below
+    floors = None
+    if terraced < TERRACED_HIGH:  # terraced_share under 1: auto may check its estimators against each other
+        floors = _bin_floors(grouped[0], starts, MIN_SAMPLES, work[4][:n]) / 0.6745
+    profile = NoiseProfile(centres, rho, floor, terraced, step, smooth.result(), correlation, floors)
     # every part has ended (result() waits for one another thread runs), so nothing reads the arrays any more; on an
     # error they are dropped instead (a part may still be running)
     _working.give(size, work)

@@ -802,6 +802,9 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
     sigma alone.
     """
     t = 1.0 if method == "adaptive_fit" else record.get("weight", 0.0)
+    took = record.get("took_d2nt") if method == "auto" else None
+    if took is not None:  # auto's consistency check: d2nt_v3's sigma where it took d2nt_v3's normal
+        return _checked_sigma(record, z, valid, cam, normals, fill, out, bands, t, took)
     if t > 0.0:
         # the kernel's own record of which pixels hold a normal, unless the blend below changes the normals
         has = record["has"] if t == 1.0 else None
@@ -836,4 +839,17 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
     if 0.0 < t < 1.0:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
         both = np.sqrt((1.0 - t) * np.square(d2nt) + t * np.square(fitted))
         out[...] = np.where(np.isnan(fitted), d2nt, np.where(np.isnan(d2nt), fitted, both))
+    return out
+
+
+def _checked_sigma(record, z, valid, cam, normals, fill, out, bands, t, took):
+    """:func:`sigma_map` after ``auto``'s consistency check (``took``: the pixels that took d2nt_v3's normal for
+    adaptive_fit's): there d2nt_v3's sigma, elsewhere the blend's (weight ``t``; adaptive_fit's alone at t 1)."""
+    fitted = sigma_from_fits(valid, normals, record["variance"], record["stride"], has=None, fill=fill, bands=bands)
+    profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
+    z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
+    d2nt = d2nt_sigma(z, valid, cam, normals, (z0, inv_step, rho), clean=False, fill=fill, bands=bands)
+    weight = np.where(took, 0.0, t)
+    both = np.sqrt((1.0 - weight) * np.square(d2nt) + weight * np.square(fitted))
+    out[...] = np.where(np.isnan(fitted) | took, d2nt, np.where(np.isnan(d2nt), fitted, both))
     return out

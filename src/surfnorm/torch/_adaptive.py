@@ -60,6 +60,8 @@ from .._constants import (
     _TABLE,
     ALPHA,
     CLEAN_FLOOR,
+    CONSISTENT,
+    CONSISTENT_MAX,
     CORRELATED_HIGH,
     CORRELATED_KAPPA_GAIN,
     CORRELATED_LOW,
@@ -157,6 +159,9 @@ class NoiseTables(NamedTuple):
     step: torch.Tensor  # (B,) NoiseProfile.step
     smooth: torch.Tensor  # (B,) NoiseProfile.smooth
     kappa: torch.Tensor  # (B,) the noise test's kappa: KAPPA times sensor_noise.kappa_gain
+    gain: torch.Tensor  # (B,) sensor_noise.kappa_gain
+    centres: torch.Tensor  # (B, N_BINS) the depth bins' centres (NoiseProfile.depths)
+    floors: torch.Tensor  # (B, N_BINS) NoiseProfile.floors (computed for every frame; NaN with too few samples)
 
 
 def _samples(z, valid, f, lo, span):
@@ -307,6 +312,18 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     smooth = torch.where(enough, _sqrt(quiet(xs[1].abs()) * quiet(fourth)) / _SMOOTH_GAUSS, torch.zeros_like(lo))
     # the clipped mean squares per depth bin and stride
     member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & taken.unsqueeze(1)
+    # each bin's floor (NoiseProfile.floors): median |x_1| / 0.6745, NaN with fewer than MIN_SAMPLES samples
+    floors = torch.stack(
+        [
+            torch.where(
+                member[:, b].sum(dim=1) >= MIN_SAMPLES,
+                _median(xs[0].abs(), member[:, b]) / 0.6745,
+                torch.full_like(lo, math.nan),
+            )
+            for b in range(N_BINS)
+        ],
+        dim=1,
+    )
     ms = []
     for x in xs:
         xx = (x * x).unsqueeze(1)
@@ -357,9 +374,13 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     # as sensor depth: adaptive_weight below)
     correlated = torch.clamp((correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW), 0.0, 1.0)
     noise = (GEOMETRY_RHO_HIGH - torch.quantile(rho_bins, 0.5, dim=1)) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
-    tables = NoiseTables(z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, torch.full_like(z0, KAPPA))
+    ones = torch.ones_like(z0)
+    tables = NoiseTables(
+        z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, KAPPA * ones, ones, centres, floors
+    )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
-    return tables._replace(kappa=KAPPA * (1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share))
+    gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
+    return tables._replace(kappa=KAPPA * gain, gain=gain)
 
 
 def _correlation(ms, counts) -> torch.Tensor:
@@ -842,6 +863,40 @@ def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
     return torch.where(torch.isnan(r), torch.ones_like(t), t)
 
 
+def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``auto.consistency_limits`` per frame: (checked (B,) bool, edges (B, N_BINS - 1), limits (B, N_BINS)
+    radians); where not checked, any edges and limits."""
+    share = ((tables.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW)).clamp(0.0, 1.0)
+    level = reading(tables)
+    smooth = (tables.gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * tables.smooth
+    floors = torch.maximum(
+        torch.where(torch.isnan(tables.floors), tables.floor.view(-1, 1), tables.floors), smooth.view(-1, 1)
+    )
+    scale = 2.0 * CONSISTENT * tables.gain / torch.where(share < 1.0, 1.0 - share, torch.ones_like(share))
+    limits = scale.view(-1, 1) * floors
+    checked = ~torch.isnan(level) & (share < 1.0) & (limits.amin(dim=1) < CONSISTENT_MAX)
+    c = tables.centres
+    return checked, _sqrt(c[:, :-1] * c[:, 1:]), limits
+
+
+def consistency(a, b, z, tables: NoiseTables, t: torch.Tensor, fill: float) -> torch.Tensor:
+    """``auto.consistency`` per frame: the blend of ``a`` (``d2nt_v3``) and, at each pixel, ``b`` (``adaptive_fit``)
+    where the two are at most the limit of the pixel's depth ``z`` (B, H, W) apart, else ``a``; frames that are not
+    checked blend ``a`` and ``b``. Where t is 1, the normal taken as it is (no blend)."""
+    checked, edges, limits = consistency_limits(tables)
+    B = a.shape[0]
+    k = (z.unsqueeze(-1) >= edges.view(B, 1, 1, -1)).sum(dim=-1)  # each pixel's depth bin
+    limit = limits.gather(1, k.view(B, -1)).view(z.shape)
+    cosine = torch.where(limit < math.pi, torch.cos(torch.clamp(limit, max=math.pi)), torch.full_like(limit, -2.0))
+    cos_ab = (a.to(_F64) * b.to(_F64)).sum(dim=1)
+    both = ~torch.isnan(a[:, 0]) & ~torch.isnan(b[:, 0])
+    took = both & (cos_ab < cosine) & checked.view(B, 1, 1)
+    r = torch.where(took.unsqueeze(1), a, b)
+    t4 = t.view(B, 1, 1, 1)
+    plain = torch.where(torch.isnan(r), torch.where(torch.isnan(a), torch.full_like(a, fill), a), r)
+    return torch.where(t4 == 1.0, plain, blend(a, r, t, fill))
+
+
 def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> torch.Tensor:
     """``auto.blend`` per frame: the unit normal along (1 - t) a + t b of two normal maps (B, 3, H, W) with NaN
     where they have none; where only one has a normal, that one; where neither, ``fill``; where the mean
@@ -887,6 +942,7 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
             z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
         )
 
+    checked = consistency_limits(tables)[0] & (t > 0.0)
     if g.z.device.type != "cpu" or not _GATHER_ON_CPU:
         a = d2nt_v3(g, cam64, math.nan)
         b = fit(g, z, cam64, tables, math.nan)
@@ -894,11 +950,19 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         a_pure = torch.where(torch.isnan(a), fill, a) if fill == 0.0 or math.isnan(fill) else d2nt_v3(g, cam64, fill)
         b_pure = torch.where(torch.isnan(b), fill, b)
         t4 = t.view(-1, 1, 1, 1)
-        return torch.where(t4 == 0.0, a_pure, torch.where(t4 == 1.0, b_pure, blend(a, b, t, fill)))
+        mixed = torch.where(checked.view(-1, 1, 1, 1), consistency(a, b, z, tables, t, fill), blend(a, b, t, fill))
+        return torch.where(t4 == 0.0, a_pure, torch.where((t4 == 1.0) & ~checked.view(-1, 1, 1, 1), b_pure, mixed))
     B = z.shape[0]
     parts = []
-    for kind in ("d2nt_v3", "adaptive_fit", "blend"):
-        pick = t == 0.0 if kind == "d2nt_v3" else t == 1.0 if kind == "adaptive_fit" else (t > 0.0) & (t < 1.0)
+    for kind in ("d2nt_v3", "adaptive_fit", "blend", "checked"):
+        if kind == "d2nt_v3":
+            pick = t == 0.0
+        elif kind == "adaptive_fit":
+            pick = (t == 1.0) & ~checked
+        elif kind == "blend":
+            pick = (t > 0.0) & (t < 1.0) & ~checked
+        else:
+            pick = checked
         idx = pick.nonzero().squeeze(1)
         if idx.numel() == 0:
             continue
@@ -911,8 +975,11 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
             n = d2nt_v3(sub, c_sub, fill)
         elif kind == "adaptive_fit":
             n = fit(sub, z_sub, c_sub, t_sub, fill)
-        else:
+        elif kind == "blend":
             n = blend(d2nt_v3(sub, c_sub, math.nan), fit(sub, z_sub, c_sub, t_sub, math.nan), t[idx], fill)
+        else:
+            a = d2nt_v3(sub, c_sub, math.nan)
+            n = consistency(a, fit(sub, z_sub, c_sub, t_sub, math.nan), z_sub, t_sub, t[idx], fill)
         parts.append((idx, n))
     if len(parts) == 1:
         return parts[0][1]

@@ -243,11 +243,11 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     (radians): ``CONSISTENT`` times 2 rho times the frame's :func:`~surfnorm.kernels.sensor_noise.kappa_gain`
     (correlated noise moves a normal more) over 1 - :func:`~surfnorm.kernels.sensor_noise.terraced_share` (a
     frame terraced in full is sensor depth: no limit), where rho is the bin's own noise floor (``NoiseProfile.floors``:
-    noise that grows with depth; the frame's floor where the bin has too few samples). Not the frame's reading: its
-    smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most. None where no limit
-    is under
-    ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise would not explain), and on
-    a frame terraced in full, without floors, or without a reading (sparse depth)."""
+    noise that grows with depth; the frame's floor where the bin has too few samples), or where the noise is
+    correlated (kappa_gain's share of it) the smooth noise if larger: d2nt_v3's small stencils see that. Not the
+    frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
+    None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
+    would not explain), and on a frame terraced in full, without floors, or without a reading (sparse depth)."""
     share = terraced_share(profile)
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:

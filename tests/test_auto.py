@@ -328,18 +328,20 @@ def check_profile(floors, floor=0.25, **kw):
 
 
 def test_consistency_limits_on_closed_forms():
-    """Each depth bin's limit is CONSISTENT times 2 rho times kappa_gain over 1 - the terraced share, rho the bin's
+    """Each depth bin's limit is CONSISTENT times 2 rho times kappa_gain over 1 - s (s: terraced from TERRACED_CHECK
+    to TERRACED_HIGH), rho the bin's
     floor (the frame's where the bin has too few samples) or, where the noise is correlated, the smooth noise in
     kappa_gain's share of it; no check on a frame terraced in full, without floors or a reading, or whose limits all
     reach CONSISTENT_MAX."""
-    from surfnorm._constants import CONSISTENT, CONSISTENT_MAX
+    from surfnorm._constants import CONSISTENT, CONSISTENT_MAX, TERRACED_CHECK
 
     p = check_profile([0.1, 0.2, np.nan, 0.3, 0.1, 0.1, 0.1, 0.1])
     rho = np.array([0.1, 0.2, 0.25, 0.3, 0.1, 0.1, 0.1, 0.1])
     edges, limits = consistency_limits(p)
     np.testing.assert_allclose(edges, np.sqrt(p.depths[:-1] * p.depths[1:]))
     np.testing.assert_allclose(limits, 2 * CONSISTENT * rho)
-    half = p._replace(terraced=(TERRACED_LOW + TERRACED_HIGH) / 2)
+    assert consistency_limits(p._replace(terraced=TERRACED_CHECK))[1] == pytest.approx(limits)
+    half = p._replace(terraced=(TERRACED_CHECK + TERRACED_HIGH) / 2)
     np.testing.assert_allclose(consistency_limits(half)[1], 2 * limits)
     for off in (p._replace(terraced=TERRACED_HIGH), p._replace(floors=None), p._replace(floor=float("nan"))):
         assert consistency_limits(off) is None

@@ -89,6 +89,7 @@ from .._constants import (
     DLF_DEFAULT,
     MNR_DLF_DEFAULT,
     NOISY_FLOOR,
+    TERRACED_CHECK,
     TERRACED_HIGH,
     TERRACED_LOW,
     TRUNCATE_DEFAULT,
@@ -104,7 +105,6 @@ from .sensor_noise import (
     noise_profile,
     quantisation,
     reading,
-    terraced_share,
 )
 
 __all__ = [
@@ -241,14 +241,14 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     """Where ``auto`` checks its two estimators against each other, per depth bin of ``profile``: (edges, limits),
     the N - 1 depths between its N bins and each bin's limit on the angle between the two normals at a pixel
     (radians): ``CONSISTENT`` times 2 rho times the frame's :func:`~surfnorm.kernels.sensor_noise.kappa_gain`
-    (correlated noise moves a normal more) over 1 - :func:`~surfnorm.kernels.sensor_noise.terraced_share` (a
-    frame terraced in full is sensor depth: no limit), where rho is the bin's own noise floor (``NoiseProfile.floors``:
+    (correlated noise moves a normal more) over 1 - s, s from 0 at ``TERRACED_CHECK`` to 1 at ``TERRACED_HIGH`` of
+    ``NoiseProfile.terraced`` (a frame terraced in full is sensor depth: no limit), where rho is the bin's own noise floor (``NoiseProfile.floors``:
     noise that grows with depth; the frame's floor where the bin has too few samples), or where the noise is
     correlated (kappa_gain's share of it) the smooth noise if larger: d2nt_v3's small stencils see that. Not the
     frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
     None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
     would not explain), and on a frame terraced in full, without floors, or without a reading (sparse depth)."""
-    share = terraced_share(profile)
+    share = min(max((profile.terraced - TERRACED_CHECK) / (TERRACED_HIGH - TERRACED_CHECK), 0.0), 1.0)
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:
         return None

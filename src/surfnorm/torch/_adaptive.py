@@ -79,6 +79,7 @@ from .._constants import (
     RHO_FLOOR,
     SHIFTS,
     SMOOTH_SHARE,
+    TERRACED_CHECK,
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
@@ -866,7 +867,7 @@ def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
 def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``auto.consistency_limits`` per frame: (checked (B,) bool, edges (B, N_BINS - 1), limits (B, N_BINS)
     radians); where not checked, any edges and limits."""
-    share = ((tables.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW)).clamp(0.0, 1.0)
+    share = ((tables.terraced - TERRACED_CHECK) / (TERRACED_HIGH - TERRACED_CHECK)).clamp(0.0, 1.0)
     level = reading(tables)
     smooth = (tables.gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * tables.smooth
     floors = torch.maximum(

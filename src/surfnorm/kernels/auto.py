@@ -105,6 +105,7 @@ from .sensor_noise import (
     noise_profile,
     quantisation,
     reading,
+    terraced_share,
 )
 
 __all__ = [
@@ -197,44 +198,9 @@ def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray) 
     """``out`` = the unit normal along (1 - t) a + t b, from two normal maps with NaN where they have none.
 
     Where only one has a normal, that one; where neither, ``fill``. Where the two point in opposite
-    directions (the mean vanishes), the one with the larger weight.
+    directions (the mean vanishes), the one with the larger weight. (:func:`consistency` without limits.)
     """
-    _blend(
-        a.reshape(-1, 3),
-        b.reshape(-1, 3),
-        np.float32(1.0 - t),
-        np.float32(t),
-        t >= 0.5,
-        np.float32(fill),
-        out.reshape(-1, 3),
-    )
-    return out
-
-
-@ahead_of_time
-@njit(noalias=True, _nrt=False)
-def _blend(a, b, wa, wb, b_wins, fill, out):
-    """:func:`blend` pixel by pixel, in float32 (``wa`` = 1 - t and ``wb`` = t rounded to float32; ``b_wins``: t >= 0.5)."""
-    for i in range(a.shape[0]):
-        have_a = not np.isnan(a[i, 0])
-        have_b = not np.isnan(b[i, 0])
-        if not (have_a or have_b):
-            out[i, 0] = out[i, 1] = out[i, 2] = fill
-            continue
-        if have_a and have_b:
-            m0 = wa * a[i, 0] + wb * b[i, 0]
-            m1 = wa * a[i, 1] + wb * b[i, 1]
-            m2 = wa * a[i, 2] + wb * b[i, 2]
-        elif have_a:
-            m0, m1, m2 = a[i, 0], a[i, 1], a[i, 2]
-        else:
-            m0, m1, m2 = b[i, 0], b[i, 1], b[i, 2]
-        norm = np.float32(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2))
-        if norm < 1e-6:  # opposite directions: the one with the larger weight
-            src = b if b_wins else a
-            out[i, 0], out[i, 1], out[i, 2] = src[i, 0], src[i, 1], src[i, 2]
-        else:
-            out[i, 0], out[i, 1], out[i, 2] = m0 / norm, m1 / norm, m2 / norm
+    return consistency(a, b, None, None, t, fill, out, alone=False)
 
 
 def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] | None:
@@ -248,7 +214,7 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
     None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
     would not explain), and on a frame terraced in full, without floors, or without a reading (sparse depth)."""
-    share = min(max((profile.terraced - TERRACED_CHECK) / (TERRACED_HIGH - TERRACED_CHECK), 0.0), 1.0)
+    share = terraced_share(profile, TERRACED_CHECK)
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:
         return None
@@ -266,19 +232,24 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
 def consistency(
     a: np.ndarray,
     b: np.ndarray,
-    z: np.ndarray,
-    limits: tuple[np.ndarray, np.ndarray],
+    z: np.ndarray | None,
+    limits: tuple[np.ndarray, np.ndarray] | None,
     t: float,
     fill: float,
     out: np.ndarray,
     took: np.ndarray | None = None,
+    alone: bool = True,
 ) -> np.ndarray:
     """``out`` = :func:`blend` of ``a`` (``d2nt_v3``'s normals) and, at each pixel, ``b`` (``adaptive_fit``'s) where
-    the two are at most the limit of the pixel's depth ``z`` apart (:func:`consistency_limits`: ``limits``), else
-    ``a`` again; NaN where a map has no normal, as for :func:`blend`. ``out`` may be ``b``. ``took``: where given
-    (H, W) bool, the pixels that took ``a`` for ``b``."""
-    edges, angles = limits
-    cosines = np.where(angles < math.pi, np.cos(np.minimum(angles, math.pi)), -2.0)  # -2: every pair passes
+    the two are at most the limit of the pixel's depth ``z`` apart (:func:`consistency_limits`: ``limits``; None:
+    no limit, the blend itself), else ``a`` again; NaN where a map has no normal, as for :func:`blend`; at t 1 (and
+    ``alone``) the normal taken as it is. ``out`` may be ``b``. ``took``: where given (H, W) bool, the pixels that
+    took ``a`` for ``b``."""
+    if limits is None:  # no edges, one bin whose limit every pair passes; z is not read
+        edges, cosines, z = np.zeros(0), np.full(1, -2.0), np.zeros(0, np.float32)
+    else:
+        edges, angles = limits
+        cosines = np.where(angles < math.pi, np.cos(np.minimum(angles, math.pi)), -2.0)  # -2: every pair passes
     _consistency(
         a.reshape(-1, 3),
         b.reshape(-1, 3),
@@ -288,7 +259,7 @@ def consistency(
         np.float32(1.0 - t),
         np.float32(t),
         t >= 0.5,
-        t == 1.0,
+        alone and t == 1.0,
         np.float32(fill),
         out.reshape(-1, 3),
         np.zeros(0, np.bool_) if took is None else took.reshape(-1),
@@ -299,8 +270,8 @@ def consistency(
 @ahead_of_time
 @njit(_nrt=False)
 def _consistency(a, b, z, edges, cosines, wa, wb, b_wins, alone, fill, out, took):
-    """:func:`consistency` pixel by pixel, the blend's arithmetic as :func:`_blend`'s, or with t 1 (``alone``) the normal
-    taken as it is (``out`` may be ``b``: no ``noalias``)."""
+    """:func:`consistency` pixel by pixel, in float32 (``wa`` = 1 - t and ``wb`` = t rounded to float32; ``b_wins``:
+    t >= 0.5), or with t 1 (``alone``) the normal taken as it is (``out`` may be ``b``: no ``noalias``)."""
     record = took.shape[0] > 0
     for i in range(a.shape[0]):
         have_a = not np.isnan(a[i, 0])

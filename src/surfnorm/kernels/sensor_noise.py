@@ -605,10 +605,10 @@ def quantisation(profile: NoiseProfile) -> float:
     return terraced_share(profile) * profile.step / math.sqrt(12.0)
 
 
-def terraced_share(profile: NoiseProfile) -> float:
-    """How far the frame counts as terraced: 0 at or below ``TERRACED_LOW``, 1 at or above ``TERRACED_HIGH``, linear
-    between."""
-    return min(max((profile.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW), 0.0), 1.0)
+def terraced_share(profile: NoiseProfile, low: float = TERRACED_LOW) -> float:
+    """How far the frame counts as terraced: 0 at or below ``low`` (``TERRACED_LOW``; ``auto``'s consistency check
+    starts from ``TERRACED_CHECK``), 1 at or above ``TERRACED_HIGH``, linear between."""
+    return min(max((profile.terraced - low) / (TERRACED_HIGH - low), 0.0), 1.0)
 
 
 def reading(profile: NoiseProfile) -> float:

@@ -799,15 +799,14 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
     and :func:`surfnorm.kernels.auto.auto`; empty for ``d2nt_v3``).
 
     ``auto``'s blend weights the variances as it weights the normals; where only one of the two has a fit, its
-    sigma alone.
+    sigma alone; where its consistency check took d2nt_v3's normal (``record["took_d2nt"]``), d2nt_v3's sigma.
     """
     t = 1.0 if method == "adaptive_fit" else record.get("weight", 0.0)
     took = record.get("took_d2nt") if method == "auto" else None
-    if took is not None:  # auto's consistency check: d2nt_v3's sigma where it took d2nt_v3's normal
-        return _checked_sigma(record, z, valid, cam, normals, fill, out, bands, t, took)
+    fit_alone = t == 1.0 and took is None
     if t > 0.0:
-        # the kernel's own record of which pixels hold a normal, unless the blend below changes the normals
-        has = record["has"] if t == 1.0 else None
+        # the kernel's own record of which pixels hold a normal, unless the blend or the check below changes them
+        has = record["has"] if fit_alone else None
         fitted = sigma_from_fits(
             valid,
             normals,
@@ -815,10 +814,10 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
             record["stride"],
             has=has,
             fill=fill,
-            out=out if t == 1.0 else None,
+            out=out if fit_alone else None,
             bands=bands,
         )
-    if t < 1.0:
+    if not fit_alone:
         profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
         clean = adaptive_weight(profile) == 0.0
         noise = None  # the clean model does not read it
@@ -836,20 +835,9 @@ def sigma_map(method: str, record: dict, z, valid, cam, normals, fill, out, band
             out=out if t == 0.0 else None,
             bands=bands,
         )
-    if 0.0 < t < 1.0:  # the blend: the variances weighted as the normals are; one alone where the other has no fit
-        both = np.sqrt((1.0 - t) * np.square(d2nt) + t * np.square(fitted))
-        out[...] = np.where(np.isnan(fitted), d2nt, np.where(np.isnan(d2nt), fitted, both))
-    return out
-
-
-def _checked_sigma(record, z, valid, cam, normals, fill, out, bands, t, took):
-    """:func:`sigma_map` after ``auto``'s consistency check (``took``: the pixels that took d2nt_v3's normal for
-    adaptive_fit's): there d2nt_v3's sigma, elsewhere the blend's (weight ``t``; adaptive_fit's alone at t 1)."""
-    fitted = sigma_from_fits(valid, normals, record["variance"], record["stride"], has=None, fill=fill, bands=bands)
-    profile = record.get("profile") or noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
-    z0, inv_step, _, rho = radius_table(profile.depths, profile.rho)
-    d2nt = d2nt_sigma(z, valid, cam, normals, (z0, inv_step, rho), clean=False, fill=fill, bands=bands)
-    weight = np.where(took, 0.0, t)
-    both = np.sqrt((1.0 - weight) * np.square(d2nt) + weight * np.square(fitted))
-    out[...] = np.where(np.isnan(fitted) | took, d2nt, np.where(np.isnan(d2nt), fitted, both))
+    if t > 0.0 and not fit_alone:  # the variances weighted as the normals are; one alone where the other has no fit
+        weight = t if took is None else np.where(took, 0.0, t)
+        both = np.sqrt((1.0 - weight) * np.square(d2nt) + weight * np.square(fitted))
+        only_d2nt = np.isnan(fitted) if took is None else np.isnan(fitted) | took
+        out[...] = np.where(only_d2nt, d2nt, np.where(np.isnan(d2nt), fitted, both))
     return out

@@ -847,10 +847,15 @@ def adaptive_fit(g: Grid, cam, *, window, max_window: int, fill: float, stride=N
     )
 
 
+def terraced_share(tables: NoiseTables, low: float = TERRACED_LOW) -> torch.Tensor:
+    """``sensor_noise.terraced_share`` per frame: 0 at or below ``low``, 1 at or above TERRACED_HIGH, linear between."""
+    return ((tables.terraced - low) / (TERRACED_HIGH - low)).clamp(0.0, 1.0)
+
+
 def reading(tables: NoiseTables) -> torch.Tensor:
     """``auto.reading`` per frame: the largest of the noise floor, the smooth noise, the terraces' quantisation
     noise and NOISY_FLOOR times the share in which the frame counts as terraced (NaN with the floor)."""
-    share = ((tables.terraced - TERRACED_LOW) / (TERRACED_HIGH - TERRACED_LOW)).clamp(0.0, 1.0)
+    share = terraced_share(tables)
     quantisation = share * tables.step / math.sqrt(12.0)
     level = torch.maximum(torch.maximum(tables.floor, tables.smooth), torch.maximum(quantisation, NOISY_FLOOR * share))
     return torch.where(torch.isnan(tables.floor), tables.floor, level)
@@ -867,7 +872,7 @@ def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
 def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``auto.consistency_limits`` per frame: (checked (B,) bool, edges (B, N_BINS - 1), limits (B, N_BINS)
     radians); where not checked, any edges and limits."""
-    share = ((tables.terraced - TERRACED_CHECK) / (TERRACED_HIGH - TERRACED_CHECK)).clamp(0.0, 1.0)
+    share = terraced_share(tables, TERRACED_CHECK)
     level = reading(tables)
     smooth = (tables.gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * tables.smooth
     floors = torch.maximum(

@@ -44,9 +44,16 @@ $(TORCH_STAMP): $(STAMP)
 		echo "make test: could not install torch==$(TORCH_VERSION), needed by tests/test_torch.py" >&2; exit 1; }
 	touch $@
 
-# A separate step, so that a failure says that it was Open3D (Linux: it also needs the system library libusb-1.0-0).
+# A separate step, so that a failure says that it was Open3D. On Linux its import needs the system library
+# libusb-1.0-0, which a bare Debian machine lacks: installed here with apt-get where this runs as root.
 $(OPEN3D_STAMP): $(STAMP)
 	@echo "Installing Open3D $(OPEN3D_VERSION) for the tests of the PLY point clouds and surfnorm.to_open3d"
+	@if [ "$$(uname -s)" = Linux ] && ! ldconfig -p 2>/dev/null | grep -q 'libusb-1\.0\.so\.0' \
+		&& [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "Installing the system library libusb-1.0-0 that Open3D needs (apt-get)"; \
+		apt-get install -y -q libusb-1.0-0 >/dev/null 2>&1 \
+		|| { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q libusb-1.0-0 >/dev/null 2>&1; } || true; \
+	fi
 	@$(PY) -m pip install -q "open3d==$(OPEN3D_VERSION)" && $(PY) -c "import open3d" || { \
 		echo "make test: could not install or import open3d==$(OPEN3D_VERSION), needed by tests/test_ply.py" \
 		"(on Linux it needs libusb-1.0-0: apt-get install libusb-1.0-0)" >&2; exit 1; }

@@ -446,3 +446,142 @@ def test_the_check_sigma_is_d2nt_v3s_where_it_took_d2nt_v3():
     ref = d2nt_sigma(z, z > 0, cam, normals, (z0, inv_step, rho), clean=False)
     np.testing.assert_array_equal(sigma[took], ref[took])
     assert np.isfinite(sigma[z > 0]).mean() > 0.99
+
+
+# --- depth upsampled from a lower resolution ----------------------------------------------------------------
+
+
+def upsampled_scene(k, interpolation="linear", noise=0.004, seed=0, size=240):
+    """A sphere before a tilted plane (exact depth and normals), as a sensor of 1/k the resolution measures it
+    (every k-th pixel, relative noise ``noise``) resized back to the frame by OpenCV (bilinear or nearest)."""
+    import cv2
+
+    K = camera(size, size, fov_deg=60)
+    z_p, n_p, _ = plane(K, size, size, [0.3, -0.2, -1.0], 3.0)
+    z_s, n_s, hit = sphere(K, size, size, [0.1, 0.0, 2.0], 0.6)
+    z = np.where(hit, z_s, z_p)
+    normals = np.where(hit[..., None], n_s, n_p)
+    low = z[k // 2 :: k, k // 2 :: k] * (1.0 + noise * np.random.default_rng(seed).standard_normal((size // k,) * 2))
+    how = cv2.INTER_LINEAR if interpolation == "linear" else cv2.INTER_NEAREST
+    up = cv2.resize(low.astype(np.float32), (size, size), interpolation=how)
+    return up, K, normals
+
+
+def naive_bends(z, valid, step):
+    """sensor_noise._bends written out with NumPy: the relative second differences of depth on every step-th row
+    (by column) and column (by row), 0 across a discontinuity (depths over 1.25 x apart)."""
+
+    def along(a, ok):
+        a = a.astype(np.float64)
+        x = np.zeros(a.shape)
+        both = ok[:, :-2] & ok[:, 1:-1] & ok[:, 2:]
+        trio = np.stack([a[:, :-2], a[:, 1:-1], a[:, 2:]])
+        near = np.where(both, trio.min(axis=0), 1.0)
+        far = np.where(both, trio.max(axis=0), 1.0)
+        mid = np.where(both, a[:, 1:-1], 1.0)
+        bend = np.abs(a[:, :-2] - 2.0 * a[:, 1:-1] + a[:, 2:]) / mid
+        x[:, 1:-1] = np.where(both & (far <= 1.25 * near), bend, 0.0)
+        return x.sum(axis=0), int(both.sum())
+
+    (u, n_u), (v, n_v) = along(z[::step], valid[::step]), along(z[:, ::step].T, valid[:, ::step].T)
+    return u, v, n_u, n_v
+
+
+def naive_seam_share(bends, k):
+    """The largest share of ``bends`` on two neighbouring positions modulo k."""
+    by_phase = np.bincount(np.arange(bends.size) % k, weights=bends, minlength=k)
+    return (by_phase + np.roll(by_phase, -1)).max() / bends.sum()
+
+
+@pytest.mark.parametrize("k", [4, 7, 8])
+def test_bends_and_seam_shares_match_the_naive_reference(k):
+    from surfnorm.kernels.sensor_noise import _bends, seam_share
+
+    z, _, _ = upsampled_scene(k, size=224)
+    z = z.copy()
+    z[50:60, 70:90] = 0.0  # a hole
+    valid = z > 0
+    for step in (1, 3, 10):
+        u, v = np.empty(z.shape[1]), np.empty(z.shape[0])
+        n_u, n_v = _bends(z, valid, step, u, v)
+        nu, nv, nn_u, nn_v = naive_bends(z, valid, step)
+        assert (n_u, n_v) == (nn_u, nn_v)
+        np.testing.assert_allclose(u, nu, rtol=1e-12, atol=0)
+        np.testing.assert_allclose(v, nv, rtol=1e-12, atol=0)
+        for kk in range(2, 17):
+            assert seam_share(u, kk) == pytest.approx(naive_seam_share(nu, kk), rel=1e-12)
+    assert seam_share(np.zeros(20), 4) == 0.0
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "nearest"])
+@pytest.mark.parametrize("k", [4, 5, 8, 15])
+def test_upsampling_factor_finds_the_resize_factor(k, interpolation):
+    from surfnorm.kernels.sensor_noise import upsampling_factor
+
+    z, _, _ = upsampled_scene(k, interpolation)
+    assert upsampling_factor(z, z > 0) == k
+    # a factor over UPSAMPLED_MAX gives its largest divisor in range (16: 8), with the same seams
+    if k == 8:
+        z16, _, _ = upsampled_scene(16, interpolation)
+        assert upsampling_factor(z16, z16 > 0) == 8
+
+
+def test_depth_that_was_not_resized_has_no_upsampling_factor():
+    from surfnorm.kernels.sensor_noise import upsampling_factor
+
+    exact, K, _ = upsampled_scene(4, noise=0.0)  # only the resize's seams: still upsampled
+    assert upsampling_factor(exact, exact > 0) == 4
+    z, K = slanted_plane()
+    z = z.astype(np.float32)
+    rng = np.random.default_rng(0)
+    noisy = (z * (1 + 0.001 * rng.standard_normal(z.shape))).astype(np.float32)
+    for depth in (z, noisy, terraced(z, K), np.round(z * 1000) / 1000):
+        assert upsampling_factor(depth.astype(np.float32), depth > 0) == 1
+    # a factor-2 resize bends at every pixel: not looked for; nor on frames too small or without depth
+    z2, _, _ = upsampled_scene(2)
+    assert upsampling_factor(z2, z2 > 0) == 1
+    assert upsampling_factor(np.ones((2, 50), np.float32), np.ones((2, 50), bool)) == 1
+    assert upsampling_factor(z, np.zeros(z.shape, bool)) == 1
+
+
+@pytest.mark.parametrize("k", [5, 8])
+def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k):
+    from surfnorm.metrics import mean_angular_error
+
+    z, K, exact = upsampled_scene(k)
+    d = surfnorm.auto_decision(z, K)
+    assert d.reading < NOISY_FLOOR  # the pixel scale reads it as (nearly) clean
+    assert (d.method, d.weight, d.upsampled, d.checked) == ("adaptive_fit", 1.0, k, False)
+    assert f"with windows of at least {2 * k + 1} pixels (depth upsampled {k} times)" in str(d)
+    got = surfnorm.estimate(z, K)
+    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=2 * k + 1))
+    errors = {m: mean_angular_error(surfnorm.estimate(z, K, method=m), exact, z > 0) for m in ("d2nt_v3", "auto")}
+    assert errors["auto"] < 0.7 * errors["d2nt_v3"], errors
+    # with sigma: adaptive_fit's, of the windows it ran
+    n, sigma = surfnorm.estimate(z, K, uncertainty=True)
+    np.testing.assert_array_equal(n, got)
+    _, sigma_af = surfnorm.estimate(z, K, method="adaptive_fit", window=2 * k + 1, uncertainty=True)
+    np.testing.assert_array_equal(sigma, sigma_af)
+
+
+def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():
+    torch = pytest.importorskip("torch")
+    import surfnorm.torch as st
+    from surfnorm.kernels.sensor_noise import upsampling_factor
+    from surfnorm.torch import _adaptive
+
+    frames = [upsampled_scene(8)[0], upsampled_scene(5, seed=1)[0], upsampled_scene(4, "nearest")[0]]
+    z, K = slanted_plane(240, 240)
+    frames += [z.astype(np.float32), terraced(z, K)]
+    stack = np.stack(frames).astype(np.float32)
+    t = torch.from_numpy(stack).double()
+    factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 1, 1]
+    want = np.stack([surfnorm.estimate(f, K) for f in frames])
+    for gather in (True, False):
+        _adaptive._GATHER_ON_CPU = gather
+        try:
+            got = st.estimate(torch.from_numpy(stack)[:, None], torch.from_numpy(K), method="auto")
+        finally:
+            _adaptive._GATHER_ON_CPU = True
+        np.testing.assert_allclose(got.permute(0, 2, 3, 1).numpy(), want, atol=2e-6, rtol=0)

@@ -359,9 +359,9 @@ def auto_decision(depth, K, *, mask=None, disparity: bool = False):
 
     ``auto`` measures the depth's noise once per frame (the noise floor at the pixel scale, the noise at
     twice that scale in the quietest tenth of the frame, and the quantisation noise of depth terraces) and
-    runs ``d2nt_v3`` on clean depth, ``adaptive_fit`` on sensor depth, their blend between; see
-    :mod:`surfnorm.kernels.auto`. This function measures the same and returns the decision without
-    estimating any normal.
+    runs ``d2nt_v3`` on clean depth, ``adaptive_fit`` on sensor depth, their blend between, and ``adaptive_fit``
+    with wide windows on depth resized from a lower resolution; see :mod:`surfnorm.kernels.auto`. This function
+    measures the same and returns the decision without estimating any normal.
 
     Parameters
     ----------
@@ -378,8 +378,8 @@ def auto_decision(depth, K, *, mask=None, disparity: bool = False):
     -------
     Decision, or a list of them for a stack
         ``method`` ("d2nt_v3", "adaptive_fit" or "blend"), ``weight`` (adaptive_fit's share), ``reading``
-        (the noise level decided on, in point spacings z / f) and the measurements behind it; ``str()`` of it
-        is one line for a person.
+        (the noise level decided on, in point spacings z / f), the measurements behind it, and ``upsampled``
+        (the factor of a resize from a lower resolution, or 1); ``str()`` of it is one line for a person.
 
     Examples
     --------

@@ -144,6 +144,33 @@ CONSISTENT = 2.0
 #: 8.75 degrees, against 10.93 with the ramp from TERRACED_LOW (its median filter 13.88 against 13.87).
 TERRACED_CHECK = 0.25
 CONSISTENT_MAX = math.pi / 2
+#: Upsampled depth (``sensor_noise.upsampling_factor``): depth that a lower-resolution sensor measured and a resize
+#: brought to the frame (a time-of-flight or phone LiDAR registered to a colour camera, a depth completion's output)
+#: bends only at the seams between its samples, every K pixels: along the rows and along the columns, at least
+#: UPSAMPLED_SHARE of the |second difference of z| falls on two neighbouring columns (rows) of every K. On the 12
+#: 3F2N frames resized 4, 5 and 8 times, bilinearly or to the nearest pixel, 1.00; 6 times (640 / 6 is not a whole
+#: number: the seams drift) at least 0.89. Depth that was not resized spreads it over every phase (2 / K and up):
+#: at most 0.52 on 11 real frames, 0.57 on the clean renders and the families of benchmarks/families.py, 0.58 on
+#: the simulated sensors but LiDAR, 0.70 on simulated LiDAR (its scan lines; auto does not look at sensor depth).
+#: Its noise lies in the samples, K pixels apart, where the pixel-scale noise measurement does not see it (bilinear
+#: 8x reads as clean): ``auto`` runs ``adaptive_fit`` with windows of at least 2 K + 1 pixels there. Factors under
+#: UPSAMPLED_MIN (the seams of K = 2 and 3 touch every pixel or most) and over UPSAMPLED_MAX (a window of 2 K + 1
+#: over MAX_WINDOW) are not looked for; a factor that is not a whole number has no fixed seam column (its seams
+#: drift) and is found only where the drift is slow.
+UPSAMPLED_SHARE = 0.8
+UPSAMPLED_MIN = 4
+UPSAMPLED_MAX = 15
+#: The seams are looked for on every UPSAMPLED_STEP-th row and column that the noise measurement samples
+#: (``noise_step``): every 10th of a 640x480 frame, about 0.15 ms. Sparser sampling raises the shares of depth that
+#: was not resized (simulated LiDAR's scan lines, the most: 0.69 on every sampled line, 0.70 on every other one,
+#: 0.77 on every fourth).
+UPSAMPLED_STEP = 2
+
+
+def upsampled_window(k: int) -> int:
+    """``auto``'s window side on depth upsampled K times: 2 K + 1 (two seams in every direction), at most MAX_WINDOW."""
+    return min(2 * k + 1, MAX_WINDOW)
+
 
 # --- the plane fits (surfnorm.kernels.plane_fit, surfnorm.torch._plane_fit) ---------------------------
 

@@ -584,10 +584,13 @@ def folder_markdown(result: dict) -> str:
             "the smooth noise and the terraces' quantisation noise, and at least 0.20 where the depth is terraced in "
             "full; `d2nt_v3` at or below 0.10, `adaptive_fit` at or above 0.20, their blend between "
             "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
-            "pixel (depth not terraced in full, at low noise).",
+            "pixel (depth not terraced in full, at low noise); upsampled: the factor by which the depth was resized "
+            "from a lower resolution, where the reading is under 0.20 and one was found (`adaptive_fit` alone then, "
+            "with windows of at least 2 K + 1 pixels), 1 elsewhere.",
             "",
-            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation | checked |",
-            "|---|---|---|---|---|---|---|---|---|---|",
+            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation | checked "
+            "| upsampled |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:
             d = result["decisions"].get(f)
@@ -595,7 +598,7 @@ def folder_markdown(result: dict) -> str:
                 continue
             nums = [_fmt(d[k], 3) for k in ("weight", "reading", "floor", "smooth", "terraced", "step", "quantisation")]
             checked = "yes" if d.get("checked") else "no"
-            out.append(f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} |")
+            out.append(f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1)} |")
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):
         out += ["", "## Absent peers (library not installed)", ""]

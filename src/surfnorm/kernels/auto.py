@@ -60,6 +60,13 @@ error falls from 53 to 23 degrees (``d2nt_v3`` alone: 14). Depth terraced in ful
 the real sensor frames get what they got before, at the same cost; a checked frame
 runs both estimators.
 
+Depth resized from a lower resolution (a time-of-flight or phone LiDAR registered to a colour camera, a depth
+completion's output) bends only at the seams between its samples, K pixels apart, and its noise lies in the
+samples: at the pixel scale it reads as clean, and ``d2nt_v3`` follows each sample's error (bilinear 8x: 34
+degrees, against 30 for OpenCV's LINEMOD). Where the reading is under ``NOISY_FLOOR``, ``auto`` looks for such
+seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole factors from 4 to 15) and, where it finds
+them, runs ``adaptive_fit`` alone with windows of at least 2 K + 1 pixels (26 degrees).
+
 What each family of depth gets, and the cost of a wrong call, are measured in the
 documentation's "Which method when" page. A limit: error smooth over more than
 a few pixels, small and not quantised shows neither a floor, nor terraces, nor
@@ -93,6 +100,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TRUNCATE_DEFAULT,
+    upsampled_window,
 )
 from ._schedule import run_bands
 from .adaptive_fit import FitPlan, adaptive_fit
@@ -106,6 +114,7 @@ from .sensor_noise import (
     quantisation,
     reading,
     terraced_share,
+    upsampling_factor,
 )
 
 __all__ = [
@@ -143,6 +152,10 @@ class Decision(NamedTuple):
         Whether ``adaptive_fit``'s normals are checked against ``d2nt_v3``'s, pixel by pixel
         (:func:`consistency_limits`): where the two differ by more than the noise explains, the pixel takes
         ``d2nt_v3``'s. False where ``d2nt_v3`` runs alone.
+    upsampled : int
+        The factor K by which the depth was resized from a lower resolution, where the reading is under
+        ``NOISY_FLOOR`` and one was found (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`): ``adaptive_fit``
+        then runs alone (``weight`` 1), with windows of at least 2 K + 1 pixels. 1 elsewhere.
     """
 
     method: str
@@ -154,9 +167,15 @@ class Decision(NamedTuple):
     step: float
     quantisation: float
     checked: bool = False
+    upsampled: int = 1
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
+        if self.upsampled > 1:
+            ran += (
+                f" with windows of at least {upsampled_window(self.upsampled)} pixels "
+                f"(depth upsampled {self.upsampled} times)"
+            )
         if self.checked:
             ran += ", checked against d2nt_v3 pixel by pixel"
         return (
@@ -167,9 +186,9 @@ class Decision(NamedTuple):
         )
 
 
-def decision(profile: NoiseProfile) -> Decision:
-    """The :class:`Decision` for a measured profile."""
-    t = adaptive_weight(profile)
+def decision(profile: NoiseProfile, upsampled: int = 1) -> Decision:
+    """The :class:`Decision` for a measured profile (and the depth's :func:`upsampling_factor`, where measured)."""
+    t = 1.0 if upsampled > 1 else adaptive_weight(profile)
     method = "d2nt_v3" if t == 0.0 else "adaptive_fit" if t == 1.0 else "blend"
     return Decision(
         method,
@@ -180,13 +199,20 @@ def decision(profile: NoiseProfile) -> Decision:
         profile.terraced,
         profile.step,
         quantisation(profile),
-        t > 0.0 and consistency_limits(profile) is not None,
+        upsampled == 1 and t > 0.0 and consistency_limits(profile) is not None,
+        upsampled,
     )
+
+
+def upsampled(z: np.ndarray, valid: np.ndarray, profile: NoiseProfile) -> int:
+    """The depth's :func:`upsampling_factor` where ``auto`` looks for one (a reading under ``NOISY_FLOOR``), else 1."""
+    return upsampling_factor(z, valid) if adaptive_weight(profile) < 1.0 else 1
 
 
 def decide(z: np.ndarray, valid: np.ndarray, cam) -> Decision:
     """What ``auto`` runs on this frame, and why (:class:`Decision`)."""
-    return decision(noise_profile(z, valid, math.sqrt(cam.fx * cam.fy)))
+    profile = noise_profile(z, valid, math.sqrt(cam.fx * cam.fy))
+    return decision(profile, upsampled(z, valid, profile))
 
 
 def choose(z: np.ndarray, valid: np.ndarray, cam) -> str:
@@ -349,6 +375,10 @@ def auto(
     def sensor_depth(p: NoiseProfile):
         measured.append(p)
         sensor = adaptive_weight(p) == 1.0
+        k = 1 if sensor else upsampled(z, valid, p)
+        if k > 1:  # upsampled depth: adaptive_fit alone, with windows that span the seams
+            frame.window = upsampled_window(k)
+            return frame.tables(p)
         limits = consistency_limits(p) if sensor else None
         if limits is not None:  # the fit's normals are checked against d2nt_v3's below: NaN where it has none
             checked.append(limits)

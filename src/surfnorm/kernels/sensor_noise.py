@@ -43,6 +43,10 @@ from .._constants import (
     SMOOTH_SHARE,
     TERRACED_HIGH,
     TERRACED_LOW,
+    UPSAMPLED_MAX,
+    UPSAMPLED_MIN,
+    UPSAMPLED_SHARE,
+    UPSAMPLED_STEP,
     noise_step,
     stride_gain,
 )
@@ -59,6 +63,7 @@ __all__ = [
     "reading",
     "quantisation",
     "terraced_share",
+    "upsampling_factor",
 ]
 
 
@@ -657,3 +662,98 @@ def adaptive_weight(profile: NoiseProfile) -> float:
     if not r == r:
         return 1.0
     return min(max((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)
+
+
+# --- depth upsampled from a lower resolution ----------------------------------------------------------------------
+
+
+@pixel
+def _bend(a, b, c):
+    """|a - 2 b + c| / b, the relative second difference of three valid depths; 0 across a discontinuity (their
+    depths differ by more than ``_MAX_SPREAD``)."""
+    lo = min(a, b, c)
+    hi = max(a, b, c)
+    return select(hi <= _MAX_SPREAD * lo, abs(a - 2.0 * b + c) / b, 0.0)
+
+
+@ahead_of_time
+@njit(noalias=True)
+def _bends(z, valid, step, along_u, along_v):
+    """The relative second differences of depth (:func:`_bend`) summed by position: along every ``step``-th row
+    into ``along_u`` (W,) by column, along every ``step``-th column into ``along_v`` (H,) by row (where the three
+    pixels are valid; branch-free, so that the loops vectorise). Returns how many were summed along each."""
+    H, W = z.shape
+    along_u[:] = 0.0
+    along_v[:] = 0.0
+    n_u = 0
+    n_v = 0
+    for v in range(0, H, step):
+        z_row = z[v]
+        ok_row = valid[v]
+        for u in range(1, W - 1):
+            ok = ok_row[u - 1] & ok_row[u] & ok_row[u + 1]
+            b = select(ok, z_row[u], 1.0)
+            along_u[u] += select(ok, _bend(select(ok, z_row[u - 1], 1.0), b, select(ok, z_row[u + 1], 1.0)), 0.0)
+            n_u += ok
+    for v in range(1, H - 1):
+        up, mid, down = z[v - 1], z[v], z[v + 1]
+        ok_up, ok_mid, ok_down = valid[v - 1], valid[v], valid[v + 1]
+        total = 0.0
+        for u in range(0, W, step):
+            ok = ok_up[u] & ok_mid[u] & ok_down[u]
+            b = select(ok, mid[u], 1.0)
+            total += select(ok, _bend(select(ok, up[u], 1.0), b, select(ok, down[u], 1.0)), 0.0)
+            n_v += ok
+        along_v[v] = total
+    return n_u, n_v
+
+
+@pixel
+def seam_share(bends, k):
+    """Of the bends summed by position (:func:`_bends`), the largest share on two neighbouring positions modulo
+    ``k`` (0 without any): 1 where depth bends only at the seams of a k-times resize, about 2 / k elsewhere."""
+    total = 0.0
+    first = 0.0
+    before = 0.0
+    most = 0.0
+    for p in range(k):
+        phase = 0.0
+        for i in range(p, bends.shape[0], k):
+            phase += bends[i]
+        total += phase
+        if p == 0:
+            first = phase
+        else:
+            most = max(most, before + phase)
+        before = phase
+    most = max(most, before + first)
+    return most / total if total > 0.0 else 0.0
+
+
+@ahead_of_time
+@njit
+def _seam_factor(along_u, along_v, k_low, k_high, share):
+    """The largest k from ``k_high`` down to ``k_low`` whose :func:`seam_share` reaches ``share`` along both, or 1."""
+    for k in range(k_high, k_low - 1, -1):
+        if seam_share(along_u, k) >= share and seam_share(along_v, k) >= share:
+            return k
+    return 1
+
+
+def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
+    """The factor K by which the depth was resized from a lower resolution (bilinear or nearest), or 1.
+
+    Such depth bends only at the seams between the low-resolution samples, the same columns in every row and the
+    same rows in every column: K is the largest factor from ``UPSAMPLED_MIN`` to ``UPSAMPLED_MAX`` for which, along
+    the rows and along the columns, at least ``UPSAMPLED_SHARE`` of the bends fall on two neighbouring positions
+    modulo K (:func:`seam_share`), measured on every ``UPSAMPLED_STEP``-th row and column that the noise
+    measurement samples; 1 where none does, or where fewer than ``MIN_SAMPLES`` stencils were valid along either.
+    A factor K makes its divisors pass too, hence the largest. See :mod:`surfnorm._constants`."""
+    H, W = z.shape
+    if H < 3 or W < 3:
+        return 1
+    along_u, along_v = np.empty(W), np.empty(H)
+    n_u, n_v = _bends(z, valid, UPSAMPLED_STEP * noise_step(H, W), along_u, along_v)
+    if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
+        return 1
+    return int(_seam_factor(along_u, along_v, UPSAMPLED_MIN, min(UPSAMPLED_MAX, W // 4, H // 4), UPSAMPLED_SHARE))

@@ -83,7 +83,12 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
+    UPSAMPLED_MAX,
+    UPSAMPLED_MIN,
+    UPSAMPLED_SHARE,
+    UPSAMPLED_STEP,
     noise_step,
+    upsampled_window,
 )
 from ._ops import Grid
 
@@ -861,6 +866,45 @@ def reading(tables: NoiseTables) -> torch.Tensor:
     return torch.where(torch.isnan(tables.floor), tables.floor, level)
 
 
+def _bends_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``sensor_noise._bends`` along the last dimension of a (B, lines, N): the relative second differences of depth
+    summed over the lines by position (B, N; 0 at both ends), and how many were valid (B,)."""
+    left, mid, right = a[..., :-2], a[..., 1:-1], a[..., 2:]
+    both = ok[..., :-2] & ok[..., 1:-1] & ok[..., 2:]
+    lo = torch.minimum(torch.minimum(left, mid), right)
+    hi = torch.maximum(torch.maximum(left, mid), right)
+    bend = (left - 2.0 * mid + right).abs() / torch.where(both, mid, torch.ones_like(mid))
+    x = torch.where(both & (hi <= _MAX_SPREAD * lo), bend, torch.zeros_like(bend))
+    return F.pad(x.sum(dim=1), (1, 1)), both.sum(dim=(1, 2))
+
+
+def _seam_share(along: torch.Tensor, k: int) -> torch.Tensor:
+    """``sensor_noise.seam_share`` of every frame's bends (B, N): (B,)."""
+    B, N = along.shape
+    phase = torch.arange(N, device=along.device) % k
+    by_phase = torch.zeros((B, k), dtype=along.dtype, device=along.device).index_add_(1, phase, along)
+    total = by_phase.sum(dim=1)
+    pair = (by_phase + torch.roll(by_phase, -1, dims=1)).amax(dim=1)
+    return torch.where(total > 0.0, pair / torch.where(total > 0.0, total, torch.ones_like(total)), 0.0)
+
+
+def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """``sensor_noise.upsampling_factor`` of every frame: z (B, H, W) float64 (any value where invalid), valid
+    (B, H, W); (B,) int64, 1 where none is found."""
+    B, H, W = z.shape
+    out = torch.ones(B, dtype=torch.int64, device=z.device)
+    if H < 3 or W < 3:
+        return out
+    step = UPSAMPLED_STEP * noise_step(H, W)
+    along_u, n_u = _bends_along(z[:, ::step, :], valid[:, ::step, :])
+    along_v, n_v = _bends_along(z[:, :, ::step].transpose(1, 2), valid[:, :, ::step].transpose(1, 2))
+    enough = (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)
+    for k in range(min(UPSAMPLED_MAX, W // 4, H // 4), UPSAMPLED_MIN - 1, -1):
+        seams = (_seam_share(along_u, k) >= UPSAMPLED_SHARE) & (_seam_share(along_v, k) >= UPSAMPLED_SHARE)
+        out = torch.where(enough & (out == 1) & seams, k, out)
+    return out
+
+
 def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
     """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
     (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples)."""
@@ -925,10 +969,12 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
 
 def auto(g: Grid, cam, *, tau: float, fill: float):
     """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
-    ``adaptive_fit`` at or above NOISY_FLOOR, their blend between; ``cam`` in float64.
+    ``adaptive_fit`` at or above NOISY_FLOOR, their blend between, and ``adaptive_fit`` with windows of at least
+    2 K + 1 pixels on depth upsampled K times (:func:`upsampling_factors`, where the reading is under NOISY_FLOOR);
+    ``cam`` in float64.
 
     On the CPU each estimator runs on the frames that need it only; elsewhere both run on the whole batch
-    and each frame takes its own (no host synchronisation)."""
+    and each frame takes its own, with one host synchronisation (whether any frame was upsampled)."""
     from . import _ops
 
     z = g.z.to(_F64)
@@ -937,6 +983,12 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
     with torch.no_grad():
         tables = noise_tables(z.detach(), g.valid, _sqrt(cam64[0] * cam64[1]).reshape(-1), r_max=r_max)
     t = adaptive_weight(tables)
+    # upsampled depth (auto.upsampled): looked for where the reading is under NOISY_FLOOR; adaptive_fit alone there,
+    # with windows of at least 2 K + 1 pixels
+    with torch.no_grad():
+        factor = torch.where(t < 1.0, upsampling_factors(z.detach(), g.valid), 1)
+    upsampled = factor > 1
+    t = torch.where(upsampled, 1.0, t)
 
     def d2nt_v3(grid, c, fill_value):
         c = tuple(x.to(grid.z.dtype) for x in c)
@@ -948,7 +1000,14 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
             z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
         )
 
-    checked = consistency_limits(tables)[0] & (t > 0.0)
+    def fit_upsampled(grid, z_f, c, tab, k, fill_value):
+        side = upsampled_window(k)
+        tab = tab._replace(radius=torch.full_like(tab.radius, (side - 1) // 2))
+        return _normals(
+            z_f, grid.valid, c, tab, window=side, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
+        )
+
+    checked = consistency_limits(tables)[0] & (t > 0.0) & ~upsampled
     if g.z.device.type != "cpu" or not _GATHER_ON_CPU:
         a = d2nt_v3(g, cam64, math.nan)
         b = fit(g, z, cam64, tables, math.nan)
@@ -957,14 +1016,25 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         b_pure = torch.where(torch.isnan(b), fill, b)
         t4 = t.view(-1, 1, 1, 1)
         mixed = torch.where(checked.view(-1, 1, 1, 1), consistency(a, b, z, tables, t, fill), blend(a, b, t, fill))
-        return torch.where(t4 == 0.0, a_pure, torch.where((t4 == 1.0) & ~checked.view(-1, 1, 1, 1), b_pure, mixed))
+        out = torch.where(t4 == 0.0, a_pure, torch.where((t4 == 1.0) & ~checked.view(-1, 1, 1, 1), b_pure, mixed))
+        # upsampled frames: one host synchronisation, to know which factors to fit with (none in most batches)
+        if bool(upsampled.any()):
+            for k in factor[upsampled].unique().tolist():
+                n = fit_upsampled(g, z, cam64, tables, k, fill)
+                out = torch.where((factor == k).view(-1, 1, 1, 1), n, out)
+        return out
     B = z.shape[0]
     parts = []
-    for kind in ("d2nt_v3", "adaptive_fit", "blend", "checked"):
-        if kind == "d2nt_v3":
+    kinds: list = ["d2nt_v3", "adaptive_fit", "blend", "checked"]
+    if bool(upsampled.any()):
+        kinds += factor[upsampled].unique().tolist()
+    for kind in kinds:
+        if isinstance(kind, int):  # upsampled kind times
+            pick = factor == kind
+        elif kind == "d2nt_v3":
             pick = t == 0.0
         elif kind == "adaptive_fit":
-            pick = (t == 1.0) & ~checked
+            pick = (t == 1.0) & ~checked & ~upsampled
         elif kind == "blend":
             pick = (t > 0.0) & (t < 1.0) & ~checked
         else:
@@ -977,7 +1047,9 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         c_sub = cam64 if whole else tuple(c[idx] for c in cam64)
         t_sub = tables if whole else NoiseTables(*(x[idx] for x in tables))
         z_sub = z if whole else z[idx]
-        if kind == "d2nt_v3":
+        if isinstance(kind, int):
+            n = fit_upsampled(sub, z_sub, c_sub, t_sub, kind, fill)
+        elif kind == "d2nt_v3":
             n = d2nt_v3(sub, c_sub, fill)
         elif kind == "adaptive_fit":
             n = fit(sub, z_sub, c_sub, t_sub, fill)

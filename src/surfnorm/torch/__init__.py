@@ -30,9 +30,10 @@ the sensor sample, where ``adaptive_fit`` gives the same bits).
   :mod:`surfnorm.torch._adaptive`.
 * No host synchronisation in the forward pass: every per-pixel choice is a
   ``torch.where`` on masks, so it runs asynchronously on a GPU and traces
-  under ``torch.compile``. One exception: ``sda_sne`` with
+  under ``torch.compile``. Two exceptions: ``sda_sne`` with
   ``iterations=None`` (until stable) reads once per pass whether every frame
-  has stopped. (On the CPU the plane fits also gather the pixels whose
+  has stopped, and ``auto`` once per batch whether any frame was resized from
+  a lower resolution. (On the CPU the plane fits also gather the pixels whose
   Newton iteration still moves, and ``adaptive_fit`` and ``auto`` the pixels
   and frames each step concerns, which is free there.)
 * SDA-SNE's dynamic programming is a Jacobi iteration: each pass is

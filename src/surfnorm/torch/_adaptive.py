@@ -1029,7 +1029,7 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
     if bool(upsampled.any()):
         kinds += factor[upsampled].unique().tolist()
     for kind in kinds:
-        if isinstance(kind, int):  # upsampled kind times
+        if isinstance(kind, int):  # an upsampling factor: the frames upsampled that many times
             pick = factor == kind
         elif kind == "d2nt_v3":
             pick = t == 0.0

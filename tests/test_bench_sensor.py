@@ -534,3 +534,25 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and err.startswith("families: --families: ") and err.endswith(tail), err
+
+
+def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):
+    """benchmarks/resized_frames.py: a frame's depth every K-th pixel, resized back (exact on a plane's rows where
+    depth is linear), no depth where a low pixel had none; one table row per frame and factor; bad factors: exit 2."""
+    script = _benchmark_script("resized_frames")
+    z, n, m = plane_scene()
+    z[10:14, 20:30] = 0.0
+    up = script.resized(z, 4)
+    assert up.shape == z.shape and up.dtype == np.float32
+    assert np.all(up[10:14, 20:30] == 0.0) and np.mean(up > 0) > 0.9
+    np.testing.assert_array_equal(up[z == 0], 0.0)
+    write_frame(tmp_path / "frames" / "a", z, planes=(n, m))
+    assert script.main([str(tmp_path / "frames"), "--factors", "4,8", "--methods", "auto,d2nt_v3"]) == 0
+    rows = [
+        line for line in capsys.readouterr().out.splitlines() if line.startswith("| 4 |") or line.startswith("| 8 |")
+    ]
+    assert len(rows) == 4 and all(len(r.split("|")) == 7 for r in rows), rows
+    for bad in ("1", "4,x", "", "17"):
+        assert script.main([str(tmp_path / "frames"), "--factors", bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("resized_frames: --factors: expected whole numbers from 2 to 16") and err.count("\n") == 0

@@ -588,8 +588,8 @@ def folder_markdown(result: dict) -> str:
             "from a lower resolution, where the reading is under 0.20 and one was found (`adaptive_fit` alone then, "
             "with windows of at least 2 K + 1 pixels), 1 elsewhere.",
             "",
-            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation | checked "
-            "| upsampled |",
+            "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
+            "| checked | upsampled |",
             "|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:

@@ -374,11 +374,11 @@ def auto(
 
     def sensor_depth(p: NoiseProfile):
         measured.append(p)
-        sensor = adaptive_weight(p) == 1.0
-        k = 1 if sensor else upsampled(z, valid, p)
+        k = upsampled(z, valid, p)
         if k > 1:  # upsampled depth: adaptive_fit alone, with windows that span the seams
             frame.window = upsampled_window(k)
             return frame.tables(p)
+        sensor = adaptive_weight(p) == 1.0
         limits = consistency_limits(p) if sensor else None
         if limits is not None:  # the fit's normals are checked against d2nt_v3's below: NaN where it has none
             checked.append(limits)

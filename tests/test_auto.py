@@ -453,7 +453,7 @@ def test_the_check_sigma_is_d2nt_v3s_where_it_took_d2nt_v3():
 
 def upsampled_scene(k, interpolation="linear", noise=0.004, seed=0, size=240):
     """A sphere before a tilted plane (exact depth and normals), as a sensor of 1/k the resolution measures it
-    (every k-th pixel, relative noise ``noise``) resized back to the frame by OpenCV (bilinear or nearest)."""
+    (every k-th pixel, relative noise ``noise``) resized back to the frame by OpenCV (bilinear, nearest or bicubic)."""
     import cv2
 
     K = camera(size, size, fov_deg=60)
@@ -462,7 +462,7 @@ def upsampled_scene(k, interpolation="linear", noise=0.004, seed=0, size=240):
     z = np.where(hit, z_s, z_p)
     normals = np.where(hit[..., None], n_s, n_p)
     low = z[k // 2 :: k, k // 2 :: k] * (1.0 + noise * np.random.default_rng(seed).standard_normal((size // k,) * 2))
-    how = cv2.INTER_LINEAR if interpolation == "linear" else cv2.INTER_NEAREST
+    how = {"linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST, "cubic": cv2.INTER_CUBIC}[interpolation]
     up = cv2.resize(low.astype(np.float32), (size, size), interpolation=how)
     return up, K, normals
 
@@ -487,39 +487,64 @@ def naive_bends(z, valid, step):
     return u, v, n_u, n_v
 
 
-def naive_seam_share(bends, k):
-    """The largest share of ``bends`` on two neighbouring positions modulo k."""
+def naive_fourths(z, valid, step):
+    """sensor_noise._fourths written out with NumPy: the relative fourth differences of depth by the position of
+    their centre, on every step-th row (by column) and column (by row), 0 across a discontinuity."""
+
+    def along(a, ok):
+        a = a.astype(np.float64)
+        n = a.shape[1]
+        x = np.zeros(a.shape)
+        five = np.stack([a[:, j : n - 4 + j] for j in range(5)])
+        every = np.all(np.stack([ok[:, j : n - 4 + j] for j in range(5)]), axis=0)
+        near = np.where(every, five.min(axis=0), 1.0)
+        far = np.where(every, five.max(axis=0), 1.0)
+        centre = np.where(every, five[2], 1.0)
+        fourth = np.abs(five[0] - 4.0 * five[1] + 6.0 * five[2] - 4.0 * five[3] + five[4]) / centre
+        x[:, 2:-2] = np.where(every & (far <= 1.25 * near), fourth, 0.0)
+        return x.sum(axis=0), int(every.sum())
+
+    (u, n_u), (v, n_v) = along(z[::step], valid[::step]), along(z[:, ::step].T, valid[:, ::step].T)
+    return u, v, n_u, n_v
+
+
+def naive_seam_share(bends, k, width):
+    """The largest share of ``bends`` on ``width`` neighbouring positions modulo k."""
     by_phase = np.bincount(np.arange(bends.size) % k, weights=bends, minlength=k)
-    return (by_phase + np.roll(by_phase, -1)).max() / bends.sum()
+    return sum(np.roll(by_phase, -j) for j in range(width)).max() / bends.sum()
 
 
-@pytest.mark.parametrize("k", [4, 7, 8])
-def test_bends_and_seam_shares_match_the_naive_reference(k):
-    from surfnorm.kernels.sensor_noise import _bends, seam_share
+@pytest.mark.parametrize("k, interpolation", [(4, "linear"), (7, "linear"), (8, "linear"), (8, "cubic")])
+def test_bends_and_seam_shares_match_the_naive_reference(k, interpolation):
+    from surfnorm.kernels.sensor_noise import _bends, _fourths, seam_share
 
-    z, _, _ = upsampled_scene(k, size=224)
+    z, _, _ = upsampled_scene(k, interpolation, size=224)
     z = z.copy()
     z[50:60, 70:90] = 0.0  # a hole
     valid = z > 0
-    for step in (1, 3, 10):
-        u, v = np.empty(z.shape[1]), np.empty(z.shape[0])
-        n_u, n_v = _bends(z, valid, step, u, v)
-        nu, nv, nn_u, nn_v = naive_bends(z, valid, step)
-        assert (n_u, n_v) == (nn_u, nn_v)
-        np.testing.assert_allclose(u, nu, rtol=1e-12, atol=0)
-        np.testing.assert_allclose(v, nv, rtol=1e-12, atol=0)
-        for kk in range(2, 17):
-            assert seam_share(u, kk) == pytest.approx(naive_seam_share(nu, kk), rel=1e-12)
-    assert seam_share(np.zeros(20), 4) == 0.0
+    for kernel, reference, width in ((_bends, naive_bends, 2), (_fourths, naive_fourths, 4)):
+        for step in (1, 3, 10):
+            u, v = np.empty(z.shape[1]), np.empty(z.shape[0])
+            n_u, n_v = kernel(z, valid, step, u, v)
+            nu, nv, nn_u, nn_v = reference(z, valid, step)
+            assert (n_u, n_v) == (nn_u, nn_v)
+            np.testing.assert_allclose(u, nu, rtol=1e-12, atol=0)
+            np.testing.assert_allclose(v, nv, rtol=1e-12, atol=0)
+            for kk in range(width, 17):
+                assert seam_share(u, kk, width) == pytest.approx(naive_seam_share(nu, kk, width), rel=1e-12)
+    assert seam_share(np.zeros(20), 4, 2) == 0.0
+    assert seam_share(np.zeros(20), 8, 4) == 0.0
 
 
-@pytest.mark.parametrize("interpolation", ["linear", "nearest"])
+@pytest.mark.parametrize("interpolation", ["linear", "nearest", "cubic"])
 @pytest.mark.parametrize("k", [4, 5, 8, 15])
 def test_upsampling_factor_finds_the_resize_factor(k, interpolation):
+    from surfnorm._constants import UPSAMPLED_CUBIC_MIN
     from surfnorm.kernels.sensor_noise import upsampling_factor
 
     z, _, _ = upsampled_scene(k, interpolation)
-    assert upsampling_factor(z, z > 0) == k
+    # bicubic seams are looked for from UPSAMPLED_CUBIC_MIN up (under it, depth not resized would pass too often)
+    assert upsampling_factor(z, z > 0) == (k if interpolation != "cubic" or k >= UPSAMPLED_CUBIC_MIN else 1)
     # a factor over UPSAMPLED_MAX gives its largest divisor in range (16: 8), with the same seams
     if k == 8:
         z16, _, _ = upsampled_scene(16, interpolation)
@@ -544,11 +569,11 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     assert upsampling_factor(z, np.zeros(z.shape, bool)) == 1
 
 
-@pytest.mark.parametrize("k", [5, 8])
-def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k):
+@pytest.mark.parametrize("k, interpolation", [(5, "linear"), (8, "linear"), (8, "cubic")])
+def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k, interpolation):
     from surfnorm.metrics import mean_angular_error
 
-    z, K, exact = upsampled_scene(k)
+    z, K, exact = upsampled_scene(k, interpolation)
     d = surfnorm.auto_decision(z, K)
     assert d.reading < NOISY_FLOOR  # the pixel scale reads it as (nearly) clean
     assert (d.method, d.weight, d.upsampled, d.checked) == ("adaptive_fit", 1.0, k, False)
@@ -571,12 +596,13 @@ def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():
     from surfnorm.torch import _adaptive
 
     frames = [upsampled_scene(8)[0], upsampled_scene(5, seed=1)[0], upsampled_scene(4, "nearest")[0]]
+    frames.append(upsampled_scene(12, "cubic", seed=2)[0])
     z, K = slanted_plane(240, 240)
     frames += [z.astype(np.float32), terraced(z, K)]
     stack = np.stack(frames).astype(np.float32)
     t = torch.from_numpy(stack).double()
     factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
-    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 1, 1]
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 12, 1, 1]
     want = np.stack([surfnorm.estimate(f, K) for f in frames])
     for gather in (True, False):
         _adaptive._GATHER_ON_CPU = gather

@@ -83,6 +83,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
+    UPSAMPLED_CUBIC_MIN,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
@@ -878,31 +879,63 @@ def _bends_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, torch
     return F.pad(x.sum(dim=1), (1, 1)), both.sum(dim=(1, 2))
 
 
-def _seam_share(along: torch.Tensor, k: int) -> torch.Tensor:
-    """``sensor_noise.seam_share`` of every frame's bends (B, N): (B,)."""
+def _fourths_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``sensor_noise._fourths`` along the last dimension of a (B, lines, N): the relative fourth differences of
+    depth summed over the lines by the position of their centre (B, N; 0 at the two first and last), and how many
+    were valid (B,)."""
+    n = a.shape[-1]
+    five = [a[..., j : n - 4 + j] for j in range(5)]
+    every = ok[..., : n - 4] & ok[..., 1 : n - 3] & ok[..., 2 : n - 2] & ok[..., 3 : n - 1] & ok[..., 4:]
+    lo = torch.minimum(torch.minimum(torch.minimum(five[0], five[1]), torch.minimum(five[2], five[3])), five[4])
+    hi = torch.maximum(torch.maximum(torch.maximum(five[0], five[1]), torch.maximum(five[2], five[3])), five[4])
+    centre = torch.where(every, five[2], torch.ones_like(five[2]))
+    fourth = (five[0] - 4.0 * five[1] + 6.0 * five[2] - 4.0 * five[3] + five[4]).abs() / centre
+    x = torch.where(every & (hi <= _MAX_SPREAD * lo), fourth, torch.zeros_like(fourth))
+    return F.pad(x.sum(dim=1), (2, 2)), every.sum(dim=(1, 2))
+
+
+def _seam_share(along: torch.Tensor, k: int, width: int) -> torch.Tensor:
+    """``sensor_noise.seam_share`` of every frame's differences (B, N) on ``width`` neighbouring positions: (B,)."""
     B, N = along.shape
     phase = torch.arange(N, device=along.device) % k
     by_phase = torch.zeros((B, k), dtype=along.dtype, device=along.device).index_add_(1, phase, along)
     total = by_phase.sum(dim=1)
-    pair = (by_phase + torch.roll(by_phase, -1, dims=1)).amax(dim=1)
-    return torch.where(total > 0.0, pair / torch.where(total > 0.0, total, torch.ones_like(total)), 0.0)
+    run = by_phase
+    for j in range(1, width):
+        run = run + torch.roll(by_phase, -j, dims=1)
+    most = run.amax(dim=1)
+    return torch.where(total > 0.0, most / torch.where(total > 0.0, total, torch.ones_like(total)), 0.0)
+
+
+def _factors(along_u, along_v, enough, k_low: int, k_high: int, width: int, out: torch.Tensor) -> torch.Tensor:
+    """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils."""
+    for k in range(k_high, k_low - 1, -1):
+        seams = (_seam_share(along_u, k, width) >= UPSAMPLED_SHARE) & (
+            _seam_share(along_v, k, width) >= UPSAMPLED_SHARE
+        )
+        out = torch.where(enough & (out == 1) & seams, k, out)
+    return out
 
 
 def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """``sensor_noise.upsampling_factor`` of every frame: z (B, H, W) float64 (any value where invalid), valid
-    (B, H, W); (B,) int64, 1 where none is found."""
+    (B, H, W); (B,) int64, 1 where none is found (bilinear or nearest seams first, then bicubic ones)."""
     B, H, W = z.shape
     out = torch.ones(B, dtype=torch.int64, device=z.device)
-    if H < 3 or W < 3:
+    if H < 5 or W < 5:
         return out
     step = UPSAMPLED_STEP * noise_step(H, W)
-    along_u, n_u = _bends_along(z[:, ::step, :], valid[:, ::step, :])
-    along_v, n_v = _bends_along(z[:, :, ::step].transpose(1, 2), valid[:, :, ::step].transpose(1, 2))
-    enough = (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)
-    for k in range(min(UPSAMPLED_MAX, W // 4, H // 4), UPSAMPLED_MIN - 1, -1):
-        seams = (_seam_share(along_u, k) >= UPSAMPLED_SHARE) & (_seam_share(along_v, k) >= UPSAMPLED_SHARE)
-        out = torch.where(enough & (out == 1) & seams, k, out)
-    return out
+    k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
+    rows, ok_rows = z[:, ::step, :], valid[:, ::step, :]
+    cols, ok_cols = z[:, :, ::step].transpose(1, 2), valid[:, :, ::step].transpose(1, 2)
+    along_u, n_u = _bends_along(rows, ok_rows)
+    along_v, n_v = _bends_along(cols, ok_cols)
+    bent = (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)  # too few: 1, whatever the fourth differences (as on NumPy)
+    out = _factors(along_u, along_v, bent, UPSAMPLED_MIN, k_high, 2, out)
+    along_u, n_u = _fourths_along(rows, ok_rows)
+    along_v, n_v = _fourths_along(cols, ok_cols)
+    enough = bent & (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)
+    return _factors(along_u, along_v, enough, UPSAMPLED_CUBIC_MIN, k_high, 4, out)
 
 
 def adaptive_weight(tables: NoiseTables) -> torch.Tensor:

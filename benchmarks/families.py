@@ -11,6 +11,7 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
   to the frame bilinearly (a low-resolution time-of-flight or phone LiDAR registered to a colour camera, or a depth
   completion's output);
 - ``upsampled_nearest:K``: the same, resized back to the nearest pixel;
+- ``upsampled_cubic:K``: the same, resized back bicubically (OpenCV's ``INTER_CUBIC``);
 - ``median_mm``: 0.2 % noise, whole millimetres, then a 5x5 median filter (a common clean-up);
 - ``tof_mm``: 2 mm + 0.1 % of depth of noise, whole millimetres;
 - ``smooth_warp``: a relative error of 0.2 % RMS smooth over about 15 pixels (a learned depth's, say);
@@ -43,6 +44,7 @@ REPO = Path(__file__).resolve().parent.parent
 FAMILIES = (
     "upsampled_linear",
     "upsampled_nearest",
+    "upsampled_cubic",
     "median_mm",
     "tof_mm",
     "smooth_warp",
@@ -55,7 +57,7 @@ FAMILIES = (
 )
 DEFAULT = (
     "upsampled_linear:4,upsampled_linear:5,upsampled_linear:6,upsampled_linear:8,upsampled_linear:12,"
-    "upsampled_nearest:8,median_mm,tof_mm,smooth_warp,"
+    "upsampled_nearest:8,upsampled_cubic:6,upsampled_cubic:8,upsampled_cubic:12,median_mm,tof_mm,smooth_warp,"
     "white:0.01,white:0.02,white:0.05,white:0.2,mm,outliers,bilateral,flying,blurred"
 )
 
@@ -97,7 +99,11 @@ def resized(family: str, low: np.ndarray, valid: np.ndarray) -> np.ndarray:
     import cv2
 
     H, W = valid.shape
-    interpolation = cv2.INTER_LINEAR if family == "upsampled_linear" else cv2.INTER_NEAREST
+    interpolation = {
+        "upsampled_linear": cv2.INTER_LINEAR,
+        "upsampled_nearest": cv2.INTER_NEAREST,
+        "upsampled_cubic": cv2.INTER_CUBIC,
+    }[family]
     # the low pixel i sits at i k + k // 2; bilinear resizing puts it at (i + 0.5) k - 0.5: the same for odd k
     out = cv2.resize(low, (W, H), interpolation=interpolation)
     return np.where(valid & (out > 0), out, 0.0).astype(np.float32)

@@ -1,16 +1,17 @@
-"""Real frames as a sensor of 1/K their resolution would give them, resized back bilinearly: the plane metric.
+"""Real frames as a sensor of 1/K their resolution would give them, resized back: the plane metric.
 
-    PYTHONPATH=src python benchmarks/resized_frames.py [SENSOR_DIR] [--factors 4,5,8]
+    PYTHONPATH=src python benchmarks/resized_frames.py [SENSOR_DIR] [--factors 4,5,8] [--interpolation cubic]
 
 Each frame of SENSOR_DIR (default ../shared/data/sensor-sample beside the repository; the layout of
 `surfnorm bench --sensor`) keeps every K-th pixel of its depth (starting at K // 2), its own sensor's noise
-included, and is resized back to its size by OpenCV (bilinear), with no depth where the nearest low pixel had none:
+included, and is resized back to its size by OpenCV (bilinear, or bicubic with ``--interpolation cubic``), with no
+depth where the nearest low pixel had none:
 a low-resolution time-of-flight camera or phone LiDAR registered to a colour camera, on real scenes. Per factor and
 frame: the sensor benchmark's score (the mean folded angle to its reference planes, or e_A against its gt.npy;
 sparse frames, under half of whose pixels hold depth (LiDAR: a resize mixes its gaps with depth), are left out) of
 the default (with what it decided), its two estimators and OpenCV's peers, one thread each; then the means over the
 frames. The 3F2N version of this
-family, with exact normals, is `benchmarks/families.py` (`upsampled_linear:K`).
+family, with exact normals, is `benchmarks/families.py` (`upsampled_linear:K`, `upsampled_cubic:K`).
 """
 
 from __future__ import annotations
@@ -26,14 +27,18 @@ REPO = Path(__file__).resolve().parent.parent
 METHODS = "auto,d2nt_v3,adaptive_fit,opencv_linemod_w5,opencv_fals_w7"
 
 
-def resized(depth: np.ndarray, k: int) -> np.ndarray:
-    """``depth`` (float32, 0 where none) as a sensor of 1/k its resolution gives it, resized back bilinearly; 0 where
-    the nearest low pixel, or the frame itself, had no depth."""
+INTERPOLATIONS = ("linear", "cubic")
+
+
+def resized(depth: np.ndarray, k: int, interpolation: str = "linear") -> np.ndarray:
+    """``depth`` (float32, 0 where none) as a sensor of 1/k its resolution gives it, resized back (bilinear or
+    bicubic: ``interpolation``); 0 where the nearest low pixel, or the frame itself, had no depth."""
     import cv2
 
     H, W = depth.shape
     low = np.ascontiguousarray(depth[k // 2 :: k, k // 2 :: k], dtype=np.float32)
-    up = cv2.resize(low, (W, H), interpolation=cv2.INTER_LINEAR)
+    how = cv2.INTER_LINEAR if interpolation == "linear" else cv2.INTER_CUBIC
+    up = cv2.resize(low, (W, H), interpolation=how)
     near = cv2.resize(low, (W, H), interpolation=cv2.INTER_NEAREST)
     return np.where((near > 0) & (depth > 0), up, 0.0).astype(np.float32)
 
@@ -56,15 +61,18 @@ def main(argv=None) -> int:
     single_thread()  # before any peer library is imported
     from surfnorm import auto_decision
     from surfnorm.bench.sensor import find_sensor_frames, make_entries, read_sensor_frame, score_frame
-    from surfnorm.errors import SurfnormError
+    from surfnorm.errors import InputError, SurfnormError
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("sensor_dir", nargs="?", default=str(REPO.parent / "shared" / "data" / "sensor-sample"))
     ap.add_argument("--factors", default="4,5,8", help="comma-separated resize factors K (2 to 16)")
+    ap.add_argument("--interpolation", default="linear", help="linear (bilinear) or cubic (bicubic)")
     ap.add_argument("--methods", default=METHODS)
     args = ap.parse_args(argv)
     try:
         factors = parse_factors(args.factors)
+        if args.interpolation not in INTERPOLATIONS:
+            raise InputError(f"--interpolation: expected linear or cubic, got {args.interpolation!r}")
         entries, missing = make_entries(args.methods.split(","))
         frames = [read_sensor_frame(f) for f in find_sensor_frames(args.sensor_dir)]
     except SurfnormError as exc:
@@ -78,7 +86,7 @@ def main(argv=None) -> int:
     for k in factors:
         scores = []
         for f in frames:
-            depth = resized(f.depth.astype(np.float32), k)
+            depth = resized(f.depth.astype(np.float32), k, args.interpolation)
             got = dataclasses.replace(f, depth=depth)
             row = [score_frame(e.normals(depth, f.K, depth > 0), got)[1] for e in entries]
             scores.append(row)

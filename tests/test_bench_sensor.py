@@ -552,6 +552,15 @@ def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):
         line for line in capsys.readouterr().out.splitlines() if line.startswith("| 4 |") or line.startswith("| 8 |")
     ]
     assert len(rows) == 4 and all(len(r.split("|")) == 7 for r in rows), rows
+    cubic = script.resized(z, 4, "cubic")  # bicubic: another resize, the same holes
+    assert cubic.dtype == np.float32 and np.array_equal(cubic > 0, up > 0) and not np.array_equal(cubic, up)
+    assert (
+        script.main([str(tmp_path / "frames"), "--factors", "8", "--interpolation", "cubic", "--methods", "auto"]) == 0
+    )
+    assert sum(line.startswith("| 8 |") for line in capsys.readouterr().out.splitlines()) == 2
+    assert script.main([str(tmp_path / "frames"), "--interpolation", "area"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "resized_frames: --interpolation: expected linear or cubic, got 'area'", err
     for bad in ("1", "4,x", "", "17"):
         assert script.main([str(tmp_path / "frames"), "--factors", bad]) == 2
         err = capsys.readouterr().err.strip()

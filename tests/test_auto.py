@@ -537,13 +537,13 @@ def test_bends_and_seam_shares_match_the_naive_reference(k, interpolation):
 
 
 @pytest.mark.parametrize("interpolation", ["linear", "nearest", "cubic"])
-@pytest.mark.parametrize("k", [4, 5, 8, 15])
+@pytest.mark.parametrize("k", [4, 5, 6, 8, 15])
 def test_upsampling_factor_finds_the_resize_factor(k, interpolation):
     from surfnorm._constants import UPSAMPLED_CUBIC_MIN
     from surfnorm.kernels.sensor_noise import upsampling_factor
 
     z, _, _ = upsampled_scene(k, interpolation)
-    # bicubic seams are looked for from UPSAMPLED_CUBIC_MIN up (under it, depth not resized would pass too often)
+    # bicubic seams are looked for from UPSAMPLED_CUBIC_MIN up (at 4 the noise shows at the pixel scale)
     assert upsampling_factor(z, z > 0) == (k if interpolation != "cubic" or k >= UPSAMPLED_CUBIC_MIN else 1)
     # a factor over UPSAMPLED_MAX gives its largest divisor in range (16: 8), with the same seams
     if k == 8:
@@ -569,7 +569,7 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     assert upsampling_factor(z, np.zeros(z.shape, bool)) == 1
 
 
-@pytest.mark.parametrize("k, interpolation", [(5, "linear"), (8, "linear"), (8, "cubic")])
+@pytest.mark.parametrize("k, interpolation", [(5, "linear"), (8, "linear"), (5, "cubic"), (8, "cubic")])
 def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k, interpolation):
     from surfnorm.metrics import mean_angular_error
 
@@ -596,13 +596,13 @@ def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():
     from surfnorm.torch import _adaptive
 
     frames = [upsampled_scene(8)[0], upsampled_scene(5, seed=1)[0], upsampled_scene(4, "nearest")[0]]
-    frames.append(upsampled_scene(12, "cubic", seed=2)[0])
+    frames += [upsampled_scene(12, "cubic", seed=2)[0], upsampled_scene(5, "cubic", seed=3)[0]]
     z, K = slanted_plane(240, 240)
     frames += [z.astype(np.float32), terraced(z, K)]
     stack = np.stack(frames).astype(np.float32)
     t = torch.from_numpy(stack).double()
     factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
-    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 12, 1, 1]
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 12, 5, 1, 1]
     want = np.stack([surfnorm.estimate(f, K) for f in frames])
     for gather in (True, False):
         _adaptive._GATHER_ON_CPU = gather

@@ -163,9 +163,14 @@ UPSAMPLED_MAX = 15
 #: A bicubic resize bends everywhere between its seams, but as a cubic, whose fourth differences vanish: a 5-pixel
 #: stencil differs from 0 only where it straddles a seam, at four neighbouring positions modulo K. Where no factor
 #: passes on the second differences, UPSAMPLED_SHARE of the |fourth differences of z| on four neighbouring positions
-#: is looked for from UPSAMPLED_CUBIC_MIN up: depth that was not resized gives about 4 / K there (0.67 at K = 6, too
-#: near), 0.57 at 7. On the 3F2N frames resized 7 to 15 times bicubically, 0.83-1.00.
-UPSAMPLED_CUBIC_MIN = 7
+#: is looked for from UPSAMPLED_CUBIC_CLOSE up: depth that was not resized gives about 4 / K there (0.57 at 7; at most
+#: 0.68 on the clean renders and the families of benchmarks/families.py, 0.59 on 11 real frames), the 3F2N frames
+#: resized 7 to 12 times bicubically 0.84-1.00. Under it 4 / K is too near (0.67 at 6, 0.8 at 5: at most 0.75 and 0.85
+#: on the same frames), but a resize leaves the one or two other positions nearly empty (shares of at least 0.988 at 6,
+#: where 640 / 6 is not a whole number, and 1.000 at 5): from UPSAMPLED_CUBIC_MIN, UPSAMPLED_CUBIC_CLOSE_SHARE there.
+UPSAMPLED_CUBIC_MIN = 5
+UPSAMPLED_CUBIC_CLOSE = 7
+UPSAMPLED_CUBIC_CLOSE_SHARE = 0.97
 #: The seams are looked for on every UPSAMPLED_STEP-th row and column that the noise measurement samples
 #: (``noise_step``): every 10th of a 640x480 frame, about 0.15 ms. Sparser sampling raises the shares of depth that
 #: was not resized (simulated LiDAR's scan lines, the most: 0.69 on every sampled line, 0.70 on every other one,

@@ -65,7 +65,7 @@ completion's output) bends only at the seams between its samples, K pixels apart
 samples: at the pixel scale it reads as clean, and ``d2nt_v3`` follows each sample's error (bilinear 8x: 34
 degrees, against 30 for OpenCV's LINEMOD). Where the reading is under ``NOISY_FLOOR``, ``auto`` looks for such
 seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole factors from 4 to 15 in the second differences,
-and for a bicubic resize, which is a cubic between its seams, from 7 to 15 in the fourth differences) and, where it
+and for a bicubic resize, which is a cubic between its seams, from 5 to 15 in the fourth differences) and, where it
 finds them, runs ``adaptive_fit`` alone with windows of at least 2 K + 1 pixels (26 degrees; bicubic 8x 42 -> 30).
 
 What each family of depth gets, and the cost of a wrong call, are measured in the

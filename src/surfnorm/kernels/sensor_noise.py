@@ -43,6 +43,8 @@ from .._constants import (
     SMOOTH_SHARE,
     TERRACED_HIGH,
     TERRACED_LOW,
+    UPSAMPLED_CUBIC_CLOSE,
+    UPSAMPLED_CUBIC_CLOSE_SHARE,
     UPSAMPLED_CUBIC_MIN,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
@@ -804,8 +806,10 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     the rows and along the columns, at least ``UPSAMPLED_SHARE`` of the bends (second differences, :func:`_bends`)
     fall on two neighbouring positions modulo K (:func:`seam_share`). A bicubic resize bends everywhere between its
     seams, but it is a cubic there, whose fourth differences vanish (:func:`_fourths`): where no factor passes on
-    the bends, K is the largest factor from ``UPSAMPLED_CUBIC_MIN`` to ``UPSAMPLED_MAX`` for which as much of the
-    fourth differences falls on four neighbouring positions. Measured on every ``UPSAMPLED_STEP``-th row and column
+    the bends, K is the largest factor from ``UPSAMPLED_CUBIC_CLOSE`` to ``UPSAMPLED_MAX`` for which as much of the
+    fourth differences falls on four neighbouring positions, else from ``UPSAMPLED_CUBIC_MIN`` up, with
+    ``UPSAMPLED_CUBIC_CLOSE_SHARE`` of them there (depth without seams puts 4 / K there).
+    Measured on every ``UPSAMPLED_STEP``-th row and column
     that the noise measurement samples; 1 where no factor passes, or where fewer than ``MIN_SAMPLES`` stencils were
     valid along either direction. A factor K makes its divisors pass too, hence the largest. See
     :mod:`surfnorm._constants`."""
@@ -824,4 +828,8 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     n_u, n_v = _fourths(z, valid, step, along_u, along_v)
     if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
         return 1
-    return int(_seam_factor(along_u, along_v, UPSAMPLED_CUBIC_MIN, k_high, UPSAMPLED_SHARE, 4))
+    k = int(_seam_factor(along_u, along_v, UPSAMPLED_CUBIC_CLOSE, k_high, UPSAMPLED_SHARE, 4))
+    if k > 1:
+        return k
+    close = min(UPSAMPLED_CUBIC_CLOSE - 1, k_high)
+    return int(_seam_factor(along_u, along_v, UPSAMPLED_CUBIC_MIN, close, UPSAMPLED_CUBIC_CLOSE_SHARE, 4))

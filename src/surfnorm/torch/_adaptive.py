@@ -83,6 +83,8 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
+    UPSAMPLED_CUBIC_CLOSE,
+    UPSAMPLED_CUBIC_CLOSE_SHARE,
     UPSAMPLED_CUBIC_MIN,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
@@ -907,12 +909,12 @@ def _seam_share(along: torch.Tensor, k: int, width: int) -> torch.Tensor:
     return torch.where(total > 0.0, most / torch.where(total > 0.0, total, torch.ones_like(total)), 0.0)
 
 
-def _factors(along_u, along_v, enough, k_low: int, k_high: int, width: int, out: torch.Tensor) -> torch.Tensor:
+def _factors(
+    along_u, along_v, enough, k_low: int, k_high: int, share: float, width: int, out: torch.Tensor
+) -> torch.Tensor:
     """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils."""
     for k in range(k_high, k_low - 1, -1):
-        seams = (_seam_share(along_u, k, width) >= UPSAMPLED_SHARE) & (
-            _seam_share(along_v, k, width) >= UPSAMPLED_SHARE
-        )
+        seams = (_seam_share(along_u, k, width) >= share) & (_seam_share(along_v, k, width) >= share)
         out = torch.where(enough & (out == 1) & seams, k, out)
     return out
 
@@ -931,11 +933,13 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     along_u, n_u = _bends_along(rows, ok_rows)
     along_v, n_v = _bends_along(cols, ok_cols)
     bent = (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)  # too few: 1, whatever the fourth differences (as on NumPy)
-    out = _factors(along_u, along_v, bent, UPSAMPLED_MIN, k_high, 2, out)
+    out = _factors(along_u, along_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out)
     along_u, n_u = _fourths_along(rows, ok_rows)
     along_v, n_v = _fourths_along(cols, ok_cols)
     enough = bent & (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)
-    return _factors(along_u, along_v, enough, UPSAMPLED_CUBIC_MIN, k_high, 4, out)
+    out = _factors(along_u, along_v, enough, UPSAMPLED_CUBIC_CLOSE, k_high, UPSAMPLED_SHARE, 4, out)
+    close = min(UPSAMPLED_CUBIC_CLOSE - 1, k_high)
+    return _factors(along_u, along_v, enough, UPSAMPLED_CUBIC_MIN, close, UPSAMPLED_CUBIC_CLOSE_SHARE, 4, out)
 
 
 def adaptive_weight(tables: NoiseTables) -> torch.Tensor:

@@ -27,7 +27,8 @@ REPO = Path(__file__).resolve().parent.parent
 METHODS = "auto,d2nt_v3,adaptive_fit,opencv_linemod_w5,opencv_fals_w7"
 
 
-INTERPOLATIONS = ("linear", "cubic")
+#: --interpolation: OpenCV's flag for each (looked up where the resize runs: cv2 is imported there)
+INTERPOLATIONS = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC"}
 
 
 def resized(depth: np.ndarray, k: int, interpolation: str = "linear") -> np.ndarray:
@@ -37,8 +38,7 @@ def resized(depth: np.ndarray, k: int, interpolation: str = "linear") -> np.ndar
 
     H, W = depth.shape
     low = np.ascontiguousarray(depth[k // 2 :: k, k // 2 :: k], dtype=np.float32)
-    how = cv2.INTER_LINEAR if interpolation == "linear" else cv2.INTER_CUBIC
-    up = cv2.resize(low, (W, H), interpolation=how)
+    up = cv2.resize(low, (W, H), interpolation=getattr(cv2, INTERPOLATIONS[interpolation]))
     near = cv2.resize(low, (W, H), interpolation=cv2.INTER_NEAREST)
     return np.where((near > 0) & (depth > 0), up, 0.0).astype(np.float32)
 

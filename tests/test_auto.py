@@ -515,7 +515,7 @@ def naive_seam_share(bends, k, width):
 
 
 @pytest.mark.parametrize("k, interpolation", [(4, "linear"), (7, "linear"), (8, "linear"), (8, "cubic")])
-def test_bends_and_seam_shares_match_the_naive_reference(k, interpolation):
+def test_bends_fourths_and_seam_shares_match_the_naive_reference(k, interpolation):
     from surfnorm.kernels.sensor_noise import _bends, _fourths, seam_share
 
     z, _, _ = upsampled_scene(k, interpolation, size=224)
@@ -543,7 +543,8 @@ def test_upsampling_factor_finds_the_resize_factor(k, interpolation):
     from surfnorm.kernels.sensor_noise import upsampling_factor
 
     z, _, _ = upsampled_scene(k, interpolation)
-    # bicubic seams are looked for from UPSAMPLED_CUBIC_MIN up (at 4 the noise shows at the pixel scale)
+    # bicubic seams are looked for from UPSAMPLED_CUBIC_MIN up: at 4 the fourth differences' four positions are
+    # every position, a share of 1 for any depth
     assert upsampling_factor(z, z > 0) == (k if interpolation != "cubic" or k >= UPSAMPLED_CUBIC_MIN else 1)
     # a factor over UPSAMPLED_MAX gives its largest divisor in range (16: 8), with the same seams
     if k == 8:
@@ -552,7 +553,8 @@ def test_upsampling_factor_finds_the_resize_factor(k, interpolation):
 
 
 def test_depth_that_was_not_resized_has_no_upsampling_factor():
-    from surfnorm.kernels.sensor_noise import upsampling_factor
+    from surfnorm._constants import UPSAMPLED_CUBIC_CLOSE_SHARE, UPSAMPLED_SHARE, UPSAMPLED_STEP, noise_step
+    from surfnorm.kernels.sensor_noise import _fourths, seam_share, upsampling_factor
 
     exact, K, _ = upsampled_scene(4, noise=0.0)  # only the resize's seams: still upsampled
     assert upsampling_factor(exact, exact > 0) == 4
@@ -562,6 +564,11 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     noisy = (z * (1 + 0.001 * rng.standard_normal(z.shape))).astype(np.float32)
     for depth in (z, noisy, terraced(z, K), np.round(z * 1000) / 1000):
         assert upsampling_factor(depth.astype(np.float32), depth > 0) == 1
+    # why K 5 and 6 ask for more of the fourth differences: a plane's float32 rounding puts 4 / 5 of them anywhere
+    plane = z.astype(np.float32)
+    u, v = np.empty(plane.shape[1]), np.empty(plane.shape[0])
+    _fourths(plane, plane > 0, UPSAMPLED_STEP * noise_step(*plane.shape), u, v)
+    assert UPSAMPLED_SHARE <= min(seam_share(u, 5, 4), seam_share(v, 5, 4)) < UPSAMPLED_CUBIC_CLOSE_SHARE
     # a factor-2 resize bends at every pixel: not looked for; nor on frames too small or without depth
     z2, _, _ = upsampled_scene(2)
     assert upsampling_factor(z2, z2 > 0) == 1

@@ -446,7 +446,8 @@ def test_rooms_refuses_an_unknown_sensor(capsys):
 def test_families_deliver_what_they_say():
     """benchmarks/families.py's families on a tilted plane: upsampling keeps the low sensor's depth at the pixels it
     was taken from (bilinearly: between them the depth is linear along a row; to the nearest pixel: constant over a
-    cell); the low sensor's intrinsics put those pixels' points where the frame's put them; the millimetre families
+    cell; bicubically: another curve through them); the low sensor's intrinsics put those pixels' points where the
+    frame's put them; the millimetre families
     are whole millimetres; the warp is a relative error of about 0.2 % RMS; invalid pixels stay invalid."""
     script = _benchmark_script("families")
     H, W, k = 96, 120, 3
@@ -457,7 +458,7 @@ def test_families_deliver_what_they_say():
     valid[:5, :7] = False
     low = script.low_resolution(np.where(valid, z, 0.0), k, np.random.default_rng(0))
     assert low.shape == (H // k, W // k)
-    for family in ("upsampled_linear", "upsampled_nearest"):
+    for family in ("upsampled_linear", "upsampled_nearest", "upsampled_cubic"):
         got = script.degrade(family, k, z, valid, np.random.default_rng(0))
         assert got.dtype == np.float32 and (got[~valid] == 0).all()
         inner = got[k + k // 2 : -k : k, k + k // 2 : -k : k]  # away from the invalid corner and the borders
@@ -468,6 +469,8 @@ def test_families_deliver_what_they_say():
     assert (np.abs(second) < 1e-5).mean() > 0.6  # linear inside each cell; kinks where the cells meet
     nearest = script.degrade("upsampled_nearest", k, z, valid, np.random.default_rng(0))
     assert (nearest[30:33, 30:33] == nearest[31, 31]).all()  # one cell, one depth
+    cubic = script.degrade("upsampled_cubic", k, z, valid, np.random.default_rng(0))
+    assert not np.array_equal(cubic, linear)  # the same samples, another curve between them
     Kn = script.native_camera(K, k)
     i, j = 7, 11  # low pixel (row i, column j) is the frame's (i k + k // 2, j k + k // 2)
     np.testing.assert_allclose(
@@ -554,9 +557,15 @@ def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):
     assert len(rows) == 4 and all(len(r.split("|")) == 7 for r in rows), rows
     cubic = script.resized(z, 4, "cubic")  # bicubic: another resize, the same holes
     assert cubic.dtype == np.float32 and np.array_equal(cubic > 0, up > 0) and not np.array_equal(cubic, up)
-    assert (
-        script.main([str(tmp_path / "frames"), "--factors", "8", "--interpolation", "cubic", "--methods", "auto"]) == 0
-    )
+    asked = []
+    resized = script.resized
+    script.resized = lambda depth, k, interpolation: asked.append(interpolation) or resized(depth, k, interpolation)
+    try:
+        args = [str(tmp_path / "frames"), "--factors", "8", "--interpolation", "cubic", "--methods", "auto"]
+        assert script.main(args) == 0
+    finally:
+        script.resized = resized
+    assert asked == ["cubic"]
     assert sum(line.startswith("| 8 |") for line in capsys.readouterr().out.splitlines()) == 2
     assert script.main([str(tmp_path / "frames"), "--interpolation", "area"]) == 2
     err = capsys.readouterr().err.strip()

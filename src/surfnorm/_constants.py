@@ -162,15 +162,24 @@ UPSAMPLED_MIN = 4
 UPSAMPLED_MAX = 15
 #: A bicubic resize bends everywhere between its seams, but as a cubic, whose fourth differences vanish: a 5-pixel
 #: stencil differs from 0 only where it straddles a seam, at four neighbouring positions modulo K. Where no factor
-#: passes on the second differences, UPSAMPLED_SHARE of the |fourth differences of z| on four neighbouring positions
-#: is looked for from UPSAMPLED_CUBIC_CLOSE up: depth that was not resized gives about 4 / K there (0.57 at 7; at most
-#: 0.68 on the clean renders and the families of benchmarks/families.py, 0.59 on 11 real frames), the 3F2N frames
-#: resized 7 to 12 times bicubically 0.84-1.00. Under it 4 / K is too near (0.67 at 6, 0.8 at 5: at most 0.75 and 0.85
-#: on the same frames), but a resize leaves the one or two other positions nearly empty (shares of at least 0.988 at 6,
-#: where 640 / 6 is not a whole number, and 1.000 at 5): from UPSAMPLED_CUBIC_MIN, UPSAMPLED_CUBIC_CLOSE_SHARE there.
+#: passes on the second differences, the |fourth differences of z| are asked the same on four neighbouring positions
+#: (UPSAMPLED_FOURTH_PASSES): UPSAMPLED_SHARE for K from UPSAMPLED_CUBIC_CLOSE to UPSAMPLED_MAX, where depth that was
+#: not resized gives about 4 / K (0.57 at 7; at most 0.68 on the clean renders and the families of
+#: benchmarks/families.py, 0.59 on 11 real frames) and the 3F2N frames resized 7, 8 and 12 times bicubically 0.84-1.00
+#: (the pass also finds bilinear resizes whose seams drift, 12.08x, on more frames); then UPSAMPLED_CUBIC_CLOSE_SHARE
+#: for K from UPSAMPLED_CUBIC_MIN to UPSAMPLED_CUBIC_CLOSE - 1, where 4 / K is too near (0.8 at 5 and 0.67 at 6; at
+#: most 0.85 and 0.75 on the same frames, 0.80 at 5 on an exact plane stored as float32), but a resize leaves the one
+#: or two other positions nearly empty (1.000 at 5; at least 0.988 at 6, where 640 / 6 is not a whole number). At 4
+#: the four positions are every position. On 40 simulated frames (every sensor model) no factor was found.
 UPSAMPLED_CUBIC_MIN = 5
 UPSAMPLED_CUBIC_CLOSE = 7
 UPSAMPLED_CUBIC_CLOSE_SHARE = 0.97
+#: The passes over the fourth differences, in order: (lowest K, highest K (then at most UPSAMPLED_MAX and a quarter
+#: of the frame's sides), share on four positions). Shared by ``sensor_noise.upsampling_factor`` and the torch backend.
+UPSAMPLED_FOURTH_PASSES = (
+    (UPSAMPLED_CUBIC_CLOSE, UPSAMPLED_MAX, UPSAMPLED_SHARE),
+    (UPSAMPLED_CUBIC_MIN, UPSAMPLED_CUBIC_CLOSE - 1, UPSAMPLED_CUBIC_CLOSE_SHARE),
+)
 #: The seams are looked for on every UPSAMPLED_STEP-th row and column that the noise measurement samples
 #: (``noise_step``): every 10th of a 640x480 frame, about 0.15 ms. Sparser sampling raises the shares of depth that
 #: was not resized (simulated LiDAR's scan lines, the most: 0.69 on every sampled line, 0.70 on every other one,

@@ -43,9 +43,7 @@ from .._constants import (
     SMOOTH_SHARE,
     TERRACED_HIGH,
     TERRACED_LOW,
-    UPSAMPLED_CUBIC_CLOSE,
-    UPSAMPLED_CUBIC_CLOSE_SHARE,
-    UPSAMPLED_CUBIC_MIN,
+    UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
@@ -806,18 +804,17 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     the rows and along the columns, at least ``UPSAMPLED_SHARE`` of the bends (second differences, :func:`_bends`)
     fall on two neighbouring positions modulo K (:func:`seam_share`). A bicubic resize bends everywhere between its
     seams, but it is a cubic there, whose fourth differences vanish (:func:`_fourths`): where no factor passes on
-    the bends, K is the largest factor from ``UPSAMPLED_CUBIC_CLOSE`` to ``UPSAMPLED_MAX`` for which as much of the
-    fourth differences falls on four neighbouring positions, else from ``UPSAMPLED_CUBIC_MIN`` up, with
-    ``UPSAMPLED_CUBIC_CLOSE_SHARE`` of them there (depth without seams puts 4 / K there).
-    Measured on every ``UPSAMPLED_STEP``-th row and column
-    that the noise measurement samples; 1 where no factor passes, or where fewer than ``MIN_SAMPLES`` stencils were
-    valid along either direction. A factor K makes its divisors pass too, hence the largest. See
-    :mod:`surfnorm._constants`."""
+    the bends, the same is asked of the fourth differences on four neighbouring positions, in the passes of
+    ``UPSAMPLED_FOURTH_PASSES``: K from ``UPSAMPLED_CUBIC_CLOSE`` to ``UPSAMPLED_MAX`` with ``UPSAMPLED_SHARE``, then
+    from ``UPSAMPLED_CUBIC_MIN`` to ``UPSAMPLED_CUBIC_CLOSE`` - 1 with ``UPSAMPLED_CUBIC_CLOSE_SHARE`` (depth without
+    seams puts about 4 / K there). Measured on every ``UPSAMPLED_STEP``-th row and column that the noise measurement
+    samples; 1 where no factor passes, or where fewer than ``MIN_SAMPLES`` stencils were valid along either
+    direction. A factor K makes its divisors pass too, hence the largest. See :mod:`surfnorm._constants`."""
     H, W = z.shape
-    if H < 5 or W < 5:
+    k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
+    if k_high < UPSAMPLED_MIN:
         return 1
     step = UPSAMPLED_STEP * noise_step(H, W)
-    k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     along_u, along_v = np.empty(W), np.empty(H)
     n_u, n_v = _bends(z, valid, step, along_u, along_v)
     if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
@@ -828,8 +825,8 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     n_u, n_v = _fourths(z, valid, step, along_u, along_v)
     if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
         return 1
-    k = int(_seam_factor(along_u, along_v, UPSAMPLED_CUBIC_CLOSE, k_high, UPSAMPLED_SHARE, 4))
-    if k > 1:
-        return k
-    close = min(UPSAMPLED_CUBIC_CLOSE - 1, k_high)
-    return int(_seam_factor(along_u, along_v, UPSAMPLED_CUBIC_MIN, close, UPSAMPLED_CUBIC_CLOSE_SHARE, 4))
+    for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+        k = int(_seam_factor(along_u, along_v, k_low, min(k_top, k_high), share, 4))
+        if k > 1:
+            return k
+    return 1

@@ -83,9 +83,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
-    UPSAMPLED_CUBIC_CLOSE,
-    UPSAMPLED_CUBIC_CLOSE_SHARE,
-    UPSAMPLED_CUBIC_MIN,
+    UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
@@ -883,7 +881,7 @@ def _bends_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, torch
 
 def _fourths_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """``sensor_noise._fourths`` along the last dimension of a (B, lines, N): the relative fourth differences of
-    depth summed over the lines by the position of their centre (B, N; 0 at the two first and last), and how many
+    depth summed over the lines by the position of their centre (B, N; 0 at the first two and the last two), and how many
     were valid (B,)."""
     n = a.shape[-1]
     five = [a[..., j : n - 4 + j] for j in range(5)]
@@ -910,7 +908,14 @@ def _seam_share(along: torch.Tensor, k: int, width: int) -> torch.Tensor:
 
 
 def _factors(
-    along_u, along_v, enough, k_low: int, k_high: int, share: float, width: int, out: torch.Tensor
+    along_u: torch.Tensor,
+    along_v: torch.Tensor,
+    enough: torch.Tensor,
+    k_low: int,
+    k_high: int,
+    share: float,
+    width: int,
+    out: torch.Tensor,
 ) -> torch.Tensor:
     """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils."""
     for k in range(k_high, k_low - 1, -1):
@@ -924,10 +929,10 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     (B, H, W); (B,) int64, 1 where none is found (bilinear or nearest seams first, then bicubic ones)."""
     B, H, W = z.shape
     out = torch.ones(B, dtype=torch.int64, device=z.device)
-    if H < 5 or W < 5:
+    k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
+    if k_high < UPSAMPLED_MIN:
         return out
     step = UPSAMPLED_STEP * noise_step(H, W)
-    k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     rows, ok_rows = z[:, ::step, :], valid[:, ::step, :]
     cols, ok_cols = z[:, :, ::step].transpose(1, 2), valid[:, :, ::step].transpose(1, 2)
     along_u, n_u = _bends_along(rows, ok_rows)
@@ -937,9 +942,9 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     along_u, n_u = _fourths_along(rows, ok_rows)
     along_v, n_v = _fourths_along(cols, ok_cols)
     enough = bent & (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)
-    out = _factors(along_u, along_v, enough, UPSAMPLED_CUBIC_CLOSE, k_high, UPSAMPLED_SHARE, 4, out)
-    close = min(UPSAMPLED_CUBIC_CLOSE - 1, k_high)
-    return _factors(along_u, along_v, enough, UPSAMPLED_CUBIC_MIN, close, UPSAMPLED_CUBIC_CLOSE_SHARE, 4, out)
+    for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+        out = _factors(along_u, along_v, enough, k_low, min(k_top, k_high), share, 4, out)
+    return out
 
 
 def adaptive_weight(tables: NoiseTables) -> torch.Tensor:

@@ -43,6 +43,7 @@ from .._constants import (
     SMOOTH_SHARE,
     TERRACED_HIGH,
     TERRACED_LOW,
+    UPSAMPLED_CONTRAST,
     UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
@@ -789,9 +790,14 @@ def seam_share(bends, k, width):
 @njit
 def _seam_factor(along_u, along_v, k_low, k_high, share, width):
     """The largest k from ``k_high`` down to ``k_low`` whose :func:`seam_share` on ``width`` positions reaches
-    ``share`` along both, or 1."""
+    ``share`` along both, and exceeds that of k + 1 by ``UPSAMPLED_CONTRAST`` along both (seams repeat every k
+    pixels: differences piled at a few places, a clean planar scene's creases, hold as much at every k), or 1."""
     for k in range(k_high, k_low - 1, -1):
-        if seam_share(along_u, k, width) >= share and seam_share(along_v, k, width) >= share:
+        for along in (along_u, along_v):
+            here = seam_share(along, k, width)
+            if not (here >= share and seam_share(along, k + 1, width) <= here - UPSAMPLED_CONTRAST):
+                break
+        else:
             return k
     return 1
 

@@ -83,6 +83,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     TIE,
+    UPSAMPLED_CONTRAST,
     UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
@@ -919,8 +920,11 @@ def _factors(
 ) -> torch.Tensor:
     """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils."""
     for k in range(k_high, k_low - 1, -1):
-        seams = (_seam_share(along_u, k, width) >= share) & (_seam_share(along_v, k, width) >= share)
-        out = torch.where(enough & (out == 1) & seams, k, out)
+        seams = enough & (out == 1)
+        for along in (along_u, along_v):
+            here = _seam_share(along, k, width)
+            seams = seams & (here >= share) & (_seam_share(along, k + 1, width) <= here - UPSAMPLED_CONTRAST)
+        out = torch.where(seams, k, out)
     return out
 
 

@@ -815,7 +815,9 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     from ``UPSAMPLED_CUBIC_MIN`` to ``UPSAMPLED_CUBIC_CLOSE`` - 1 with ``UPSAMPLED_CUBIC_CLOSE_SHARE`` (depth without
     seams puts about 4 / K there). Measured on every ``UPSAMPLED_STEP``-th row and column that the noise measurement
     samples; 1 where no factor passes, or where fewer than ``MIN_SAMPLES`` stencils were valid along either
-    direction. A factor K makes its divisors pass too, hence the largest. See :mod:`surfnorm._constants`."""
+    direction. In every pass the share modulo K + 1 must be at least ``UPSAMPLED_CONTRAST`` lower (seams repeat every
+    K pixels; differences piled at a few places do not). A factor K makes its divisors pass too, hence the largest.
+    See :mod:`surfnorm._constants`."""
     H, W = z.shape
     k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     if k_high < UPSAMPLED_MIN:

@@ -175,10 +175,11 @@ UPSAMPLED_CUBIC_MIN = 5
 UPSAMPLED_CUBIC_CLOSE = 7
 #: Seams repeat every K pixels, so K's share must exceed that of K + 1 by UPSAMPLED_CONTRAST along both axes (in
 #: every pass): differences piled at a few places hold as much at every K. A clean frame of planes with a step and a
-#: ball, its depth linear between the creases, gave 0.99 along its rows at every K from 5 to 12 (the test scene
-#: ``sensor_like`` of tests/test_torch.py, noise-free); a resize by K gives K + 1 0.29-0.70 against its 1.00 (the
-#: test scenes, bilinear, nearest and bicubic, K 4 to 15).
-UPSAMPLED_CONTRAST = 0.2
+#: ball, its depth linear between the creases, gave 0.99 along its rows at every K from 5 to 12, K + 1 at most 0.01
+#: less (the test scene ``sensor_like`` of tests/test_torch.py, noise-free, 30 seeds); a resize by K gives K + 1
+#: 0.29-0.70 against its 1.00 on the test scenes (bilinear, nearest and bicubic, K 4 to 15), and 0.18 less on the
+#: fewest seams measured (3F2N's cube resized bicubically 8 times: a small object, few cells).
+UPSAMPLED_CONTRAST = 0.1
 UPSAMPLED_CUBIC_CLOSE_SHARE = 0.97
 #: The passes over the fourth differences, in order: (lowest K, highest K (then at most UPSAMPLED_MAX and a quarter
 #: of the frame's sides), share on four positions). Shared by ``sensor_noise.upsampling_factor`` and the torch backend.

@@ -792,12 +792,15 @@ def _seam_factor(along_u, along_v, k_low, k_high, share, width):
     """The largest k from ``k_high`` down to ``k_low`` whose :func:`seam_share` on ``width`` positions reaches
     ``share`` along both, and exceeds that of k + 1 by ``UPSAMPLED_CONTRAST`` along both (seams repeat every k
     pixels: differences piled at a few places, a clean planar scene's creases, hold as much at every k), or 1."""
+    shares = np.zeros((2, max(k_high + 2, 1)))  # each k's shares once: k is also the k + 1 of k - 1
+    for k in range(k_low, k_high + 2):
+        shares[0, k] = seam_share(along_u, k, width)
+        shares[1, k] = seam_share(along_v, k, width)
     for k in range(k_high, k_low - 1, -1):
-        for along in (along_u, along_v):
-            here = seam_share(along, k, width)
-            if not (here >= share and seam_share(along, k + 1, width) <= here - UPSAMPLED_CONTRAST):
-                break
-        else:
+        passes = True
+        for a in range(2):
+            passes &= shares[a, k] >= share and shares[a, k + 1] <= shares[a, k] - UPSAMPLED_CONTRAST
+        if passes:
             return k
     return 1
 

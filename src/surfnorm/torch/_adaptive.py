@@ -919,11 +919,12 @@ def _factors(
     out: torch.Tensor,
 ) -> torch.Tensor:
     """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils."""
+    # each k's shares once: k is also the k + 1 of k - 1
+    shares = {k: [_seam_share(along, k, width) for along in (along_u, along_v)] for k in range(k_low, k_high + 2)}
     for k in range(k_high, k_low - 1, -1):
         seams = enough & (out == 1)
-        for along in (along_u, along_v):
-            here = _seam_share(along, k, width)
-            seams = seams & (here >= share) & (_seam_share(along, k + 1, width) <= here - UPSAMPLED_CONTRAST)
+        for here, above in zip(shares[k], shares[k + 1]):
+            seams = seams & (here >= share) & (above <= here - UPSAMPLED_CONTRAST)
         out = torch.where(seams, k, out)
     return out
 

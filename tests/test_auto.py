@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import surfnorm
+from surfnorm._constants import CORRELATED_HIGH, upsampled_window
 from surfnorm.bench.simulate import SENSORS, simulate
 from surfnorm.io.threef2n import find_frames, read_frame
 from surfnorm.kernels.auto import (
@@ -584,16 +585,59 @@ def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k, interpolation)
     d = surfnorm.auto_decision(z, K)
     assert d.reading < NOISY_FLOOR  # the pixel scale reads it as (nearly) clean
     assert (d.method, d.weight, d.upsampled, d.checked) == ("adaptive_fit", 1.0, k, False)
-    assert f"with windows of at least {2 * k + 1} pixels (depth upsampled {k} times)" in str(d)
+    side = upsampled_window(k)
+    assert f"with windows of at least {side} pixels (depth upsampled {k} times)" in str(d)
     got = surfnorm.estimate(z, K)
-    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=2 * k + 1))
+    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=side))
     errors = {m: mean_angular_error(surfnorm.estimate(z, K, method=m), exact, z > 0) for m in ("d2nt_v3", "auto")}
     assert errors["auto"] < 0.7 * errors["d2nt_v3"], errors
     # with sigma: adaptive_fit's, of the windows it ran
     n, sigma = surfnorm.estimate(z, K, uncertainty=True)
     np.testing.assert_array_equal(n, got)
-    _, sigma_af = surfnorm.estimate(z, K, method="adaptive_fit", window=2 * k + 1, uncertainty=True)
+    _, sigma_af = surfnorm.estimate(z, K, method="adaptive_fit", window=side, uncertainty=True)
     np.testing.assert_array_equal(sigma, sigma_af)
+
+
+def test_upsampled_windows_span_about_three_seams():
+    from surfnorm._constants import MAX_WINDOW
+
+    assert [upsampled_window(k) for k in (4, 5, 6, 7, 8, 9, 10, 12, 15)] == [13, 17, 19, 23, 25, 29, 31, 31, 31]
+    assert all(upsampled_window(k) % 2 == 1 and upsampled_window(k) <= MAX_WINDOW for k in range(4, 16))
+
+
+@pytest.mark.parametrize("k, interpolation", [(4, "linear"), (5, "cubic"), (6, "cubic")])
+def test_auto_finds_noisy_upsampled_depth_by_its_correlated_noise(k, interpolation):
+    """Samples noisy enough to show at the pixel scale read as sensor depth; the resize spreads each sample's error
+    over K pixels, so the noise is correlated, and the seams are looked for there too."""
+    from surfnorm.metrics import mean_angular_error
+
+    z, K, exact = upsampled_scene(k, interpolation, noise=0.02)
+    d = surfnorm.auto_decision(z, K)
+    assert d.reading >= NOISY_FLOOR
+    assert noise_profile(z, z > 0, math.sqrt(K[0, 0] * K[1, 1])).correlation >= CORRELATED_HIGH
+    assert (d.method, d.weight, d.upsampled) == ("adaptive_fit", 1.0, k)
+    got = surfnorm.estimate(z, K)
+    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=upsampled_window(k)))
+    errors = {m: mean_angular_error(surfnorm.estimate(z, K, method=m), exact, z > 0) for m in ("adaptive_fit", "auto")}
+    assert errors["auto"] < 0.8 * errors["adaptive_fit"], errors
+
+
+def test_sensor_depth_with_independent_noise_is_not_searched_for_seams(monkeypatch):
+    """The search costs 0.5-1 ms on a 640x480 frame: sensor depth whose noise is not correlated does not pay it."""
+    import surfnorm.kernels.auto as auto_module
+
+    calls = []
+    real = auto_module.upsampling_factor
+    monkeypatch.setattr(auto_module, "upsampling_factor", lambda z, valid: calls.append(1) or real(z, valid))
+    z, K = slanted_plane()
+    noisy = (z * (1 + 0.004 * np.random.default_rng(0).standard_normal(z.shape))).astype(np.float32)
+    p = noise_profile(noisy, noisy > 0, math.sqrt(K[0, 0] * K[1, 1]))
+    assert reading(p) >= NOISY_FLOOR and p.correlation < CORRELATED_HIGH
+    assert surfnorm.auto_decision(noisy, K).upsampled == 1
+    surfnorm.estimate(noisy, K)
+    assert calls == []
+    surfnorm.estimate(z.astype(np.float32), K)  # clean depth is searched
+    assert calls == [1]
 
 
 def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():
@@ -604,12 +648,13 @@ def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():
 
     frames = [upsampled_scene(8)[0], upsampled_scene(5, seed=1)[0], upsampled_scene(4, "nearest")[0]]
     frames += [upsampled_scene(12, "cubic", seed=2)[0], upsampled_scene(5, "cubic", seed=3)[0]]
+    frames += [upsampled_scene(5, "cubic", noise=0.02, seed=4)[0]]  # reads as sensor depth: searched by correlation
     z, K = slanted_plane(240, 240)
     frames += [z.astype(np.float32), terraced(z, K)]
     stack = np.stack(frames).astype(np.float32)
     t = torch.from_numpy(stack).double()
     factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
-    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 12, 5, 1, 1]
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [8, 5, 4, 12, 5, 5, 1, 1]
     want = np.stack([surfnorm.estimate(f, K) for f in frames])
     for gather in (True, False):
         _adaptive._GATHER_ON_CPU = gather

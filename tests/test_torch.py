@@ -300,6 +300,7 @@ class TestAdaptive:
                     [got.z0.item(), got.inv_step.item()], [z0, inv_step], rtol=1e-13, err_msg=msg
                 )
                 assert got.kappa.item() == pytest.approx(KAPPA * kappa_gain(profile), rel=1e-12), msg
+                assert got.correlation.item() == pytest.approx(profile.correlation, rel=1e-12), msg
 
     def test_noise_tables_kappa_follows_correlation_and_rho(self):
         """The torch tables' kappa is KAPPA times kappa_gain of the NumPy profile, from 1 (white noise) to more than

@@ -585,8 +585,8 @@ def folder_markdown(result: dict) -> str:
             "full; `d2nt_v3` at or below 0.10, `adaptive_fit` at or above 0.20, their blend between "
             "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
             "pixel (depth not terraced in full, at low noise); upsampled: the factor by which the depth was resized "
-            "from a lower resolution, where the reading is under 0.20 and one was found (`adaptive_fit` alone then, "
-            "with windows of at least 2 K + 1 pixels), 1 elsewhere.",
+            "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
+            "was found (`adaptive_fit` alone then, with windows of at least 2 ceil(1.5 K) + 1 pixels), 1 elsewhere.",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
             "| checked | upsampled |",

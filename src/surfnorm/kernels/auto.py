@@ -63,10 +63,13 @@ runs both estimators.
 Depth resized from a lower resolution (a time-of-flight or phone LiDAR registered to a colour camera, a depth
 completion's output) bends only at the seams between its samples, K pixels apart, and its noise lies in the
 samples: at the pixel scale it reads as clean, and ``d2nt_v3`` follows each sample's error (bilinear 8x: 34
-degrees, against 30 for OpenCV's LINEMOD). Where the reading is under ``NOISY_FLOOR``, ``auto`` looks for such
-seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole factors from 4 to 15 in the second differences,
-and for a bicubic resize, which is a cubic between its seams, from 5 to 15 in the fourth differences) and, where it
-finds them, runs ``adaptive_fit`` alone with windows of at least 2 K + 1 pixels (26 degrees; bicubic 8x 42 -> 30).
+degrees, against 30 for OpenCV's LINEMOD); noisier samples read as sensor depth whose noise is correlated over K
+pixels. Where the reading is under ``NOISY_FLOOR``, or ``NoiseProfile.correlation`` is at least ``CORRELATED_HIGH``
+(:func:`searched`), ``auto`` looks for such seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole
+factors from 4 to 15 in the second differences, and for a bicubic resize, which is a cubic between its seams, from 5
+to 15 in the fourth differences) and, where it finds them, runs ``adaptive_fit`` alone with windows of at least
+:func:`surfnorm._constants.upsampled_window` (K) pixels, about 3 K (bilinear 8x 26 degrees; bicubic 8x 42 -> 28,
+bicubic 5x, which reads as sensor depth, 41 -> 25).
 
 What each family of depth gets, and the cost of a wrong call, are measured in the
 documentation's "Which method when" page. A limit: error smooth over more than
@@ -93,6 +96,7 @@ from .._constants import (
     CLEAN_FLOOR,
     CONSISTENT,
     CONSISTENT_MAX,
+    CORRELATED_HIGH,
     CORRELATED_KAPPA_GAIN,
     DLF_DEFAULT,
     MNR_DLF_DEFAULT,
@@ -154,9 +158,10 @@ class Decision(NamedTuple):
         (:func:`consistency_limits`): where the two differ by more than the noise explains, the pixel takes
         ``d2nt_v3``'s. False where ``d2nt_v3`` runs alone.
     upsampled : int
-        The factor K by which the depth was resized from a lower resolution, where the reading is under
-        ``NOISY_FLOOR`` and one was found (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`): ``adaptive_fit``
-        then runs alone (``weight`` 1), with windows of at least 2 K + 1 pixels. 1 elsewhere.
+        The factor K by which the depth was resized from a lower resolution, where ``auto`` looked for one
+        (:func:`searched`) and found it (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`): ``adaptive_fit``
+        then runs alone (``weight`` 1), with windows of at least ``upsampled_window(K)`` pixels (about 3 K). 1
+        elsewhere.
     """
 
     method: str
@@ -205,9 +210,17 @@ def decision(profile: NoiseProfile, upsampled: int = 1) -> Decision:
     )
 
 
+def searched(profile: NoiseProfile) -> bool:
+    """Whether ``auto`` looks for the seams of upsampled depth (:func:`upsampled`): where the reading is under
+    ``NOISY_FLOOR``, or where the noise is correlated across pixels (``NoiseProfile.correlation`` at least
+    ``CORRELATED_HIGH``), as resizing makes it: noisy samples resized 4-6 times read 0.1-0.9 point spacings and
+    6-40 there, most real sensor frames 0.5-2.9 (their frames do not pay for the search)."""
+    return adaptive_weight(profile) < 1.0 or profile.correlation >= CORRELATED_HIGH
+
+
 def upsampled(z: np.ndarray, valid: np.ndarray, profile: NoiseProfile) -> int:
-    """The depth's :func:`upsampling_factor` where ``auto`` looks for one (a reading under ``NOISY_FLOOR``), else 1."""
-    return upsampling_factor(z, valid) if adaptive_weight(profile) < 1.0 else 1
+    """The depth's :func:`upsampling_factor` where ``auto`` looks for one (:func:`searched`), else 1."""
+    return upsampling_factor(z, valid) if searched(profile) else 1
 
 
 def decide(z: np.ndarray, valid: np.ndarray, cam) -> Decision:

@@ -170,6 +170,7 @@ class NoiseTables(NamedTuple):
     gain: torch.Tensor  # (B,) sensor_noise.kappa_gain
     centres: torch.Tensor  # (B, N_BINS) the depth bins' centres (NoiseProfile.depths)
     floors: torch.Tensor  # (B, N_BINS) NoiseProfile.floors (computed for every frame; NaN with too few samples)
+    correlation: torch.Tensor  # (B,) NoiseProfile.correlation
 
 
 def _samples(z, valid, f, lo, span):
@@ -384,7 +385,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     noise = (GEOMETRY_RHO_HIGH - torch.quantile(rho_bins, 0.5, dim=1)) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
     ones = torch.ones_like(z0)
     tables = NoiseTables(
-        z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, KAPPA * ones, ones, centres, floors
+        z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, KAPPA * ones, ones, centres, floors, correlation
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -1017,7 +1018,7 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
 def auto(g: Grid, cam, *, tau: float, fill: float):
     """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
     ``adaptive_fit`` at or above NOISY_FLOOR, their blend between, and ``adaptive_fit`` with windows of at least
-    2 K + 1 pixels on depth upsampled K times (:func:`upsampling_factors`, where the reading is under NOISY_FLOOR);
+    about 3 K pixels on depth upsampled K times (:func:`upsampling_factors`, where auto.searched);
     ``cam`` in float64.
 
     On the CPU each estimator runs on the frames that need it only; elsewhere both run on the whole batch
@@ -1030,10 +1031,11 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
     with torch.no_grad():
         tables = noise_tables(z.detach(), g.valid, _sqrt(cam64[0] * cam64[1]).reshape(-1), r_max=r_max)
     t = adaptive_weight(tables)
-    # upsampled depth (auto.upsampled): looked for where the reading is under NOISY_FLOOR; adaptive_fit alone there,
-    # with windows of at least 2 K + 1 pixels
+    # upsampled depth (auto.upsampled): looked for where the reading is under NOISY_FLOOR or the noise is correlated
+    # (auto.searched); adaptive_fit alone there, with windows of at least about 3 K (upsampled_window)
     with torch.no_grad():
-        factor = torch.where(t < 1.0, upsampling_factors(z.detach(), g.valid), 1)
+        searched = (t < 1.0) | (tables.correlation >= CORRELATED_HIGH)
+        factor = torch.where(searched, upsampling_factors(z.detach(), g.valid), 1)
     upsampled = factor > 1
     t = torch.where(upsampled, 1.0, t)
 

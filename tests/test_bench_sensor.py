@@ -115,6 +115,11 @@ class TestSensorBench:
         assert doc["meta"]["threads"]["numba"] == "1"
         assert paths["figure"].read_bytes()[:8] == PNG_MAGIC
         assert not [p for p in (tmp_path / "R").iterdir() if p.name.startswith(".")]  # no temporary left
+        # what the default ran on each frame and what it decided on, as surfnorm.auto_decision says
+        for frame in result["frames"]:
+            d = doc["decisions"][frame]
+            row = f"| {frame} | {d['method']} | {d['weight']:.3f} | {d['reading']:.3f} |"
+            assert row in text and f"| {d['upsampled']} | {d['correlation']:.2f} |" in text
 
     @pytest.mark.slow
     def test_absent_peer_is_reported_and_a_failing_one_recorded(self, folder, tmp_path, monkeypatch):

@@ -586,11 +586,12 @@ def folder_markdown(result: dict) -> str:
             "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
             "pixel (depth not terraced in full, at low noise); upsampled: the factor by which the depth was resized "
             "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
-            "was found (`adaptive_fit` alone then, with windows of at least 2 ceil(1.5 K) + 1 pixels), 1 elsewhere.",
+            "was found (`adaptive_fit` alone then, with windows of at least 2 ceil(1.5 K) + 1 pixels), 1 elsewhere; "
+            "correlation: of the noise between neighbouring pixels (1: independent).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
-            "| checked | upsampled |",
-            "|---|---|---|---|---|---|---|---|---|---|---|",
+            "| checked | upsampled | correlation |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:
             d = result["decisions"].get(f)
@@ -598,7 +599,10 @@ def folder_markdown(result: dict) -> str:
                 continue
             nums = [_fmt(d[k], 3) for k in ("weight", "reading", "floor", "smooth", "terraced", "step", "quantisation")]
             checked = "yes" if d.get("checked") else "no"
-            out.append(f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1)} |")
+            out.append(
+                f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1)} "
+                f"| {_fmt(d.get('correlation'), 2)} |"
+            )
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):
         out += ["", "## Absent peers (library not installed)", ""]

@@ -162,6 +162,10 @@ class Decision(NamedTuple):
         (:func:`searched`) and found it (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`): ``adaptive_fit``
         then runs alone (``weight`` 1), with windows of at least ``upsampled_window(K)`` pixels (about 3 K). 1
         elsewhere.
+    correlation : float
+        The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: how far the noise is correlated between
+        neighbouring pixels (1 for independent noise); at or above ``CORRELATED_HIGH`` sensor depth is searched for
+        the seams of a resize too (:func:`searched`).
     """
 
     method: str
@@ -174,6 +178,7 @@ class Decision(NamedTuple):
     quantisation: float
     checked: bool = False
     upsampled: int = 1
+    correlation: float = 1.0
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
@@ -188,7 +193,7 @@ class Decision(NamedTuple):
             f"auto ran {ran}: noise reading {self.reading:.3f} point spacings (clean at or below {CLEAN_FLOOR:g}, "
             f"sensor at or above {NOISY_FLOOR:g}); floor {self.floor:.3f}, smooth {self.smooth:.3f}, "
             f"terraced {self.terraced:.3f}, "
-            f"step {self.step:.3f}, quantisation {self.quantisation:.3f}"
+            f"step {self.step:.3f}, quantisation {self.quantisation:.3f}, correlation {self.correlation:.2f}"
         )
 
 
@@ -207,6 +212,7 @@ def decision(profile: NoiseProfile, upsampled: int = 1) -> Decision:
         quantisation(profile),
         upsampled == 1 and t > 0.0 and consistency_limits(profile) is not None,
         upsampled,
+        profile.correlation,
     )
 
 

@@ -598,11 +598,15 @@ def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k, interpolation)
     np.testing.assert_array_equal(sigma, sigma_af)
 
 
-def test_upsampled_windows_span_about_three_seams():
+def test_upsampled_windows_span_two_seams_or_about_three_on_noisy_samples():
     from surfnorm._constants import MAX_WINDOW
 
-    assert [upsampled_window(k) for k in (4, 5, 6, 7, 8, 9, 10, 12, 15)] == [13, 17, 19, 23, 25, 29, 31, 31, 31]
-    assert all(upsampled_window(k) % 2 == 1 and upsampled_window(k) <= MAX_WINDOW for k in range(4, 16))
+    assert [upsampled_window(k) for k in (4, 5, 8, 15)] == [9, 11, 17, 31]
+    assert [upsampled_window(k, True) for k in (4, 5, 6, 7, 8, 9, 10, 12, 15)] == [13, 17, 19, 23, 25, 29, 31, 31, 31]
+    for noisy in (False, True):
+        assert all(
+            upsampled_window(k, noisy) % 2 == 1 and upsampled_window(k, noisy) <= MAX_WINDOW for k in range(4, 16)
+        )
 
 
 @pytest.mark.parametrize("k, interpolation", [(4, "linear"), (5, "cubic"), (6, "cubic")])
@@ -616,8 +620,10 @@ def test_auto_finds_noisy_upsampled_depth_by_its_correlated_noise(k, interpolati
     assert d.reading >= NOISY_FLOOR
     assert noise_profile(z, z > 0, math.sqrt(K[0, 0] * K[1, 1])).correlation >= CORRELATED_HIGH
     assert (d.method, d.weight, d.upsampled) == ("adaptive_fit", 1.0, k)
+    side = upsampled_window(k, noisy=True)  # wider than on depth that reads as clean
+    assert f"with windows of at least {side} pixels (depth upsampled {k} times)" in str(d)
     got = surfnorm.estimate(z, K)
-    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=upsampled_window(k)))
+    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=side))
     errors = {m: mean_angular_error(surfnorm.estimate(z, K, method=m), exact, z > 0) for m in ("adaptive_fit", "auto")}
     assert errors["auto"] < 0.8 * errors["adaptive_fit"], errors
 

@@ -586,7 +586,8 @@ def folder_markdown(result: dict) -> str:
             "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
             "pixel (depth not terraced in full, at low noise); upsampled: the factor by which the depth was resized "
             "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
-            "was found (`adaptive_fit` alone then, with windows of at least 2 ceil(1.5 K) + 1 pixels), 1 elsewhere; "
+            "was found (`adaptive_fit` alone then, with windows of at least 2 K + 1 pixels, 2 ceil(1.5 K) + 1 where the "
+            "reading is 0.20 or more), 1 elsewhere; "
             "correlation: of the noise between neighbouring pixels (1: independent).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "

@@ -68,8 +68,8 @@ pixels. Where the reading is under ``NOISY_FLOOR``, or ``NoiseProfile.correlatio
 (:func:`searched`), ``auto`` looks for such seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole
 factors from 4 to 15 in the second differences, and for a bicubic resize, which is a cubic between its seams, from 5
 to 15 in the fourth differences) and, where it finds them, runs ``adaptive_fit`` alone with windows of at least
-:func:`surfnorm._constants.upsampled_window` (K) pixels, about 3 K (bilinear 8x 26 degrees; bicubic 8x 42 -> 28,
-bicubic 5x, which reads as sensor depth, 41 -> 25).
+2 K + 1 pixels, about 3 K where the depth reads as sensor depth (:func:`surfnorm._constants.upsampled_window`;
+bilinear 8x 26 degrees; bicubic 8x 42 -> 30, bicubic 5x, which reads as sensor depth, 41 -> 25).
 
 What each family of depth gets, and the cost of a wrong call, are measured in the
 documentation's "Which method when" page. A limit: error smooth over more than
@@ -118,6 +118,7 @@ from .sensor_noise import (
     noise_profile,
     quantisation,
     reading,
+    reading_weight,
     terraced_share,
     upsampling_factor,
 )
@@ -160,8 +161,8 @@ class Decision(NamedTuple):
     upsampled : int
         The factor K by which the depth was resized from a lower resolution, where ``auto`` looked for one
         (:func:`searched`) and found it (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`): ``adaptive_fit``
-        then runs alone (``weight`` 1), with windows of at least ``upsampled_window(K)`` pixels (about 3 K). 1
-        elsewhere.
+        then runs alone (``weight`` 1), with windows of at least ``upsampled_window(K, noisy)`` pixels (2 K + 1, or
+        about 3 K where the reading is ``NOISY_FLOOR`` or more). 1 elsewhere.
     correlation : float
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: how far the noise is correlated between
         neighbouring pixels (1 for independent noise); at or above ``CORRELATED_HIGH`` sensor depth is searched for
@@ -183,10 +184,8 @@ class Decision(NamedTuple):
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
         if self.upsampled > 1:
-            ran += (
-                f" with windows of at least {upsampled_window(self.upsampled)} pixels "
-                f"(depth upsampled {self.upsampled} times)"
-            )
+            side = upsampled_window(self.upsampled, reading_weight(self.reading) == 1.0)
+            ran += f" with windows of at least {side} pixels (depth upsampled {self.upsampled} times)"
         if self.checked:
             ran += ", checked against d2nt_v3 pixel by pixel"
         return (
@@ -396,7 +395,7 @@ def auto(
         measured.append(p)
         k = upsampled(z, valid, p)
         if k > 1:  # upsampled depth: adaptive_fit alone, with windows that span the seams
-            frame.window = upsampled_window(k)
+            frame.window = upsampled_window(k, adaptive_weight(p) == 1.0)
             return frame.tables(p)
         sensor = adaptive_weight(p) == 1.0
         limits = consistency_limits(p) if sensor else None

@@ -660,7 +660,11 @@ def adaptive_weight(profile: NoiseProfile) -> float:
 
     A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
     """
-    r = reading(profile)
+    return reading_weight(reading(profile))
+
+
+def reading_weight(r: float) -> float:
+    """:func:`adaptive_weight` of a frame whose :func:`reading` is ``r`` (1 where NaN)."""
     if not r == r:
         return 1.0
     return min(max((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)

@@ -1018,7 +1018,7 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
 def auto(g: Grid, cam, *, tau: float, fill: float):
     """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
     ``adaptive_fit`` at or above NOISY_FLOOR, their blend between, and ``adaptive_fit`` with windows of at least
-    about 3 K pixels on depth upsampled K times (:func:`upsampling_factors`, where auto.searched);
+    upsampled_window(K, noisy) pixels on depth upsampled K times (:func:`upsampling_factors`, where auto.searched);
     ``cam`` in float64.
 
     On the CPU each estimator runs on the frames that need it only; elsewhere both run on the whole batch
@@ -1032,11 +1032,17 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         tables = noise_tables(z.detach(), g.valid, _sqrt(cam64[0] * cam64[1]).reshape(-1), r_max=r_max)
     t = adaptive_weight(tables)
     # upsampled depth (auto.upsampled): looked for where the reading is under NOISY_FLOOR or the noise is correlated
-    # (auto.searched); adaptive_fit alone there, with windows of at least about 3 K (upsampled_window)
+    # (auto.searched); adaptive_fit alone there, with windows of at least upsampled_window(K, noisy)
     with torch.no_grad():
         searched = (t < 1.0) | (tables.correlation >= CORRELATED_HIGH)
         factor = torch.where(searched, upsampling_factors(z.detach(), g.valid), 1)
     upsampled = factor > 1
+    # each upsampled frame's window side (upsampled_window: wider where the frame reads as sensor depth); 0 elsewhere
+    side = torch.zeros_like(factor)
+    if bool(upsampled.any()):
+        for k in factor[upsampled].unique().tolist():
+            for noisy in (False, True):
+                side = torch.where((factor == k) & ((t == 1.0) == noisy), upsampled_window(k, noisy), side)
     t = torch.where(upsampled, 1.0, t)
 
     def d2nt_v3(grid, c, fill_value):
@@ -1049,11 +1055,10 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
             z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
         )
 
-    def fit_upsampled(grid, z_f, c, tab, k, fill_value):
-        side = upsampled_window(k)
-        tab = tab._replace(radius=torch.full_like(tab.radius, (side - 1) // 2))
+    def fit_upsampled(grid, z_f, c, tab, window, fill_value):
+        tab = tab._replace(radius=torch.full_like(tab.radius, (window - 1) // 2))
         return _normals(
-            z_f, grid.valid, c, tab, window=side, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
+            z_f, grid.valid, c, tab, window=window, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
         )
 
     checked = consistency_limits(tables)[0] & (t > 0.0) & ~upsampled
@@ -1068,18 +1073,18 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         out = torch.where(t4 == 0.0, a_pure, torch.where((t4 == 1.0) & ~checked.view(-1, 1, 1, 1), b_pure, mixed))
         # upsampled frames: one host synchronisation, to know which factors to fit with (none in most batches)
         if bool(upsampled.any()):
-            for k in factor[upsampled].unique().tolist():
-                n = fit_upsampled(g, z, cam64, tables, k, fill)
-                out = torch.where((factor == k).view(-1, 1, 1, 1), n, out)
+            for w in side[upsampled].unique().tolist():
+                n = fit_upsampled(g, z, cam64, tables, w, fill)
+                out = torch.where((side == w).view(-1, 1, 1, 1), n, out)
         return out
     B = z.shape[0]
     parts = []
     kinds: list = ["d2nt_v3", "adaptive_fit", "blend", "checked"]
     if bool(upsampled.any()):
-        kinds += factor[upsampled].unique().tolist()
+        kinds += side[upsampled].unique().tolist()
     for kind in kinds:
-        if isinstance(kind, int):  # an upsampling factor: the frames upsampled that many times
-            pick = factor == kind
+        if isinstance(kind, int):  # a window side: the upsampled frames fitted with it
+            pick = side == kind
         elif kind == "d2nt_v3":
             pick = t == 0.0
         elif kind == "adaptive_fit":

@@ -315,9 +315,15 @@ def test_200_pngs_with_5_corrupt(batch, tmp_path):
 def _interrupt(command, env, out: Path, at_least: int, sig) -> subprocess.CompletedProcess:
     """Start the CLI, send ``sig`` to it and its workers once ``at_least`` outputs exist, wait for it.
 
-    The CLI runs at a lower priority than this process, so that its workers, busy on every core, cannot
-    keep this watcher from seeing the outputs until the whole run has finished.
+    The CLI gets Ctrl-C's default action even where this process ignores it (a shell's background job does, and
+    Python then installs no KeyboardInterrupt handler: the CLI ran to its end), and runs at a lower priority than
+    this process, so that its workers, busy on every core, cannot keep this watcher from seeing the outputs.
     """
+
+    def child():
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        os.nice(10)
+
     proc = subprocess.Popen(
         command,
         env=env,
@@ -325,7 +331,7 @@ def _interrupt(command, env, out: Path, at_least: int, sig) -> subprocess.Comple
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
-        preexec_fn=lambda: os.nice(10),
+        preexec_fn=child,
     )
     try:
         deadline = time.monotonic() + 120
@@ -347,7 +353,7 @@ def test_interrupted_and_killed_mid_run_then_restarted_finishes_every_output(tmp
     folder = tmp_path / "in"
     folder.mkdir()
     for i in range(300):
-        depth_png(folder / f"{i:03d}.png", i, h=144, w=192)  # large enough that the run takes seconds
+        depth_png(folder / f"{i:03d}.png", i)
     out = tmp_path / "out"
     command = [
         sys.executable,

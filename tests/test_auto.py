@@ -462,7 +462,8 @@ def upsampled_scene(k, interpolation="linear", noise=0.004, seed=0, size=240):
     z_s, n_s, hit = sphere(K, size, size, [0.1, 0.0, 2.0], 0.6)
     z = np.where(hit, z_s, z_p)
     normals = np.where(hit[..., None], n_s, n_p)
-    low = z[k // 2 :: k, k // 2 :: k] * (1.0 + noise * np.random.default_rng(seed).standard_normal((size // k,) * 2))
+    low = z[k // 2 :: k, k // 2 :: k]
+    low = low * (1.0 + noise * np.random.default_rng(seed).standard_normal(low.shape))
     how = {"linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST, "cubic": cv2.INTER_CUBIC}[interpolation]
     up = cv2.resize(low.astype(np.float32), (size, size), interpolation=how)
     return up, K, normals
@@ -509,10 +510,16 @@ def naive_fourths(z, valid, step):
     return u, v, n_u, n_v
 
 
-def naive_seam_share(bends, k, width):
-    """The largest share of ``bends`` on ``width`` neighbouring positions modulo k."""
-    by_phase = np.bincount(np.arange(bends.size) % k, weights=bends, minlength=k)
-    return sum(np.roll(by_phase, -j) for j in range(width)).max() / bends.sum()
+def naive_seam_share(bends, k, width, chunks=1):
+    """The largest share of ``bends`` on ``width`` neighbouring positions modulo k; with ``chunks``, the sum of each
+    of that many consecutive parts' largest (part c: positions c n // chunks up to (c + 1) n // chunks), over the
+    total."""
+    most = 0.0
+    n = bends.size
+    for part in (np.arange(c * n // chunks, (c + 1) * n // chunks) for c in range(chunks)):
+        by_phase = np.bincount(part % k, weights=bends[part], minlength=k)
+        most += sum(np.roll(by_phase, -j) for j in range(width)).max()
+    return most / bends.sum()
 
 
 @pytest.mark.parametrize("k, interpolation", [(4, "linear"), (7, "linear"), (8, "linear"), (8, "cubic")])
@@ -532,9 +539,11 @@ def test_bends_fourths_and_seam_shares_match_the_naive_reference(k, interpolatio
             np.testing.assert_allclose(u, nu, rtol=1e-12, atol=0)
             np.testing.assert_allclose(v, nv, rtol=1e-12, atol=0)
             for kk in range(width, 17):
-                assert seam_share(u, kk, width) == pytest.approx(naive_seam_share(nu, kk, width), rel=1e-12)
-    assert seam_share(np.zeros(20), 4, 2) == 0.0
-    assert seam_share(np.zeros(20), 8, 4) == 0.0
+                for chunks in (1, 2, 3):
+                    want = naive_seam_share(nu, kk, width, chunks)
+                    assert seam_share(u, kk, width, chunks) == pytest.approx(want, rel=1e-12)
+    assert seam_share(np.zeros(20), 4, 2, 1) == 0.0
+    assert seam_share(np.zeros(20), 8, 4, 2) == 0.0
 
 
 @pytest.mark.parametrize("interpolation", ["linear", "nearest", "cubic"])
@@ -553,6 +562,24 @@ def test_upsampling_factor_finds_the_resize_factor(k, interpolation):
         assert upsampling_factor(z16, z16 > 0) == 8
 
 
+@pytest.mark.parametrize("interpolation", ["linear", "cubic"])
+def test_upsampling_factor_finds_a_factor_that_is_not_a_whole_number(interpolation):
+    """450 pixels from 37 samples (12.16x): the seams drift 6 pixels across the frame against K 12, and are found in
+    parts of the frame (UPSAMPLED_DRIFT_SPAN), each at its own phase."""
+    from surfnorm._constants import UPSAMPLED_DRIFT_SPAN, UPSAMPLED_SHARE, UPSAMPLED_STEP, noise_step
+    from surfnorm.kernels.sensor_noise import _bends, _fourths, seam_share, upsampling_factor
+
+    z, _, _ = upsampled_scene(12, interpolation, size=450)
+    assert upsampling_factor(z, z > 0) == 12
+    # the whole row's phases do not find it: the drift spreads the seams over more positions
+    kernel, width = (_bends, 2) if interpolation == "linear" else (_fourths, 4)
+    u, v = np.empty(450), np.empty(450)
+    kernel(z, z > 0, UPSAMPLED_STEP * noise_step(450, 450), u, v)
+    chunks = 450 // UPSAMPLED_DRIFT_SPAN
+    assert min(seam_share(u, 12, width, 1), seam_share(v, 12, width, 1)) < UPSAMPLED_SHARE
+    assert min(seam_share(u, 12, width, chunks), seam_share(v, 12, width, chunks)) >= UPSAMPLED_SHARE
+
+
 def test_depth_that_was_not_resized_has_no_upsampling_factor():
     from surfnorm._constants import UPSAMPLED_CUBIC_CLOSE_SHARE, UPSAMPLED_SHARE, UPSAMPLED_STEP, noise_step
     from surfnorm.kernels.sensor_noise import _fourths, seam_share, upsampling_factor
@@ -569,7 +596,7 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     plane = z.astype(np.float32)
     u, v = np.empty(plane.shape[1]), np.empty(plane.shape[0])
     _fourths(plane, plane > 0, UPSAMPLED_STEP * noise_step(*plane.shape), u, v)
-    assert UPSAMPLED_SHARE <= min(seam_share(u, 5, 4), seam_share(v, 5, 4)) < UPSAMPLED_CUBIC_CLOSE_SHARE
+    assert UPSAMPLED_SHARE <= min(seam_share(u, 5, 4, 1), seam_share(v, 5, 4, 1)) < UPSAMPLED_CUBIC_CLOSE_SHARE
     # a factor-2 resize bends at every pixel: not looked for; nor on frames too small or without depth
     z2, _, _ = upsampled_scene(2)
     assert upsampling_factor(z2, z2 > 0) == 1
@@ -644,6 +671,23 @@ def test_sensor_depth_with_independent_noise_is_not_searched_for_seams(monkeypat
     assert calls == []
     surfnorm.estimate(z.astype(np.float32), K)  # clean depth is searched
     assert calls == [1]
+
+
+def test_torch_finds_drifting_seams_as_numpy_does():
+    torch = pytest.importorskip("torch")
+    from surfnorm.kernels.sensor_noise import upsampling_factor
+    from surfnorm.torch import _adaptive
+
+    z, K = slanted_plane(400, 400)
+    frames = [upsampled_scene(9, size=400, seed=5)[0], upsampled_scene(9, "cubic", size=400, seed=6)[0]]
+    frames += [upsampled_scene(13, size=400, seed=7)[0], z.astype(np.float32)]
+    t = torch.from_numpy(np.stack(frames).astype(np.float32)).double()
+    factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [9, 9, 13, 1]
+    u = torch.rand(3, 401, dtype=torch.float64)
+    for chunks in (1, 2, 3):
+        want = [naive_seam_share(row.numpy(), 7, 2, chunks) for row in u]
+        np.testing.assert_allclose(_adaptive._seam_share(u, 7, 2, chunks).numpy(), want, rtol=1e-12)
 
 
 def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():

@@ -193,6 +193,14 @@ UPSAMPLED_FOURTH_PASSES = (
 #: was not resized (simulated LiDAR's scan lines, the most: 0.69 on every sampled line, 0.70 on every other one,
 #: 0.77 on every fourth).
 UPSAMPLED_STEP = 2
+#: A factor that is not a whole number (640 pixels from 107 samples: 5.98) puts its seams at columns that drift
+#: against any whole K (2 pixels across the frame there), which spreads their share over more positions. Where no factor
+#: passes, the passes are run again with the positions in parts of about UPSAMPLED_DRIFT_SPAN pixels, each part at its
+#: own phase (``sensor_noise.seam_share``'s ``chunks``): a drift of 0.5 pixel per part at 5.98x. On 10 real frames
+#: resized from 1/6 and 1/12 (``benchmarks/resized_frames.py``, bilinearly and bicubically) the factor is then found on
+#: all, where it was on 4-7; on the frames that were not resized (16 real, 10 simulated sensors and 12 families
+#: without a resize on the 12 3F2N frames, and those frames clean: 280) none.
+UPSAMPLED_DRIFT_SPAN = 160
 
 
 def upsampled_window(k: int, noisy: bool = False) -> int:

@@ -44,6 +44,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     UPSAMPLED_CONTRAST,
+    UPSAMPLED_DRIFT_SPAN,
     UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
@@ -769,37 +770,48 @@ def _fourths(z, valid, step, along_u, along_v):
 
 
 @pixel
-def seam_share(bends, k, width):
+def seam_share(bends, k, width, chunks):
     """Of the differences summed by position (:func:`_bends`, :func:`_fourths`), the largest share on ``width``
     neighbouring positions modulo ``k`` (0 without any): 1 where depth bends only at the seams of a k-times resize
-    (a stencil of width + 1 pixels straddles each seam at ``width`` positions), about width / k elsewhere."""
+    (a stencil of width + 1 pixels straddles each seam at ``width`` positions), about width / k elsewhere. With
+    ``chunks`` over 1, the positions are cut into that many consecutive parts, each with its own best phase, and the
+    share is the sum of their best over their total (seams that drift: ``UPSAMPLED_DRIFT_SPAN``)."""
+    n = bends.shape[0]
     phases = np.zeros(k)
     total = 0.0
-    for p in range(k):
-        phase = 0.0
-        for i in range(p, bends.shape[0], k):
-            phase += bends[i]
-        phases[p] = phase
-        total += phase
-    most = 0.0
-    for p in range(k):
-        run = 0.0
-        for j in range(width):
-            run += phases[(p + j) % k]
-        most = max(most, run)
-    return most / total if total > 0.0 else 0.0
+    most_sum = 0.0
+    for c in range(chunks):
+        lo = c * n // chunks
+        hi = (c + 1) * n // chunks
+        part = 0.0
+        for p in range(k):
+            phase = 0.0
+            for i in range(lo + (p - lo) % k, hi, k):
+                phase += bends[i]
+            phases[p] = phase
+            part += phase
+        most = 0.0
+        for p in range(k):
+            run = 0.0
+            for j in range(width):
+                run += phases[(p + j) % k]
+            most = max(most, run)
+        total += part
+        most_sum += most
+    return most_sum / total if total > 0.0 else 0.0
 
 
 @ahead_of_time
 @njit
-def _seam_factor(along_u, along_v, k_low, k_high, share, width):
-    """The largest k from ``k_high`` down to ``k_low`` whose :func:`seam_share` on ``width`` positions reaches
-    ``share`` along both, and exceeds that of k + 1 by ``UPSAMPLED_CONTRAST`` along both (seams repeat every k
-    pixels: differences piled at a few places, a clean planar scene's creases, hold as much at every k), or 1."""
+def _seam_factor(along_u, along_v, k_low, k_high, share, width, chunks_u, chunks_v):
+    """The largest k from ``k_high`` down to ``k_low`` whose :func:`seam_share` on ``width`` positions (in
+    ``chunks_u`` and ``chunks_v`` parts) reaches ``share`` along both, and exceeds that of k + 1 by
+    ``UPSAMPLED_CONTRAST`` along both (seams repeat every k pixels: differences piled at a few places, a clean planar
+    scene's creases, hold as much at every k), or 1."""
     shares = np.zeros((2, max(k_high + 2, 1)))  # each k's shares once: k is also the k + 1 of k - 1
     for k in range(k_low, k_high + 2):
-        shares[0, k] = seam_share(along_u, k, width)
-        shares[1, k] = seam_share(along_v, k, width)
+        shares[0, k] = seam_share(along_u, k, width, chunks_u)
+        shares[1, k] = seam_share(along_v, k, width, chunks_v)
     for k in range(k_high, k_low - 1, -1):
         passes = True
         for a in range(2):
@@ -824,24 +836,38 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     samples; 1 where no factor passes, or where fewer than ``MIN_SAMPLES`` stencils were valid along either
     direction. In every pass the share modulo K + 1 must be at least ``UPSAMPLED_CONTRAST`` lower (seams repeat every
     K pixels; differences piled at a few places do not). A factor K makes its divisors pass too, hence the largest.
-    See :mod:`surfnorm._constants`."""
+    Where no pass finds one on a frame of at least 2 ``UPSAMPLED_DRIFT_SPAN`` pixels along a side, they run again with
+    the positions in parts of about that many pixels, each part at its own phase: the seams of a factor that is not a
+    whole number drift against any whole K. See :mod:`surfnorm._constants`."""
     H, W = z.shape
     k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     if k_high < UPSAMPLED_MIN:
         return 1
     step = UPSAMPLED_STEP * noise_step(H, W)
-    along_u, along_v = np.empty(W), np.empty(H)
-    n_u, n_v = _bends(z, valid, step, along_u, along_v)
+    bends = np.empty(W), np.empty(H)
+    n_u, n_v = _bends(z, valid, step, *bends)
     if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
         return 1
-    k = int(_seam_factor(along_u, along_v, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2))
-    if k > 1:
-        return k
-    n_u, n_v = _fourths(z, valid, step, along_u, along_v)
-    if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
-        return 1
-    for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-        k = int(_seam_factor(along_u, along_v, k_low, min(k_top, k_high), share, 4))
+    rounds = [
+        (1, 1)
+    ]  # the positions whole, then (frames of 2 UPSAMPLED_DRIFT_SPAN and more) in parts: seams that drift
+    drift = (max(1, W // UPSAMPLED_DRIFT_SPAN), max(1, H // UPSAMPLED_DRIFT_SPAN))
+    if drift != (1, 1):
+        rounds.append(drift)
+    fourths = None
+    for chunks in rounds:
+        k = int(_seam_factor(*bends, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, *chunks))
         if k > 1:
             return k
+        if fourths is None:
+            fourths = np.empty(W), np.empty(H)
+            n_u, n_v = _fourths(z, valid, step, *fourths)
+            if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
+                fourths = ()
+        if not fourths:
+            continue
+        for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+            k = int(_seam_factor(*fourths, k_low, min(k_top, k_high), share, 4, *chunks))
+            if k > 1:
+                return k
     return 1

@@ -84,6 +84,7 @@ from .._constants import (
     TERRACED_LOW,
     TIE,
     UPSAMPLED_CONTRAST,
+    UPSAMPLED_DRIFT_SPAN,
     UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
@@ -896,16 +897,21 @@ def _fourths_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, tor
     return F.pad(x.sum(dim=1), (2, 2)), every.sum(dim=(1, 2))
 
 
-def _seam_share(along: torch.Tensor, k: int, width: int) -> torch.Tensor:
-    """``sensor_noise.seam_share`` of every frame's differences (B, N) on ``width`` neighbouring positions: (B,)."""
+def _seam_share(along: torch.Tensor, k: int, width: int, chunks: int = 1) -> torch.Tensor:
+    """``sensor_noise.seam_share`` of every frame's differences (B, N) on ``width`` neighbouring positions, in
+    ``chunks`` consecutive parts each at its own phase: (B,)."""
     B, N = along.shape
-    phase = torch.arange(N, device=along.device) % k
-    by_phase = torch.zeros((B, k), dtype=along.dtype, device=along.device).index_add_(1, phase, along)
-    total = by_phase.sum(dim=1)
+    i = torch.arange(N, device=along.device)
+    # position i lies in part c where c N // chunks <= i < (c + 1) N // chunks
+    starts = torch.tensor([c * N // chunks for c in range(1, chunks)], dtype=i.dtype, device=along.device)
+    part = torch.bucketize(i, starts, right=True)
+    by_phase = torch.zeros((B, chunks * k), dtype=along.dtype, device=along.device)
+    by_phase = by_phase.index_add_(1, part * k + i % k, along).view(B, chunks, k)
+    total = by_phase.sum(dim=(1, 2))
     run = by_phase
     for j in range(1, width):
-        run = run + torch.roll(by_phase, -j, dims=1)
-    most = run.amax(dim=1)
+        run = run + torch.roll(by_phase, -j, dims=2)
+    most = run.amax(dim=2).sum(dim=1)
     return torch.where(total > 0.0, most / torch.where(total > 0.0, total, torch.ones_like(total)), 0.0)
 
 
@@ -918,10 +924,15 @@ def _factors(
     share: float,
     width: int,
     out: torch.Tensor,
+    chunks: tuple[int, int] = (1, 1),
 ) -> torch.Tensor:
-    """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils."""
+    """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils (the positions in
+    ``chunks`` parts along u and along v)."""
     # each k's shares once: k is also the k + 1 of k - 1
-    shares = {k: [_seam_share(along, k, width) for along in (along_u, along_v)] for k in range(k_low, k_high + 2)}
+    shares = {
+        k: [_seam_share(along, k, width, c) for along, c in zip((along_u, along_v), chunks)]
+        for k in range(k_low, k_high + 2)
+    }
     for k in range(k_high, k_low - 1, -1):
         seams = enough & (out == 1)
         for here, above in zip(shares[k], shares[k + 1]):
@@ -932,7 +943,8 @@ def _factors(
 
 def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """``sensor_noise.upsampling_factor`` of every frame: z (B, H, W) float64 (any value where invalid), valid
-    (B, H, W); (B,) int64, 1 where none is found (bilinear or nearest seams first, then bicubic ones)."""
+    (B, H, W); (B,) int64, 1 where none is found (bilinear or nearest seams first, then bicubic ones; then both
+    again with the positions in parts, for seams that drift)."""
     B, H, W = z.shape
     out = torch.ones(B, dtype=torch.int64, device=z.device)
     k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
@@ -941,15 +953,20 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     step = UPSAMPLED_STEP * noise_step(H, W)
     rows, ok_rows = z[:, ::step, :], valid[:, ::step, :]
     cols, ok_cols = z[:, :, ::step].transpose(1, 2), valid[:, :, ::step].transpose(1, 2)
-    along_u, n_u = _bends_along(rows, ok_rows)
-    along_v, n_v = _bends_along(cols, ok_cols)
+    bends_u, n_u = _bends_along(rows, ok_rows)
+    bends_v, n_v = _bends_along(cols, ok_cols)
     bent = (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)  # too few: 1, whatever the fourth differences (as on NumPy)
-    out = _factors(along_u, along_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out)
-    along_u, n_u = _fourths_along(rows, ok_rows)
-    along_v, n_v = _fourths_along(cols, ok_cols)
+    fourths_u, n_u = _fourths_along(rows, ok_rows)
+    fourths_v, n_v = _fourths_along(cols, ok_cols)
     enough = bent & (n_u >= MIN_SAMPLES) & (n_v >= MIN_SAMPLES)
-    for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-        out = _factors(along_u, along_v, enough, k_low, min(k_top, k_high), share, 4, out)
+    rounds = [(1, 1)]
+    drift = (max(1, W // UPSAMPLED_DRIFT_SPAN), max(1, H // UPSAMPLED_DRIFT_SPAN))
+    if drift != (1, 1):
+        rounds.append(drift)
+    for chunks in rounds:
+        out = _factors(bends_u, bends_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out, chunks)
+        for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+            out = _factors(fourths_u, fourths_v, enough, k_low, min(k_top, k_high), share, 4, out, chunks)
     return out
 
 

@@ -156,8 +156,8 @@ CONSISTENT_MAX = math.pi / 2
 #: see it (bilinear 8x reads as clean), or sees it correlated over K pixels: ``auto`` runs ``adaptive_fit`` with
 #: windows of at least ``upsampled_window(K)`` pixels there. Factors under UPSAMPLED_MIN (the seams of K = 2 and 3
 #: touch every pixel or most) and over UPSAMPLED_MAX (2 K + 1 over MAX_WINDOW: no window would span two seams) are
-#: not looked for; a factor that is not a whole number has no fixed seam column (its seams
-#: drift) and is found only where the drift is slow.
+#: not looked for; a factor that is not a whole number has no fixed seam column (its seams drift) and is found where
+#: the drift is slow over the frame or over parts of it (UPSAMPLED_DRIFT_SPAN).
 UPSAMPLED_SHARE = 0.8
 UPSAMPLED_MIN = 4
 UPSAMPLED_MAX = 15
@@ -198,7 +198,7 @@ UPSAMPLED_STEP = 2
 #: passes, the passes are run again with the positions in parts of about UPSAMPLED_DRIFT_SPAN pixels, each part at its
 #: own phase (``sensor_noise.seam_share``'s ``chunks``): a drift of 0.5 pixel per part at 5.98x. On 10 real frames
 #: resized from 1/6 and 1/12 (``benchmarks/resized_frames.py``, bilinearly and bicubically) the factor is then found on
-#: all, where it was on 4-7; on the frames that were not resized (16 real, 10 simulated sensors and 12 families
+#: all, where it was on 4-7; on the frames that were not resized (16 real, 10 simulated sensors and 11 families
 #: without a resize on the 12 3F2N frames, and those frames clean: 280) none.
 UPSAMPLED_DRIFT_SPAN = 160
 

@@ -848,9 +848,8 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     n_u, n_v = _bends(z, valid, step, *bends)
     if n_u < MIN_SAMPLES or n_v < MIN_SAMPLES:
         return 1
-    rounds = [
-        (1, 1)
-    ]  # the positions whole, then (frames of 2 UPSAMPLED_DRIFT_SPAN and more) in parts: seams that drift
+    # the positions whole, then (frames of 2 UPSAMPLED_DRIFT_SPAN and more) in parts: seams that drift
+    rounds = [(1, 1)]
     drift = (max(1, W // UPSAMPLED_DRIFT_SPAN), max(1, H // UPSAMPLED_DRIFT_SPAN))
     if drift != (1, 1):
         rounds.append(drift)

@@ -30,13 +30,13 @@ def sampling_step(H, W, samples=12_000):
 
 
 def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
-    xs, bins, zmin, zmax = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
-    return _profile(xs, bins, zmin, zmax, n_bins, min_samples)
+    xs, bins, zmin, zmax, first = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
+    return _profile(xs, bins, zmin, zmax, n_bins, min_samples, first)
 
 
 def bin_floors(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
     """NoiseProfile.floors: per depth bin, the median |x_1| of its samples over 0.6745, NaN with too few."""
-    xs, bins, _, _ = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
+    xs, bins, _, _, _ = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
     out = np.full(n_bins, np.nan)
     for b in range(n_bins):
         x = xs[bins == b, 0]
@@ -50,7 +50,7 @@ def samples_and_bins(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4):
     zmin, zmax = float(z[valid].min()), float(z[valid].max())
     step = sampling_step(H, W, samples)
     lo, span = math.log(zmin), math.log(zmax) - math.log(zmin)
-    xs, bins = [], []
+    xs, bins, first = [], [], []  # first: the stencil at gap 1 (the pixel scale)
     for v in range(0, H, step):
         for u in range(0, W, step):
             if not valid[v, u]:
@@ -68,12 +68,15 @@ def samples_and_bins(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4):
                         x = [(w(-s * a) - 2.0 / z[v, u] + w(s * a)) * z[v, u] * f / math.sqrt(6) for s in (1, 2, 4)]
                         xs.append(x)
                         bins.append(b)
+                        first.append(a == 1)
                         break
-    return np.array(xs).reshape(-1, 3), np.array(bins, dtype=int), zmin, zmax
+    return np.array(xs).reshape(-1, 3), np.array(bins, dtype=int), zmin, zmax, np.array(first, dtype=bool)
 
 
-def _profile(xs, bins, zmin, zmax, n_bins, min_samples):
-    floor = float(np.median(np.abs(xs[:, 0]))) / 0.6745 if len(xs) >= min_samples else float("nan")
+def _profile(xs, bins, zmin, zmax, n_bins, min_samples, first):
+    # the floor at the pixel scale (stencils at gap 1) where it has min_samples, else over every stencil
+    pixel = xs[first] if first.sum() >= min_samples else xs
+    floor = float(np.median(np.abs(pixel[:, 0]))) / 0.6745 if len(xs) >= min_samples else float("nan")
     ms = np.zeros((3, n_bins))
     for i in range(3):
         for b in range(n_bins):
@@ -322,11 +325,12 @@ def noise_extras(z, valid, f, *, samples=12_000, max_gap=4, min_samples=64):
     centre and two neighbours count as "changed" unless all three depths are equal, and as a jump when exactly
     one neighbour equals the centre (height |1/z_0 - 1/z_other| z_0 f); ``smooth`` is the 10 % quantile (the
     value at rank floor(0.1 (n - 1))) over 0.12566 of the geometric mean of |second difference at stride 2 a|
-    and |x_4 - 4 x_2| / sqrt(70 / 6), each quantile taken on its own.
+    and |x_4 - 4 x_2| / sqrt(70 / 6), each quantile taken on its own, of the stencils at gap 1 where there are
+    ``min_samples`` of them (the pixel scale, as the floor), else of all.
     """
     H, W = z.shape
     step = sampling_step(H, W, samples)
-    changed, jumps, x2, x4 = 0, [], [], []
+    changed, jumps, x2, x4, first = 0, [], [], [], []
     for v in range(0, H, step):
         for u in range(0, W, step):
             if not valid[v, u]:
@@ -343,6 +347,7 @@ def noise_extras(z, valid, f, *, samples=12_000, max_gap=4, min_samples=64):
                     fourth = (1 / z[pts[0]] - 2 / z[v, u] + 1 / z[pts[5]]) * z[v, u] * f / math.sqrt(6)
                     x2.append(second)
                     x4.append(abs(fourth - 4 * second) / math.sqrt(70 / 6))
+                    first.append(a == 1)
                     if a == 1:
                         left, centre, right = z[pts[2]], z[v, u], z[pts[3]]
                         if not (left == centre == right):
@@ -357,6 +362,9 @@ def noise_extras(z, valid, f, *, samples=12_000, max_gap=4, min_samples=64):
         terraced, step_h = len(jumps) / changed, float(np.median(jumps))
     smooth = 0.0
     if len(x2) >= min_samples:
+        if sum(first) >= min_samples:  # the pixel scale (gap 1) where it has min_samples, as the floor
+            x2 = [x for x, one in zip(x2, first) if one]
+            x4 = [x for x, one in zip(x4, first) if one]
         every = -(-len(x2) // 4096)  # at most 4096 samples read: every s-th
         second, fourth = np.abs(x2[::every]), np.array(x4[::every])
         k = int(0.1 * (len(second) - 1))

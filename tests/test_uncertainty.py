@@ -600,7 +600,7 @@ def test_the_noise_correlation_leaves_the_curvature_out():
     noise = 2e-5 * rng.standard_normal((H, W))
     z = (1.0 / (w_bowl + noise)).astype(np.float32)
     valid = np.ones_like(z, bool)
-    _, _, xs, _, _, _ = S._samples(z, valid, f)
+    _, _, xs, _, _, _, _ = S._samples(z, valid, f)
     raw = float(np.mean(xs[1] ** 2) / np.mean(xs[0] ** 2))
     got = S.noise_profile(z, valid, f).correlation
     assert raw > 1.5 and abs(got - 1.0) < 0.15, (raw, got)

@@ -178,7 +178,8 @@ def _samples(z, valid, f, lo, span):
     """``sensor_noise._second_differences`` on every frame: xs (3, B, N), taken (B, N), bins (B, N), in the
     NumPy kernel's sample order (row-major over the sampled pixels, horizontal then vertical); and its terrace
     test: changed (B, N), the stencils taken at a = 1 whose depth changes, and jumps (B, N), the jump height
-    where such a stencil is a flat step beside a jump, else NaN."""
+    where such a stencil is a flat step beside a jump, else NaN; first (B, N), the stencils taken at a = 1 (the pixel
+    scale, where the floor is measured when there are enough)."""
     B, H, W = z.shape
     step = noise_step(H, W)
     pad = 4 * _MAX_GAP
@@ -202,6 +203,7 @@ def _samples(z, valid, f, lo, span):
         taken = torch.zeros_like(ok_b)
         xs = [torch.zeros_like(zb) for _ in range(3)]
         changed = torch.zeros_like(ok_b)
+        first = torch.zeros_like(ok_b)
         jumps = torch.full_like(zb, math.nan)
         for a in range(1, _MAX_GAP + 1):
             offsets = (-4 * a, -2 * a, -a, a, 2 * a, 4 * a)
@@ -219,6 +221,7 @@ def _samples(z, valid, f, lo, span):
                 x = ((torch.reciprocal(z_m) - w0 + torch.reciprocal(z_p)) * zb) * scale
                 xs[i] = torch.where(take, x, xs[i])
             if a == 1:  # the terrace test (sensor_noise._terrace)
+                first = take
                 flat_m, flat_p = z_m1 == zb, z_p1 == zb
                 changed = take & ~(flat_m & flat_p)
                 other = torch.where(flat_m, z_p1, z_m1)
@@ -226,15 +229,15 @@ def _samples(z, valid, f, lo, span):
                 jumps = torch.where(take & (flat_m != flat_p), height, jumps)
             taken = taken | take
             found = found | ok
-        per_axis.append((xs, taken, changed, jumps))
+        per_axis.append((xs, taken, changed, jumps, first))
 
     def interleaved(h, v):
         return torch.stack((h, v), dim=-1).reshape(B, -1)
 
     xs = torch.stack([interleaved(h, v) for h, v in zip(per_axis[0][0], per_axis[1][0])])
-    taken, changed, jumps = (interleaved(per_axis[0][i], per_axis[1][i]) for i in (1, 2, 3))
+    taken, changed, jumps, first = (interleaved(per_axis[0][i], per_axis[1][i]) for i in (1, 2, 3, 4))
     bins = bins.unsqueeze(-1).expand(-1, -1, -1, 2).reshape(B, -1)
-    return xs, taken, bins, changed, jumps
+    return xs, taken, bins, changed, jumps, first
 
 
 def _sequential_sum(x: torch.Tensor) -> torch.Tensor:
@@ -294,11 +297,12 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     zmax_s = torch.where(any_valid, zmax, torch.ones_like(zmax))
     lo = torch.log(zmin_s)
     span = torch.log(zmax_s) - lo
-    xs, taken, bins, changed, jumps = _samples(z, valid, f, lo, span)
+    xs, taken, bins, changed, jumps, first = _samples(z, valid, f, lo, span)
     n = taken.sum(dim=1)
     enough = n >= MIN_SAMPLES
-    # the floor: median |x_1| / 0.6745
-    floor = torch.where(enough, _median(xs[0].abs(), taken) / 0.6745, torch.full_like(lo, math.nan))
+    # the floor: median |x_1| / 0.6745, of the stencils at the pixel scale where there are enough of them
+    pixel_scale = torch.where((first.sum(dim=1) >= MIN_SAMPLES).view(-1, 1), first, taken)
+    floor = torch.where(enough, _median(xs[0].abs(), pixel_scale) / 0.6745, torch.full_like(lo, math.nan))
     # the terraces (sensor_noise.terrace_statistics): the share of jumps among the stencils that changed, their
     # median height; 0 and 0 with fewer than MIN_SAMPLES changed or no jump
     is_jump = ~torch.isnan(jumps)
@@ -309,10 +313,12 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     # the smooth noise (NoiseProfile.smooth, sensor_noise._quiet): every s-th sample (s = ceil(n / _SMOOTH_SAMPLES)),
     # the geometric mean of |x_2| and |x_4 - 4 x_2| / its white-noise RMS, each at rank floor(SMOOTH_SHARE (m - 1))
     # of the m read, over _SMOOTH_GAUSS
-    s = torch.div(n + _SMOOTH_SAMPLES - 1, _SMOOTH_SAMPLES, rounding_mode="floor").clamp(min=1).view(B, 1)
-    m = torch.div(n.view(B, 1) + s - 1, s, rounding_mode="floor")
-    order = torch.cumsum(taken.long(), dim=1) - 1  # each sample's place among the frame's samples
-    read = taken & (order % s == 0)
+    # of the samples at the pixel scale where there are enough (as the floor)
+    n_px = pixel_scale.sum(dim=1)
+    s = torch.div(n_px + _SMOOTH_SAMPLES - 1, _SMOOTH_SAMPLES, rounding_mode="floor").clamp(min=1).view(B, 1)
+    m = torch.div(n_px.view(B, 1) + s - 1, s, rounding_mode="floor")
+    order = torch.cumsum(pixel_scale.long(), dim=1) - 1  # each sample's place among those read
+    read = pixel_scale & (order % s == 0)
     rank = torch.floor((m - 1).clamp(min=0).to(_F64) * SMOOTH_SHARE).long()
 
     def quiet(x):

@@ -324,23 +324,34 @@ def _select(a, k):
 
 @ahead_of_time
 @njit
-def _quiet(xs, share, gauss, fourth_rms, most):
-    """:attr:`NoiseProfile.smooth` from the samples ``xs`` (3, n > 0), every s-th of them (s = ceil(n / ``most``)):
-    the geometric mean of two estimates of the noise at strides 2 and 4, each the value at rank
-    floor(share (m - 1)) of its m magnitudes sorted, over ``gauss``: of |x_2|, which curvature raises (a sphere
-    filling the frame) but fine detail does not reach where the scene is smooth; and of |x_4 - 4 x_2| /
-    ``fourth_rms``, a fourth difference in which curvature cancels but fine detail does not (the foliage of a
-    tree). Noise raises both; either kind of geometry only one. White noise of RMS rho reads rho in each, so in
-    their mean. Without the GIL."""
+def _quiet(xs, keep, share, gauss, fourth_rms, most):
+    """:attr:`NoiseProfile.smooth` from the samples ``xs`` (3, n > 0) where ``keep`` (n,) (all where ``keep`` is
+    empty), every s-th of those m kept (s = ceil(m / ``most``)): the geometric mean of two estimates of the noise at
+    strides 2 and 4, each the value at rank floor(share (m' - 1)) of its m' magnitudes sorted, over ``gauss``: of
+    |x_2|, which curvature raises (a sphere filling the frame) but fine detail does not reach where the scene is
+    smooth; and of |x_4 - 4 x_2| / ``fourth_rms``, a fourth difference in which curvature cancels but fine detail
+    does not (the foliage of a tree). Noise raises both; either kind of geometry only one. White noise of RMS rho
+    reads rho in each, so in their mean. Without the GIL."""
+    every = keep.shape[0] == 0
     n = xs.shape[1]
+    if not every:
+        n = 0
+        for i in range(keep.shape[0]):
+            n += keep[i]
     s = (n + most - 1) // most
     m = (n + s - 1) // s
     second = np.empty(m)
     fourth = np.empty(m)
-    for i in range(m):
-        j = i * s
-        second[i] = abs(xs[1, j])
-        fourth[i] = abs(xs[2, j] - 4.0 * xs[1, j]) / fourth_rms
+    i = 0
+    c = 0  # kept samples passed
+    for j in range(xs.shape[1]):
+        if not (every or keep[j]):
+            continue
+        if c % s == 0:
+            second[i] = abs(xs[1, j])
+            fourth[i] = abs(xs[2, j] - 4.0 * xs[1, j]) / fourth_rms
+            i += 1
+        c += 1
     k = int(share * (m - 1))
     return math.sqrt(_select(second, k) * _select(fourth, k)) / gauss
 
@@ -368,12 +379,15 @@ def _median_of(a):
 
 @ahead_of_time
 @njit
-def _median_abs(x, mags):
-    """np.median(np.abs(x)) (the same value), with ``mags`` (the size of ``x``) for the magnitudes, without holding
-    the GIL: another band's thread runs beside it."""
+def _median_abs(x, keep, mags):
+    """np.median(np.abs(x[keep])) (the same value; all of ``x`` where ``keep`` is empty), with ``mags`` (the size of
+    ``x``) for the magnitudes, without holding the GIL: another band's thread runs beside it."""
+    n = 0
     for i in range(x.shape[0]):
-        mags[i] = abs(x[i])
-    return _median_of(mags)
+        if keep.shape[0] == 0 or keep[i]:
+            mags[n] = abs(x[i])
+            n += 1
+    return _median_of(mags[:n])
 
 
 @ahead_of_time
@@ -397,6 +411,8 @@ def _bin_floors(x, starts, min_samples, mags):
 #: every frame, they came from fresh pages wherever another library had just freed large blocks (about 140 page
 #: faults on a 450x375 frame after OpenCV's LINEMOD, 2.4 us each on a 2-core VM).
 _working = Spares(16 << 20)
+#: ``keep`` of :func:`_median_abs` and :func:`_quiet` for every sample.
+_EVERY = np.zeros(0, np.bool_)
 
 
 def _working_set(size: int) -> tuple:
@@ -572,9 +588,9 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     # are the pixel scale's where it has enough samples (random holes on fine geometry: wider stencils see its
     # curvature); the same samples where no stencil had to bridge a gap.
     n_first = int(np.count_nonzero(firsts))
-    pixel = xs[:, firsts] if MIN_SAMPLES <= n_first < n else xs
-    median = Part(lambda: _median_abs(pixel[0], work[4][: pixel.shape[1]]))
-    smooth = Part(lambda: _quiet(pixel, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))
+    keep = firsts if MIN_SAMPLES <= n_first < n else _EVERY
+    median = Part(lambda: _median_abs(xs[0], keep, work[4][:n]))
+    smooth = Part(lambda: _quiet(xs, keep, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))
     terraces = Part(lambda: terrace_statistics(jumps, changed))
     if offers is not None:
         for part in (median, smooth, terraces):

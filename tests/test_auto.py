@@ -510,15 +510,17 @@ def naive_fourths(z, valid, step):
     return u, v, n_u, n_v
 
 
-def naive_seam_share(bends, k, width, chunks=1):
-    """The largest share of ``bends`` on ``width`` neighbouring positions modulo k; with ``chunks``, the sum of each
-    of that many consecutive parts' largest (part c: positions c n // chunks up to (c + 1) n // chunks), over the
+def naive_seam_share(bends, k, width, chunks=1, q=1):
+    """The largest share of ``bends`` on ``width`` neighbouring positions modulo the factor k / q (position i at the
+    phase i mod (k / q), in steps of 1 / q pixel; a window of ``width`` pixels); with ``chunks``, the sum of each of
+    that many consecutive parts' largest (part c: positions c n // chunks up to (c + 1) n // chunks), over the
     total."""
     most = 0.0
     n = bends.size
     for part in (np.arange(c * n // chunks, (c + 1) * n // chunks) for c in range(chunks)):
-        by_phase = np.bincount(part % k, weights=bends[part], minlength=k)
-        most += sum(np.roll(by_phase, -j) for j in range(width)).max()
+        phase = np.rint(np.mod(part.astype(np.float64), k / q) * q).astype(np.int64)  # exact: halves, quarters
+        by_phase = np.bincount(phase, weights=bends[part], minlength=k)
+        most += sum(np.roll(by_phase, -j) for j in range(q * width)).max()
     return most / bends.sum()
 
 
@@ -541,9 +543,9 @@ def test_bends_fourths_and_seam_shares_match_the_naive_reference(k, interpolatio
             for kk in range(width, 17):
                 for chunks in (1, 2, 3):
                     want = naive_seam_share(nu, kk, width, chunks)
-                    assert seam_share(u, kk, width, chunks) == pytest.approx(want, rel=1e-12)
-    assert seam_share(np.zeros(20), 4, 2, 1) == 0.0
-    assert seam_share(np.zeros(20), 8, 4, 2) == 0.0
+                    assert seam_share(u, kk, width, chunks, 1) == pytest.approx(want, rel=1e-12)
+    assert seam_share(np.zeros(20), 4, 2, 1, 1) == 0.0
+    assert seam_share(np.zeros(20), 8, 4, 2, 1) == 0.0
 
 
 @pytest.mark.parametrize("interpolation", ["linear", "nearest", "cubic"])
@@ -576,8 +578,70 @@ def test_upsampling_factor_finds_a_factor_that_is_not_a_whole_number(interpolati
     u, v = np.empty(450), np.empty(450)
     kernel(z, z > 0, UPSAMPLED_STEP * noise_step(450, 450), u, v)
     chunks = 450 // UPSAMPLED_DRIFT_SPAN
-    assert min(seam_share(u, 12, width, 1), seam_share(v, 12, width, 1)) < UPSAMPLED_SHARE
-    assert min(seam_share(u, 12, width, chunks), seam_share(v, 12, width, chunks)) >= UPSAMPLED_SHARE
+    assert min(seam_share(u, 12, width, 1, 1), seam_share(v, 12, width, 1, 1)) < UPSAMPLED_SHARE
+    assert min(seam_share(u, 12, width, chunks, 1), seam_share(v, 12, width, chunks, 1)) >= UPSAMPLED_SHARE
+
+
+def fractional_scene(s, size, interpolation="linear", noise=0.004, seed=0):
+    """The scene of :func:`upsampled_scene` rendered by a camera of size / s pixels (the same field of view), with
+    relative noise ``noise``, resized to size x size by OpenCV: a resize by a factor s that need not be whole (a
+    phone's 256x192 depth brought to its 1920x1440 colour: 7.5)."""
+    import cv2
+
+    n = round(size / s)
+    assert n * s == size
+    depth = []
+    for side in (n, size):
+        K = camera(side, side, fov_deg=60)
+        z_p, n_p, _ = plane(K, side, side, [0.3, -0.2, -1.0], 3.0)
+        z_s, n_s, hit = sphere(K, side, side, [0.1, 0.0, 2.0], 0.6)
+        depth.append((np.where(hit, z_s, z_p), np.where(hit[..., None], n_s, n_p), K))
+    low = depth[0][0] * (1.0 + noise * np.random.default_rng(seed).standard_normal((n, n)))
+    how = {"linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST, "cubic": cv2.INTER_CUBIC}[interpolation]
+    up = cv2.resize(low.astype(np.float32), (size, size), interpolation=how)
+    return up, depth[1][2], depth[1][1]
+
+
+@pytest.mark.parametrize(
+    "s, interpolation", [(4.5, "linear"), (7.5, "linear"), (7.5, "nearest"), (10.5, "linear"), (7.5, "cubic")]
+)
+def test_upsampling_factor_finds_a_factor_halfway_between_whole_ones(s, interpolation):
+    """7.5x: the seams lie 7 and 8 pixels apart in turn, so they spread over the phases of any whole factor; folded
+    modulo 7.5 (half-pixel phases) they pile on two pixels' width, as a whole factor's do modulo K (a bicubic
+    resize's fourth differences on four)."""
+    from surfnorm._constants import UPSAMPLED_SHARE, UPSAMPLED_STEP, noise_step
+    from surfnorm.kernels.sensor_noise import _bends, _fourths, seam_share, upsampling_factor
+
+    z, _, _ = fractional_scene(s, 270 if s == 4.5 else 240 if s == 7.5 else 252, interpolation)
+    assert upsampling_factor(z, z > 0) == s
+    kernel, width = (_fourths, 4) if interpolation == "cubic" else (_bends, 2)
+    u, v = np.empty(z.shape[1]), np.empty(z.shape[0])
+    kernel(z, z > 0, UPSAMPLED_STEP * noise_step(*z.shape), u, v)
+    for k in (math.floor(s), math.ceil(s)):  # no whole factor near it holds the seams
+        assert min(seam_share(u, k, width, 1, 1), seam_share(v, k, width, 1, 1)) < UPSAMPLED_SHARE
+    half = int(2 * s)
+    assert min(seam_share(u, half, width, 1, 2), seam_share(v, half, width, 1, 2)) >= UPSAMPLED_SHARE
+    for chunks in (1, 2, 3):
+        want = naive_seam_share(u, half, width, chunks, 2)
+        assert seam_share(u, half, width, chunks, 2) == pytest.approx(want, rel=1e-12)
+    # and the factor + 1 does not: seams repeat every 7.5 pixels
+    assert max(seam_share(u, half + 2, width, 1, 2), seam_share(v, half + 2, width, 1, 2)) < UPSAMPLED_SHARE
+
+
+def test_auto_fits_depth_upsampled_by_a_half_factor_with_windows_over_its_seams():
+    from surfnorm.metrics import mean_angular_error
+
+    z, K, exact = fractional_scene(7.5, 240)
+    d = surfnorm.auto_decision(z, K)
+    assert d.reading < NOISY_FLOOR
+    assert (d.method, d.weight, d.upsampled, d.checked) == ("adaptive_fit", 1.0, 7.5, False)
+    side = upsampled_window(7.5)
+    assert side == 17 and upsampled_window(7.5, True) == 25 and upsampled_window(4.5) == 11
+    assert f"with windows of at least {side} pixels (depth upsampled 7.5 times)" in str(d)
+    got = surfnorm.estimate(z, K)
+    np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=side))
+    errors = {m: mean_angular_error(surfnorm.estimate(z, K, method=m), exact, z > 0) for m in ("d2nt_v3", "auto")}
+    assert errors["auto"] < 0.7 * errors["d2nt_v3"], errors
 
 
 def test_depth_that_was_not_resized_has_no_upsampling_factor():
@@ -596,7 +660,7 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     plane = z.astype(np.float32)
     u, v = np.empty(plane.shape[1]), np.empty(plane.shape[0])
     _fourths(plane, plane > 0, UPSAMPLED_STEP * noise_step(*plane.shape), u, v)
-    assert UPSAMPLED_SHARE <= min(seam_share(u, 5, 4, 1), seam_share(v, 5, 4, 1)) < UPSAMPLED_CUBIC_CLOSE_SHARE
+    assert UPSAMPLED_SHARE <= min(seam_share(u, 5, 4, 1, 1), seam_share(v, 5, 4, 1, 1)) < UPSAMPLED_CUBIC_CLOSE_SHARE
     # a factor-2 resize bends at every pixel: not looked for; nor on frames too small or without depth
     z2, _, _ = upsampled_scene(2)
     assert upsampling_factor(z2, z2 > 0) == 1
@@ -688,6 +752,26 @@ def test_torch_finds_drifting_seams_as_numpy_does():
     for chunks in (1, 2, 3):
         want = [naive_seam_share(row.numpy(), 7, 2, chunks) for row in u]
         np.testing.assert_allclose(_adaptive._seam_share(u, 7, 2, chunks).numpy(), want, rtol=1e-12)
+        want = [naive_seam_share(row.numpy(), 15, 2, chunks, 2) for row in u]
+        np.testing.assert_allclose(_adaptive._seam_share(u, 15, 2, chunks, 2).numpy(), want, rtol=1e-12)
+
+
+def test_torch_finds_half_factors_and_fits_them_as_numpy_does():
+    torch = pytest.importorskip("torch")
+    import surfnorm.torch as st
+    from surfnorm.kernels.sensor_noise import upsampling_factor
+    from surfnorm.torch import _adaptive
+
+    frames = [fractional_scene(7.5, 240)[0], upsampled_scene(8)[0]]
+    frames += [fractional_scene(7.5, 240, "nearest", seed=3)[0], fractional_scene(7.5, 240, "cubic", seed=4)[0]]
+    K = fractional_scene(7.5, 240)[1]
+    stack = np.stack(frames).astype(np.float32)
+    t = torch.from_numpy(stack).double()
+    factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [7.5, 8, 7.5, 7.5]
+    want = np.stack([surfnorm.estimate(f, K) for f in frames])
+    got = st.estimate(torch.from_numpy(stack)[:, None], torch.from_numpy(K), method="auto")
+    np.testing.assert_allclose(got.permute(0, 2, 3, 1).numpy(), want, atol=2e-6, rtol=0)
 
 
 def test_torch_finds_the_same_factors_and_normals_on_upsampled_depth():

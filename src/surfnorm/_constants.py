@@ -156,8 +156,10 @@ CONSISTENT_MAX = math.pi / 2
 #: see it (bilinear 8x reads as clean), or sees it correlated over K pixels: ``auto`` runs ``adaptive_fit`` with
 #: windows of at least ``upsampled_window(K)`` pixels there. Factors under UPSAMPLED_MIN (the seams of K = 2 and 3
 #: touch every pixel or most) and over UPSAMPLED_MAX (2 K + 1 over MAX_WINDOW: no window would span two seams) are
-#: not looked for; a factor that is not a whole number has no fixed seam column (its seams drift) and is found where
-#: the drift is slow over the frame or over parts of it (UPSAMPLED_DRIFT_SPAN).
+#: not looked for; a factor halfway between whole ones (7.5: seams 7 and 8 pixels apart in turn) is found with the
+#: positions folded modulo it in half-pixel phases, the same share on two pixels' width; any other factor that is not a
+#: whole number has no fixed seam column (its seams drift) and is found where the drift is slow over the frame or over
+#: parts of it (UPSAMPLED_DRIFT_SPAN).
 UPSAMPLED_SHARE = 0.8
 UPSAMPLED_MIN = 4
 UPSAMPLED_MAX = 15
@@ -203,14 +205,15 @@ UPSAMPLED_STEP = 2
 UPSAMPLED_DRIFT_SPAN = 160
 
 
-def upsampled_window(k: int, noisy: bool = False) -> int:
-    """``auto``'s window side on depth upsampled K times: 2 K + 1, two seams in every direction; where the depth reads
-    as sensor depth (``noisy``: its samples' noise shows at the pixel scale), 2 ceil(1.5 K) + 1, about three; at most
-    MAX_WINDOW. The wider windows are better where the samples are noisy and worse where they are not
+def upsampled_window(k: float, noisy: bool = False) -> int:
+    """``auto``'s window side on depth upsampled K times: 2 K + 1, two seams in every direction (2 ceil(K) + 1 for a
+    factor halfway between whole ones, 7.5: windows have a whole radius); where the depth reads as sensor depth
+    (``noisy``: its samples' noise shows at the pixel scale), 2 ceil(1.5 K) + 1, about three; at most MAX_WINDOW. The
+    wider windows are better where the samples are noisy and worse where they are not
     (3F2N resized from 1/5, every frame fitted with the same windows: with 0.4 % noise in the samples, bicubically,
     most frames reading as sensor depth, 30.57 degrees with 2 K + 1, 25.15 with 17 pixels; with 0.05 % noise,
     bilinearly, reading as clean, 15.33 with 2 K + 1, 17.93 with 17 pixels)."""
-    side = 2 * ((3 * k + 1) // 2) + 1 if noisy else 2 * k + 1
+    side = 2 * math.ceil(1.5 * k) + 1 if noisy else 2 * math.ceil(k) + 1
     return min(side, MAX_WINDOW)
 
 

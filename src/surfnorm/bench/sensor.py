@@ -601,7 +601,7 @@ def folder_markdown(result: dict) -> str:
             nums = [_fmt(d[k], 3) for k in ("weight", "reading", "floor", "smooth", "terraced", "step", "quantisation")]
             checked = "yes" if d.get("checked") else "no"
             out.append(
-                f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1)} "
+                f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1):g} "
                 f"| {_fmt(d.get('correlation'), 2)} |"
             )
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]

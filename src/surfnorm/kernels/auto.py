@@ -67,8 +67,9 @@ degrees, against 30 for OpenCV's LINEMOD); noisier samples read as sensor depth 
 pixels. Where the reading is under ``NOISY_FLOOR``, or ``NoiseProfile.correlation`` is at least ``CORRELATED_HIGH``
 (:func:`searched`), ``auto`` looks for such seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole
 factors from 4 to 15 in the second differences, and for a bicubic resize, which is a cubic between its seams, from 5
-to 15 in the fourth differences) and, where it finds them, runs ``adaptive_fit`` alone with windows of at least
-2 K + 1 pixels, about 3 K where the depth reads as sensor depth (:func:`surfnorm._constants.upsampled_window`;
+to 15 in the fourth differences; and the factors halfway between, 7.5 for a phone's 256x192 depth brought to its
+1920x1440 colour) and, where it finds them, runs ``adaptive_fit`` alone with windows of at least 2 K + 1 pixels
+(2 ceil(K) + 1), about 3 K where the depth reads as sensor depth (:func:`surfnorm._constants.upsampled_window`;
 bilinear 8x 26 degrees; bicubic 8x 42 -> 30, bicubic 5x, which reads as sensor depth, 41 -> 25).
 
 What each family of depth gets, and the cost of a wrong call, are measured in the
@@ -158,11 +159,12 @@ class Decision(NamedTuple):
         Whether ``adaptive_fit``'s normals are checked against ``d2nt_v3``'s, pixel by pixel
         (:func:`consistency_limits`): where the two differ by more than the noise explains, the pixel takes
         ``d2nt_v3``'s. False where ``d2nt_v3`` runs alone.
-    upsampled : int
+    upsampled : float
         The factor K by which the depth was resized from a lower resolution, where ``auto`` looked for one
-        (:func:`searched`) and found it (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`): ``adaptive_fit``
-        then runs alone (``weight`` 1), with windows of at least ``upsampled_window(K, noisy)`` pixels (2 K + 1, or
-        about 3 K where the reading is ``NOISY_FLOOR`` or more). 1 elsewhere.
+        (:func:`searched`) and found it (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: a whole number, or
+        one halfway between two, 7.5): ``adaptive_fit`` then runs alone (``weight`` 1), with windows of at least
+        ``upsampled_window(K, noisy)`` pixels (2 K + 1, or about 3 K where the reading is ``NOISY_FLOOR`` or more).
+        1 elsewhere.
     correlation : float
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: how far the noise is correlated between
         neighbouring pixels (1 for independent noise); at or above ``CORRELATED_HIGH`` sensor depth is searched for
@@ -178,14 +180,14 @@ class Decision(NamedTuple):
     step: float
     quantisation: float
     checked: bool = False
-    upsampled: int = 1
+    upsampled: float = 1
     correlation: float = 1.0
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
         if self.upsampled > 1:
             side = upsampled_window(self.upsampled, reading_weight(self.reading) == 1.0)
-            ran += f" with windows of at least {side} pixels (depth upsampled {self.upsampled} times)"
+            ran += f" with windows of at least {side} pixels (depth upsampled {self.upsampled:g} times)"
         if self.checked:
             ran += ", checked against d2nt_v3 pixel by pixel"
         return (
@@ -196,7 +198,7 @@ class Decision(NamedTuple):
         )
 
 
-def decision(profile: NoiseProfile, upsampled: int = 1) -> Decision:
+def decision(profile: NoiseProfile, upsampled: float = 1) -> Decision:
     """The :class:`Decision` for a measured profile (and the depth's :func:`upsampling_factor`, where measured)."""
     t = 1.0 if upsampled > 1 else adaptive_weight(profile)
     method = "d2nt_v3" if t == 0.0 else "adaptive_fit" if t == 1.0 else "blend"
@@ -223,7 +225,7 @@ def searched(profile: NoiseProfile) -> bool:
     return adaptive_weight(profile) < 1.0 or profile.correlation >= CORRELATED_HIGH
 
 
-def upsampled(z: np.ndarray, valid: np.ndarray, profile: NoiseProfile) -> int:
+def upsampled(z: np.ndarray, valid: np.ndarray, profile: NoiseProfile) -> float:
     """The depth's :func:`upsampling_factor` where ``auto`` looks for one (:func:`searched`), else 1."""
     return upsampling_factor(z, valid) if searched(profile) else 1
 

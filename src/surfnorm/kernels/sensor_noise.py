@@ -811,30 +811,33 @@ def _fourths(z, valid, step, along_u, along_v):
 
 
 @pixel
-def seam_share(bends, k, width, chunks):
+def seam_share(bends, k, width, chunks, q):
     """Of the differences summed by position (:func:`_bends`, :func:`_fourths`), the largest share on ``width``
-    neighbouring positions modulo ``k`` (0 without any): 1 where depth bends only at the seams of a k-times resize
-    (a stencil of width + 1 pixels straddles each seam at ``width`` positions), about width / k elsewhere. With
-    ``chunks`` over 1, the positions are cut into that many consecutive parts, each with its own best phase, and the
-    share is the sum of their best over their total (seams that drift: ``UPSAMPLED_DRIFT_SPAN``)."""
+    neighbouring positions modulo the factor k / q (0 without any): 1 where depth bends only at the seams of a
+    k / q-times resize (a stencil of width + 1 pixels straddles each seam at ``width`` positions), about width q / k
+    elsewhere. The positions are folded into k phases of 1 / q pixel (position i at phase q i modulo k), so that a
+    factor that is not a whole number (q 2: 7.5, whose seams lie 7 and 8 pixels apart in turn) piles its seams on
+    the q width phases of ``width`` pixels as a whole one (q 1) does. With ``chunks`` over 1, the positions are cut
+    into that many consecutive parts, each with its own best phase, and the share is the sum of their best over their
+    total (seams that drift: ``UPSAMPLED_DRIFT_SPAN``)."""
     n = bends.shape[0]
     phases = np.zeros(k)
     total = 0.0
     most_sum = 0.0
+    span = q * width
     for c in range(chunks):
         lo = c * n // chunks
         hi = (c + 1) * n // chunks
         part = 0.0
+        phases[:] = 0.0
+        for i in range(lo, hi):
+            phases[(q * i) % k] += bends[i]
         for p in range(k):
-            phase = 0.0
-            for i in range(lo + (p - lo) % k, hi, k):
-                phase += bends[i]
-            phases[p] = phase
-            part += phase
+            part += phases[p]
         most = 0.0
         for p in range(k):
             run = 0.0
-            for j in range(width):
+            for j in range(span):
                 run += phases[(p + j) % k]
             most = max(most, run)
         total += part
@@ -844,26 +847,32 @@ def seam_share(bends, k, width, chunks):
 
 @ahead_of_time
 @njit
-def _seam_factor(along_u, along_v, k_low, k_high, share, width, chunks_u, chunks_v):
-    """The largest k from ``k_high`` down to ``k_low`` whose :func:`seam_share` on ``width`` positions (in
-    ``chunks_u`` and ``chunks_v`` parts) reaches ``share`` along both, and exceeds that of k + 1 by
-    ``UPSAMPLED_CONTRAST`` along both (seams repeat every k pixels: differences piled at a few places, a clean planar
-    scene's creases, hold as much at every k), or 1."""
-    shares = np.zeros((2, max(k_high + 2, 1)))  # each k's shares once: k is also the k + 1 of k - 1
-    for k in range(k_low, k_high + 2):
-        shares[0, k] = seam_share(along_u, k, width, chunks_u)
-        shares[1, k] = seam_share(along_v, k, width, chunks_v)
-    for k in range(k_high, k_low - 1, -1):
+def _seam_factor(along_u, along_v, k_low, k_high, share, width, chunks_u, chunks_v, q):
+    """The largest factor k / q from ``k_high`` down to ``k_low`` (whole factors for ``q`` 1; for ``q`` 2 those
+    halfway between whole ones) whose :func:`seam_share` on ``width`` positions (in ``chunks_u`` and ``chunks_v``
+    parts) reaches ``share`` along both, and exceeds that of the factor + 1 by ``UPSAMPLED_CONTRAST`` along both
+    (seams repeat every k / q pixels: differences piled at a few places, a clean planar scene's creases, hold as much
+    at every factor): its numerator k, or 1."""
+    top = q * (k_high + 1)
+    shares = np.zeros((2, max(top + 1, 1)))  # each factor's shares once: f is also the f + 1 of f - 1
+    for k in range(q * k_low, top + 1):
+        if q == 1 or k % q != 0:
+            shares[0, k] = seam_share(along_u, k, width, chunks_u, q)
+            shares[1, k] = seam_share(along_v, k, width, chunks_v, q)
+    for k in range(q * k_high, q * k_low - 1, -1):
+        if q > 1 and k % q == 0:
+            continue
         passes = True
         for a in range(2):
-            passes &= shares[a, k] >= share and shares[a, k + 1] <= shares[a, k] - UPSAMPLED_CONTRAST
+            passes &= shares[a, k] >= share and shares[a, k + q] <= shares[a, k] - UPSAMPLED_CONTRAST
         if passes:
             return k
     return 1
 
 
-def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
-    """The factor K by which the depth was resized from a lower resolution (bilinear, bicubic or nearest), or 1.
+def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
+    """The factor K by which the depth was resized from a lower resolution (bilinear, bicubic or nearest), or 1: a whole
+    number, or one halfway between two.
 
     Such depth bends only at the seams between the low-resolution samples, the same columns in every row and the
     same rows in every column: K is the largest factor from ``UPSAMPLED_MIN`` to ``UPSAMPLED_MAX`` for which, along
@@ -877,9 +886,13 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
     samples; 1 where no factor passes, or where fewer than ``MIN_SAMPLES`` stencils were valid along either
     direction. In every pass the share modulo K + 1 must be at least ``UPSAMPLED_CONTRAST`` lower (seams repeat every
     K pixels; differences piled at a few places do not). A factor K makes its divisors pass too, hence the largest.
-    Where no pass finds one on a frame of at least 2 ``UPSAMPLED_DRIFT_SPAN`` pixels along a side, they run again with
-    the positions in parts of about that many pixels, each part at its own phase: the seams of a factor that is not a
-    whole number drift against any whole K. See :mod:`surfnorm._constants`."""
+    A factor halfway between whole ones (a phone's 256x192 depth brought to its 1920x1440 colour: 7.5) puts its seams
+    7 and 8 pixels apart in turn, spread over the phases of any whole K; after each pass for whole factors the same is
+    asked of those between its bounds (K + 0.5, the positions folded modulo K + 0.5 in half-pixel phases:
+    :func:`seam_share`'s ``q``), whose factor is then returned (a float). Where no pass finds one on a frame of at
+    least 2 ``UPSAMPLED_DRIFT_SPAN`` pixels along a side, they run again with the positions in parts of about that
+    many pixels, each part at its own phase: the seams of a factor that is neither drift against it. See
+    :mod:`surfnorm._constants`."""
     H, W = z.shape
     k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     if k_high < UPSAMPLED_MIN:
@@ -896,9 +909,14 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
         rounds.append(drift)
     fourths = None
     for chunks in rounds:
-        k = int(_seam_factor(*bends, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, *chunks))
+        k = int(_seam_factor(*bends, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, *chunks, 1))
         if k > 1:
             return k
+        # a factor halfway between whole ones: its seams 7 and 8 pixels apart in turn (7.5x), folded modulo 7.5; before
+        # the fourth differences, whose wider stencils pile 10.5x's seams on four of every 7 pixels
+        k = int(_seam_factor(*bends, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, *chunks, 2))
+        if k > 1:
+            return k / 2
         if fourths is None:
             fourths = np.empty(W), np.empty(H)
             n_u, n_v = _fourths(z, valid, step, *fourths)
@@ -906,8 +924,9 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> int:
                 fourths = ()
         if not fourths:
             continue
-        for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-            k = int(_seam_factor(*fourths, k_low, min(k_top, k_high), share, 4, *chunks))
-            if k > 1:
-                return k
+        for q in (1, 2):  # whole factors, then those halfway between them
+            for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+                k = int(_seam_factor(*fourths, k_low, min(k_top, k_high), share, 4, *chunks, q))
+                if k > 1:
+                    return k if q == 1 else k / 2
     return 1

@@ -903,19 +903,19 @@ def _fourths_along(a: torch.Tensor, ok: torch.Tensor) -> tuple[torch.Tensor, tor
     return F.pad(x.sum(dim=1), (2, 2)), every.sum(dim=(1, 2))
 
 
-def _seam_share(along: torch.Tensor, k: int, width: int, chunks: int = 1) -> torch.Tensor:
-    """``sensor_noise.seam_share`` of every frame's differences (B, N) on ``width`` neighbouring positions, in
-    ``chunks`` consecutive parts each at its own phase: (B,)."""
+def _seam_share(along: torch.Tensor, k: int, width: int, chunks: int = 1, q: int = 1) -> torch.Tensor:
+    """``sensor_noise.seam_share`` of every frame's differences (B, N) on ``width`` neighbouring positions modulo the
+    factor k / q (k phases of 1 / q pixel), in ``chunks`` consecutive parts each at its own phase: (B,)."""
     B, N = along.shape
     i = torch.arange(N, device=along.device)
     # position i lies in part c where c N // chunks <= i < (c + 1) N // chunks
     starts = torch.tensor([c * N // chunks for c in range(1, chunks)], dtype=i.dtype, device=along.device)
     part = torch.bucketize(i, starts, right=True)
     by_phase = torch.zeros((B, chunks * k), dtype=along.dtype, device=along.device)
-    by_phase = by_phase.index_add_(1, part * k + i % k, along).view(B, chunks, k)
+    by_phase = by_phase.index_add_(1, part * k + (q * i) % k, along).view(B, chunks, k)
     total = by_phase.sum(dim=(1, 2))
     run = by_phase
-    for j in range(1, width):
+    for j in range(1, q * width):
         run = run + torch.roll(by_phase, -j, dims=2)
     most = run.amax(dim=2).sum(dim=1)
     return torch.where(total > 0.0, most / torch.where(total > 0.0, total, torch.ones_like(total)), 0.0)
@@ -931,28 +931,32 @@ def _factors(
     width: int,
     out: torch.Tensor,
     chunks: tuple[int, int] = (1, 1),
+    q: int = 1,
 ) -> torch.Tensor:
     """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils (the positions in
-    ``chunks`` parts along u and along v)."""
-    # each k's shares once: k is also the k + 1 of k - 1
+    ``chunks`` parts along u and along v): the factor k / q into ``out`` (whole factors for ``q`` 1, those halfway
+    between whole ones for ``q`` 2)."""
+    numerators = [k for k in range(q * k_low, q * k_high + 1) if q == 1 or k % q]
+    # each factor's shares once: f is also the f + 1 of f - 1
     shares = {
-        k: [_seam_share(along, k, width, c) for along, c in zip((along_u, along_v), chunks)]
-        for k in range(k_low, k_high + 2)
+        k: [_seam_share(along, k, width, c, q) for along, c in zip((along_u, along_v), chunks)]
+        for k in sorted(set(numerators) | {k + q for k in numerators})
     }
-    for k in range(k_high, k_low - 1, -1):
+    for k in numerators[::-1]:
         seams = enough & (out == 1)
-        for here, above in zip(shares[k], shares[k + 1]):
+        for here, above in zip(shares[k], shares[k + q]):
             seams = seams & (here >= share) & (above <= here - UPSAMPLED_CONTRAST)
-        out = torch.where(seams, k, out)
+        out = torch.where(seams, k / q, out)
     return out
 
 
 def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """``sensor_noise.upsampling_factor`` of every frame: z (B, H, W) float64 (any value where invalid), valid
-    (B, H, W); (B,) int64, 1 where none is found (bilinear or nearest seams first, then bicubic ones; then both
-    again with the positions in parts, for seams that drift)."""
+    (B, H, W); (B,) float64, 1 where none is found (bilinear or nearest seams first, of a whole factor, then of one
+    halfway between whole ones, then bicubic ones, the same two ways; then all again with the positions in parts,
+    for seams that drift)."""
     B, H, W = z.shape
-    out = torch.ones(B, dtype=torch.int64, device=z.device)
+    out = torch.ones(B, dtype=torch.float64, device=z.device)
     k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     if k_high < UPSAMPLED_MIN:
         return out
@@ -971,8 +975,10 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         rounds.append(drift)
     for chunks in rounds:
         out = _factors(bends_u, bends_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out, chunks)
-        for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-            out = _factors(fourths_u, fourths_v, enough, k_low, min(k_top, k_high), share, 4, out, chunks)
+        out = _factors(bends_u, bends_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out, chunks, 2)
+        for q in (1, 2):
+            for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+                out = _factors(fourths_u, fourths_v, enough, k_low, min(k_top, k_high), share, 4, out, chunks, q)
     return out
 
 
@@ -1061,7 +1067,7 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
         factor = torch.where(searched, upsampling_factors(z.detach(), g.valid), 1)
     upsampled = factor > 1
     # each upsampled frame's window side (upsampled_window: wider where the frame reads as sensor depth); 0 elsewhere
-    side = torch.zeros_like(factor)
+    side = torch.zeros(factor.shape, dtype=torch.int64, device=factor.device)
     if bool(upsampled.any()):
         for k in factor[upsampled].unique().tolist():
             for noisy in (False, True):

@@ -9,7 +9,8 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 
 - ``upsampled_linear:K``: a sensor of 1/K the resolution (every K-th pixel), 0.4 % depth noise there, resized back
   to the frame bilinearly (a low-resolution time-of-flight or phone LiDAR registered to a colour camera, or a depth
-  completion's output);
+  completion's output); K a whole number or one halfway between two (7.5: a phone's 256x192 depth brought to its
+  1920x1440 colour; the pixel nearest each sample's centre, (i + 0.5) K - 0.5);
 - ``upsampled_nearest:K``: the same, resized back to the nearest pixel;
 - ``upsampled_cubic:K``: the same, resized back bicubically (OpenCV's ``INTER_CUBIC``);
 - ``median_mm``: 0.2 % noise, whole millimetres, then a 5x5 median filter (a common clean-up);
@@ -35,6 +36,7 @@ Every library runs on one thread.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -83,14 +85,26 @@ def parse_family(text: str) -> tuple[str, float]:
         if factor:
             raise InputError(f"--families: {name} takes no factor, got {text!r}")
         return name, 0
-    if not factor.isdigit() or not 2 <= int(factor) <= 16:
-        raise InputError(f"--families: expected {name}:K with K from 2 to 16, got {text!r}")
-    return name, int(factor)
+    try:
+        k = float(factor)
+    except ValueError:
+        k = float("nan")
+    if not (2 <= k <= 16 and (2 * k).is_integer()):
+        raise InputError(f"--families: expected {name}:K with K from 2 to 16, whole or halfway (7.5), got {text!r}")
+    return name, int(k) if k.is_integer() else k
 
 
-def low_resolution(z: np.ndarray, k: int, rng) -> np.ndarray:
-    """Every k-th pixel of ``z`` (0 where invalid), with 0.4 % multiplicative noise: the sensor of 1/k resolution."""
-    low = z[k // 2 :: k, k // 2 :: k].astype(np.float32)
+def sampled(n: int, k: float) -> np.ndarray:
+    """The pixels of a side of n that a sensor of 1/k the resolution samples: floor((i + 0.5) k), the nearest to its
+    pixel i's centre (i + 0.5) k - 0.5 (i k + k // 2 for a whole k)."""
+    centres = (np.arange(math.ceil(n / k) + 1) + 0.5) * k
+    return np.floor(centres[centres < n]).astype(np.int64)
+
+
+def low_resolution(z: np.ndarray, k: float, rng) -> np.ndarray:
+    """Every k-th pixel of ``z`` (0 where invalid; :func:`sampled`), with 0.4 % multiplicative noise: the sensor of 1/k
+    resolution."""
+    low = z[np.ix_(sampled(z.shape[0], k), sampled(z.shape[1], k))].astype(np.float32)
     return np.where(low > 0, low * (1.0 + 0.004 * rng.standard_normal(low.shape)), 0.0).astype(np.float32)
 
 
@@ -123,7 +137,7 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
     import cv2
 
     if family.startswith("upsampled"):
-        return resized(family, low_resolution(np.where(valid, z, 0.0), int(k), rng), valid)
+        return resized(family, low_resolution(np.where(valid, z, 0.0), k, rng), valid)
     if family == "median_mm":
         noisy = np.round(z * (1.0 + 0.002 * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
         out = cv2.medianBlur(np.where(valid, noisy, 0.0).astype(np.float32), 5)
@@ -150,13 +164,15 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
     return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
 
 
-def native_camera(K: np.ndarray, k: int) -> np.ndarray:
-    """The intrinsics of the 1/k sensor of :func:`low_resolution` (its pixel i is the frame's pixel i k + k // 2)."""
+def native_camera(K: np.ndarray, k: float) -> np.ndarray:
+    """The intrinsics of the 1/k sensor of :func:`low_resolution` (its pixel i is the frame's pixel i k + k // 2 for a
+    whole k, (i + 0.5) k - 0.5 for one halfway between two)."""
+    shift = k // 2 if float(k).is_integer() else k / 2 - 0.5
     Kn = np.array(K, np.float64)
     Kn[0, 0] /= k
     Kn[1, 1] /= k
-    Kn[0, 2] = (K[0, 2] - k // 2) / k
-    Kn[1, 2] = (K[1, 2] - k // 2) / k
+    Kn[0, 2] = (K[0, 2] - shift) / k
+    Kn[1, 2] = (K[1, 2] - shift) / k
     return Kn
 
 
@@ -202,7 +218,7 @@ def main(argv=None) -> int:
             z = np.where(valid, z, 0.0).astype(np.float32)
             low = None
             if family.startswith("upsampled"):  # made once: the frame resized from it, and the default on it
-                low = low_resolution(z, int(k), np.random.default_rng(i))
+                low = low_resolution(z, k, np.random.default_rng(i))
                 got = resized(family, low, valid)
             else:
                 got = degrade(family, k, z, valid, np.random.default_rng(i))
@@ -210,7 +226,7 @@ def main(argv=None) -> int:
             for e in entries:
                 errors[e.label].append(mean_angular_error(e.normals(got, frame.K, got > 0), frame.normals, scored))
             if low is not None:
-                n = estimate(low, native_camera(frame.K.matrix, int(k)), threads=1)
+                n = estimate(low, native_camera(frame.K.matrix, k), threads=1)
                 n = cv2.resize(n, z.shape[::-1], interpolation=cv2.INTER_NEAREST)
                 native.append(mean_angular_error(n, frame.normals, scored))
         label = family + (f":{k:g}" if k else "")

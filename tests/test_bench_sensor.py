@@ -483,6 +483,19 @@ def test_families_deliver_what_they_say():
         [(j * k + k // 2 - K[0, 2]) / K[0, 0], (i * k + k // 2 - K[1, 2]) / K[1, 1]],
         rtol=1e-12,
     )
+    # a factor halfway between whole ones: the pixel nearest each sample's centre, (i + 0.5) k - 0.5
+    np.testing.assert_array_equal(script.sampled(10, 2.5), [1, 3, 6, 8])
+    for n in (96, 120, 7):
+        for whole in (2, 3, 4, 5):
+            np.testing.assert_array_equal(script.sampled(n, whole), np.arange(n)[whole // 2 :: whole])
+    half = script.low_resolution(np.where(valid, z, 0.0), 2.5, np.random.default_rng(0))
+    assert half.shape == (38, 48)
+    got = script.degrade("upsampled_linear", 2.5, z, valid, np.random.default_rng(0))
+    assert got.shape == z.shape and (got[~valid] == 0).all()
+    Kh = script.native_camera(K, 2.5)
+    np.testing.assert_allclose((j - Kh[0, 2]) / Kh[0, 0], ((j + 0.5) * 2.5 - 0.5 - K[0, 2]) / K[0, 0], rtol=1e-12)
+    assert script.parse_family("upsampled_cubic:7.5") == ("upsampled_cubic", 7.5)
+    assert script.parse_family("upsampled_cubic:8") == ("upsampled_cubic", 8)
     for family in ("median_mm", "tof_mm"):
         got = script.degrade(family, 0, z, valid, np.random.default_rng(0)).astype(np.float64)
         mm = got[valid] * 1000.0
@@ -533,7 +546,9 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
     script = _benchmark_script("families")
     for arg, tail in (
         ("median_mm,sonar", "got 'sonar'"),
-        ("upsampled_linear:1", "with K from 2 to 16, got 'upsampled_linear:1'"),
+        ("upsampled_linear:1", "with K from 2 to 16, whole or halfway (7.5), got 'upsampled_linear:1'"),
+        ("upsampled_linear:7.3", "with K from 2 to 16, whole or halfway (7.5), got 'upsampled_linear:7.3'"),
+        ("upsampled_cubic:x", "with K from 2 to 16, whole or halfway (7.5), got 'upsampled_cubic:x'"),
         ("tof_mm:2", "tof_mm takes no factor, got 'tof_mm:2'"),
         ("white:0", "with P a percent above 0 and at most 5, got 'white:0'"),
         ("white:x", "with P a percent above 0 and at most 5, got 'white:x'"),
@@ -542,6 +557,33 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and err.startswith("families: --families: ") and err.endswith(tail), err
+
+
+def test_resized_frames_enlarge_a_frame_with_its_reference_and_intrinsics(tmp_path, capsys):
+    """resized_frames.py --enlarge: a frame resized K times larger (7.5: a phone's depth at its colour's size), its
+    pixel i at (i + 0.5) K - 0.5 of the larger frame along the same ray, its planes' masks resized with it: the
+    default's normals of an enlarged plane scene still lie on its planes. Frames too large are left out."""
+    import surfnorm
+    from surfnorm.bench.sensor import read_sensor_frame, score_frame
+
+    script = _benchmark_script("resized_frames")
+    z, n, m = plane_scene()
+    write_frame(tmp_path / "frames" / "a", z, planes=(n, m))
+    f = read_sensor_frame(tmp_path / "frames" / "a")
+    big = script.enlarged(f, 2.5)
+    assert big.depth.shape == (150, 200) and big.planes[1].shape == (2, 150, 200) and big.depth.dtype == np.float32
+    for j in (0, 13, 79):
+        assert ((j + 0.5) * 2.5 - 0.5 - big.K.cx) / big.K.fx == pytest.approx((j - f.K.cx) / f.K.fx, abs=1e-12)
+    assert m.sum(axis=(1, 2)) * 6.25 == pytest.approx(big.planes[1].sum(axis=(1, 2)), rel=0.05)
+    assert score_frame(surfnorm.estimate(big.depth, big.K), big)[1] < 1.0
+    assert script.main([str(tmp_path / "frames"), "--enlarge", "--factors", "2.5,4", "--methods", "auto"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert sum(line.startswith("| 2.5 | a |") or line.startswith("| 4 | a |") for line in out) == 2, out
+    script.ENLARGED_MAX = 1000  # 80 pixels x 16
+    assert script.main([str(tmp_path / "frames"), "--enlarge", "--factors", "16", "--methods", "auto"]) == 2
+    captured = capsys.readouterr()
+    assert "(left out: a: over 1000 pixels along a side when enlarged)" in captured.out
+    assert captured.err.strip().startswith("resized_frames: ") and captured.err.count("\n") == 1
 
 
 def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):
@@ -575,7 +617,11 @@ def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):
     assert script.main([str(tmp_path / "frames"), "--interpolation", "area"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "resized_frames: --interpolation: expected linear or cubic, got 'area'", err
-    for bad in ("1", "4,x", "", "17"):
+    for bad in ("1", "4,x", "", "17", "7.3"):
         assert script.main([str(tmp_path / "frames"), "--factors", bad]) == 2
         err = capsys.readouterr().err.strip()
-        assert err.startswith("resized_frames: --factors: expected whole numbers from 2 to 16") and err.count("\n") == 0
+        assert err.startswith("resized_frames: --factors: expected numbers from 2 to 16, whole or halfway (7.5)")
+        assert err.count("\n") == 0 and err.endswith(f"got {bad!r}")
+    assert script.parse_factors("4,7.5,8") == [4, 7.5, 8]
+    np.testing.assert_array_equal(script._sampled(10, 2.5), [1, 3, 6, 8])
+    np.testing.assert_array_equal(script._sampled(97, 4), np.arange(97)[2::4])

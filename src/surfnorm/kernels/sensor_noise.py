@@ -830,8 +830,12 @@ def seam_share(bends, k, width, chunks, q):
         hi = (c + 1) * n // chunks
         part = 0.0
         phases[:] = 0.0
+        at = (q * lo) % k  # position i's phase, q i modulo k, kept by steps (no division per position)
         for i in range(lo, hi):
-            phases[(q * i) % k] += bends[i]
+            phases[at] += bends[i]
+            at += q
+            if at >= k:
+                at -= k
         for p in range(k):
             part += phases[p]
         most = 0.0

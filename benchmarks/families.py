@@ -59,7 +59,8 @@ FAMILIES = (
 )
 DEFAULT = (
     "upsampled_linear:4,upsampled_linear:5,upsampled_linear:6,upsampled_linear:8,upsampled_linear:12,"
-    "upsampled_nearest:8,upsampled_cubic:5,upsampled_cubic:6,upsampled_cubic:8,upsampled_cubic:12,median_mm,tof_mm,"
+    "upsampled_linear:7.5,upsampled_nearest:8,upsampled_cubic:5,upsampled_cubic:6,upsampled_cubic:8,upsampled_cubic:12,"
+    "upsampled_cubic:7.5,median_mm,tof_mm,"
     "smooth_warp,"
     "white:0.01,white:0.02,white:0.05,white:0.2,mm,outliers,bilateral,flying,blurred"
 )

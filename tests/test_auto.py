@@ -603,7 +603,8 @@ def fractional_scene(s, size, interpolation="linear", noise=0.004, seed=0):
 
 
 @pytest.mark.parametrize(
-    "s, interpolation", [(4.5, "linear"), (7.5, "linear"), (7.5, "nearest"), (10.5, "linear"), (7.5, "cubic")]
+    "s, interpolation",
+    [(4.5, "linear"), (7.5, "linear"), (7.5, "nearest"), (10.5, "linear"), (7.5, "cubic"), (6.5, "cubic")],
 )
 def test_upsampling_factor_finds_a_factor_halfway_between_whole_ones(s, interpolation):
     """7.5x: the seams lie 7 and 8 pixels apart in turn, so they spread over the phases of any whole factor; folded
@@ -612,7 +613,7 @@ def test_upsampling_factor_finds_a_factor_halfway_between_whole_ones(s, interpol
     from surfnorm._constants import UPSAMPLED_SHARE, UPSAMPLED_STEP, noise_step
     from surfnorm.kernels.sensor_noise import _bends, _fourths, seam_share, upsampling_factor
 
-    z, _, _ = fractional_scene(s, 270 if s == 4.5 else 240 if s == 7.5 else 252, interpolation)
+    z, _, _ = fractional_scene(s, {4.5: 270, 6.5: 260, 7.5: 240, 10.5: 252}[s], interpolation)
     assert upsampling_factor(z, z > 0) == s
     kernel, width = (_fourths, 4) if interpolation == "cubic" else (_bends, 2)
     u, v = np.empty(z.shape[1]), np.empty(z.shape[0])

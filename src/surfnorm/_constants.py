@@ -185,9 +185,11 @@ UPSAMPLED_CUBIC_CLOSE = 7
 UPSAMPLED_CONTRAST = 0.1
 UPSAMPLED_CUBIC_CLOSE_SHARE = 0.97
 #: The passes over the fourth differences, in order: (lowest K, highest K (then at most UPSAMPLED_MAX and a quarter
-#: of the frame's sides), share on four positions). Shared by ``sensor_noise.upsampling_factor`` and the torch backend.
+#: of the frame's sides), share on four positions); each for the whole factors between its bounds, then for those
+#: halfway between whole ones (7.5): the first from 6.5 (without a resize about 4 / 6.5 = 0.62 there), the second
+#: 5.5 only (4.5 would be too near, 0.89). Shared by ``sensor_noise.upsampling_factor`` and the torch backend.
 UPSAMPLED_FOURTH_PASSES = (
-    (UPSAMPLED_CUBIC_CLOSE, UPSAMPLED_MAX, UPSAMPLED_SHARE),
+    (UPSAMPLED_CUBIC_CLOSE - 0.5, UPSAMPLED_MAX, UPSAMPLED_SHARE),
     (UPSAMPLED_CUBIC_MIN, UPSAMPLED_CUBIC_CLOSE - 1, UPSAMPLED_CUBIC_CLOSE_SHARE),
 )
 #: The seams are looked for on every UPSAMPLED_STEP-th row and column that the noise measurement samples

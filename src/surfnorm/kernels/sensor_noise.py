@@ -852,18 +852,20 @@ def seam_share(bends, k, width, chunks, q):
 @ahead_of_time
 @njit
 def _seam_factor(along_u, along_v, k_low, k_high, share, width, chunks_u, chunks_v, q):
-    """The largest factor k / q from ``k_high`` down to ``k_low`` (whole factors for ``q`` 1; for ``q`` 2 those
-    halfway between whole ones) whose :func:`seam_share` on ``width`` positions (in ``chunks_u`` and ``chunks_v``
-    parts) reaches ``share`` along both, and exceeds that of the factor + 1 by ``UPSAMPLED_CONTRAST`` along both
-    (seams repeat every k / q pixels: differences piled at a few places, a clean planar scene's creases, hold as much
-    at every factor): its numerator k, or 1."""
-    top = q * (k_high + 1)
+    """The largest factor k / q from ``k_high`` down to ``k_low`` (both included where they are such factors: whole
+    factors for ``q`` 1; for ``q`` 2 those halfway between whole ones) whose :func:`seam_share` on ``width`` positions
+    (in ``chunks_u`` and ``chunks_v`` parts) reaches ``share`` along both, and exceeds that of the factor + 1 by
+    ``UPSAMPLED_CONTRAST`` along both (seams repeat every k / q pixels: differences piled at a few places, a clean
+    planar scene's creases, hold as much at every factor): its numerator k, or 1."""
+    lo = math.ceil(q * k_low)
+    hi = math.floor(q * k_high)
+    top = hi + q
     shares = np.zeros((2, max(top + 1, 1)))  # each factor's shares once: f is also the f + 1 of f - 1
-    for k in range(q * k_low, top + 1):
+    for k in range(lo, top + 1):
         if q == 1 or k % q != 0:
             shares[0, k] = seam_share(along_u, k, width, chunks_u, q)
             shares[1, k] = seam_share(along_v, k, width, chunks_v, q)
-    for k in range(q * k_high, q * k_low - 1, -1):
+    for k in range(hi, lo - 1, -1):
         if q > 1 and k % q == 0:
             continue
         passes = True
@@ -893,7 +895,8 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
     A factor halfway between whole ones (a phone's 256x192 depth brought to its 1920x1440 colour: 7.5) puts its seams
     7 and 8 pixels apart in turn, spread over the phases of any whole K; after each pass for whole factors the same is
     asked of those between its bounds (K + 0.5, the positions folded modulo K + 0.5 in half-pixel phases:
-    :func:`seam_share`'s ``q``), whose factor is then returned (a float). Where no pass finds one on a frame of at
+    :func:`seam_share`'s ``q``; 4.5 to 14.5 on the bends, 6.5 to 14.5 and 5.5 on the fourth differences), whose
+    factor is then returned (a float). Where no pass finds one on a frame of at
     least 2 ``UPSAMPLED_DRIFT_SPAN`` pixels along a side, they run again with the positions in parts of about that
     many pixels, each part at its own phase: the seams of a factor that is neither drift against it. See
     :mod:`surfnorm._constants`."""
@@ -913,12 +916,12 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
         rounds.append(drift)
     fourths = None
     for chunks in rounds:
-        k = int(_seam_factor(*bends, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, *chunks, 1))
+        k = int(_seam_factor(*bends, float(UPSAMPLED_MIN), float(k_high), UPSAMPLED_SHARE, 2, *chunks, 1))
         if k > 1:
             return k
         # a factor halfway between whole ones: its seams 7 and 8 pixels apart in turn (7.5x), folded modulo 7.5; before
         # the fourth differences, whose wider stencils pile 10.5x's seams on four of every 7 pixels
-        k = int(_seam_factor(*bends, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, *chunks, 2))
+        k = int(_seam_factor(*bends, float(UPSAMPLED_MIN), float(k_high), UPSAMPLED_SHARE, 2, *chunks, 2))
         if k > 1:
             return k / 2
         if fourths is None:
@@ -930,7 +933,7 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
             continue
         for q in (1, 2):  # whole factors, then those halfway between them
             for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-                k = int(_seam_factor(*fourths, k_low, min(k_top, k_high), share, 4, *chunks, q))
+                k = int(_seam_factor(*fourths, float(k_low), float(min(k_top, k_high)), share, 4, *chunks, q))
                 if k > 1:
                     return k if q == 1 else k / 2
     return 1

@@ -925,8 +925,8 @@ def _factors(
     along_u: torch.Tensor,
     along_v: torch.Tensor,
     enough: torch.Tensor,
-    k_low: int,
-    k_high: int,
+    k_low: float,
+    k_high: float,
     share: float,
     width: int,
     out: torch.Tensor,
@@ -936,7 +936,7 @@ def _factors(
     """``sensor_noise._seam_factor`` of every frame still at 1 in ``out`` with ``enough`` stencils (the positions in
     ``chunks`` parts along u and along v): the factor k / q into ``out`` (whole factors for ``q`` 1, those halfway
     between whole ones for ``q`` 2)."""
-    numerators = [k for k in range(q * k_low, q * k_high + 1) if q == 1 or k % q]
+    numerators = [k for k in range(math.ceil(q * k_low), math.floor(q * k_high) + 1) if q == 1 or k % q]
     # each factor's shares once: f is also the f + 1 of f - 1
     shares = {
         k: [_seam_share(along, k, width, c, q) for along, c in zip((along_u, along_v), chunks)]

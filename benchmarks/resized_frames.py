@@ -5,8 +5,9 @@
 
 Each frame of SENSOR_DIR (default ../shared/data/sensor-sample beside the repository; the layout of
 `surfnorm bench --sensor`) keeps every K-th pixel of its depth (starting at K // 2; K may be halfway between whole
-numbers, 7.5: then the pixel nearest each sample's centre), its own sensor's noise included, and is resized back to its size by OpenCV (bilinear, or bicubic with ``--interpolation cubic``), with no
-depth where the nearest low pixel had none:
+numbers, 7.5: then the pixel nearest each sample's centre), its own sensor's noise included, and is resized back to
+its size by OpenCV (bilinear, or bicubic with ``--interpolation cubic``), with no depth where the nearest low pixel
+had none:
 a low-resolution time-of-flight camera or phone LiDAR registered to a colour camera, on real scenes. Per factor and
 frame: the sensor benchmark's score (the mean folded angle to its reference planes, or e_A against its gt.npy;
 sparse frames, under half of whose pixels hold depth (LiDAR: a resize mixes its gaps with depth), are left out) of

@@ -629,6 +629,34 @@ def test_upsampling_factor_finds_a_factor_halfway_between_whole_ones(s, interpol
     assert max(seam_share(u, half + 2, width, 1, 2), seam_share(v, half + 2, width, 1, 2)) < UPSAMPLED_SHARE
 
 
+@pytest.mark.parametrize("s", [2.5, 3, 3.5])
+def test_upsampling_factor_finds_small_factors_by_the_positions_a_resize_leaves_empty(s):
+    """Under UPSAMPLED_MIN the seams fall on two of every 2.5-3.5 positions, which depth without seams fills 0.67-0.89
+    of too; a resize leaves the rest empty, so UPSAMPLED_SMALL_SHARE is asked there (a phone's 256x192 depth brought
+    to 640x480: 2.5)."""
+    from surfnorm._constants import UPSAMPLED_SMALL_SHARE, UPSAMPLED_STEP, noise_step
+    from surfnorm.kernels.sensor_noise import _bends, seam_share, upsampling_factor
+
+    z, K, exact = fractional_scene(s, {2.5: 240, 3: 240, 3.5: 252}[s], noise=0.0005)
+    assert upsampling_factor(z, z > 0) == s
+    d = surfnorm.auto_decision(z, K)
+    assert (d.method, d.upsampled) == ("adaptive_fit", s)
+    np.testing.assert_array_equal(
+        surfnorm.estimate(z, K), surfnorm.estimate(z, K, method="adaptive_fit", window=upsampled_window(s))
+    )
+    u, v = np.empty(z.shape[1]), np.empty(z.shape[0])
+    _bends(z, z > 0, UPSAMPLED_STEP * noise_step(*z.shape), u, v)
+    k, q = (int(2 * s), 2) if s % 1 else (int(s), 1)
+    assert min(seam_share(u, k, 2, 1, q), seam_share(v, k, 2, 1, q)) >= UPSAMPLED_SMALL_SHARE
+    # depth that was not resized fills most of those positions, but not all
+    plane, _ = slanted_plane()
+    noisy = (plane * (1 + 0.001 * np.random.default_rng(0).standard_normal(plane.shape))).astype(np.float32)
+    pu, pv = np.empty(noisy.shape[1]), np.empty(noisy.shape[0])
+    _bends(noisy, noisy > 0, UPSAMPLED_STEP * noise_step(*noisy.shape), pu, pv)
+    assert 0.5 < min(seam_share(pu, k, 2, 1, q), seam_share(pv, k, 2, 1, q)) < UPSAMPLED_SMALL_SHARE
+    assert upsampling_factor(noisy, noisy > 0) == 1
+
+
 def test_auto_fits_depth_upsampled_by_a_half_factor_with_windows_over_its_seams():
     from surfnorm.metrics import mean_angular_error
 
@@ -765,11 +793,12 @@ def test_torch_finds_half_factors_and_fits_them_as_numpy_does():
 
     frames = [fractional_scene(7.5, 240)[0], upsampled_scene(8)[0]]
     frames += [fractional_scene(7.5, 240, "nearest", seed=3)[0], fractional_scene(7.5, 240, "cubic", seed=4)[0]]
+    frames += [fractional_scene(2.5, 240, noise=0.0005, seed=5)[0]]
     K = fractional_scene(7.5, 240)[1]
     stack = np.stack(frames).astype(np.float32)
     t = torch.from_numpy(stack).double()
     factors = _adaptive.upsampling_factors(torch.where(t > 0, t, 1.0), t > 0)
-    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [7.5, 8, 7.5, 7.5]
+    assert factors.tolist() == [upsampling_factor(f, f > 0) for f in frames] == [7.5, 8, 7.5, 7.5, 2.5]
     want = np.stack([surfnorm.estimate(f, K) for f in frames])
     got = st.estimate(torch.from_numpy(stack)[:, None], torch.from_numpy(K), method="auto")
     np.testing.assert_allclose(got.permute(0, 2, 3, 1).numpy(), want, atol=2e-6, rtol=0)

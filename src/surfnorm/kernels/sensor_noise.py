@@ -49,6 +49,8 @@ from .._constants import (
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
+    UPSAMPLED_SMALL,
+    UPSAMPLED_SMALL_SHARE,
     UPSAMPLED_STEP,
     noise_step,
     stride_gain,
@@ -898,8 +900,10 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
     :func:`seam_share`'s ``q``; 4.5 to 14.5 on the bends, 6.5 to 14.5 and 5.5 on the fourth differences), whose
     factor is then returned (a float). Where no pass finds one on a frame of at
     least 2 ``UPSAMPLED_DRIFT_SPAN`` pixels along a side, they run again with the positions in parts of about that
-    many pixels, each part at its own phase: the seams of a factor that is neither drift against it. See
-    :mod:`surfnorm._constants`."""
+    many pixels, each part at its own phase: the seams of a factor that is neither drift against it. Last, where none
+    passes, the factors under ``UPSAMPLED_MIN`` in ``UPSAMPLED_SMALL`` (2.5, 3, 3.5: a phone's 256x192 depth brought
+    to 640x480) on the bends, with ``UPSAMPLED_SMALL_SHARE``: depth without seams fills most of their two positions of
+    every 2.5-3.5, a resize leaves the rest empty. See :mod:`surfnorm._constants`."""
     H, W = z.shape
     k_high = min(UPSAMPLED_MAX, W // 4, H // 4)
     if k_high < UPSAMPLED_MIN:
@@ -936,4 +940,14 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
                 k = int(_seam_factor(*fourths, float(k_low), float(min(k_top, k_high)), share, 4, *chunks, q))
                 if k > 1:
                     return k if q == 1 else k / 2
+    # factors under UPSAMPLED_MIN (2.5, 3, 3.5), which depth without seams fills most positions of: a resize leaves
+    # the rest empty (UPSAMPLED_SMALL_SHARE)
+    low, high = UPSAMPLED_SMALL
+    for chunks in rounds:
+        k = int(_seam_factor(*bends, low, high, UPSAMPLED_SMALL_SHARE, 2, *chunks, 2))
+        if k > 1:
+            return k / 2
+        k = int(_seam_factor(*bends, low, high, UPSAMPLED_SMALL_SHARE, 2, *chunks, 1))
+        if k > 1:
+            return k
     return 1

@@ -89,6 +89,8 @@ from .._constants import (
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
+    UPSAMPLED_SMALL,
+    UPSAMPLED_SMALL_SHARE,
     UPSAMPLED_STEP,
     noise_step,
     upsampled_window,
@@ -979,6 +981,10 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         for q in (1, 2):
             for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
                 out = _factors(fourths_u, fourths_v, enough, k_low, min(k_top, k_high), share, 4, out, chunks, q)
+    low, high = UPSAMPLED_SMALL  # factors under UPSAMPLED_MIN, last
+    for chunks in rounds:
+        for q in (2, 1):
+            out = _factors(bends_u, bends_v, bent, low, high, UPSAMPLED_SMALL_SHARE, 2, out, chunks, q)
     return out
 
 

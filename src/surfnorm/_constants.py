@@ -183,6 +183,7 @@ UPSAMPLED_CUBIC_CLOSE = 7
 #: 0.29-0.70 against its 1.00 on the test scenes (bilinear, nearest and bicubic, K 4 to 15), and 0.18 less on the
 #: fewest seams measured (3F2N's cube resized bicubically 8 times: a small object, few cells).
 UPSAMPLED_CONTRAST = 0.1
+UPSAMPLED_CUBIC_CLOSE_SHARE = 0.97
 #: Factors under UPSAMPLED_MIN, from 2.5 to 3.5 (a phone's 256x192 depth brought to 640x480: 2.5), where no other
 #: factor passes: their seams fall on two of every 2.5-3.5 positions, which depth without seams also fills 0.67-0.89 of
 #: (at most 0.888, 0.767 and 0.678 at 2.5, 3 and 3.5 on 16 real frames and the clean, millimetre, white-noise,
@@ -191,7 +192,6 @@ UPSAMPLED_CONTRAST = 0.1
 #: 0.6 degrees worse than ``adaptive_fit``'s own (3F2N, 0.05 % noise).
 UPSAMPLED_SMALL = (2.5, 3.5)
 UPSAMPLED_SMALL_SHARE = 0.97
-UPSAMPLED_CUBIC_CLOSE_SHARE = 0.97
 #: The passes over the fourth differences, in order: (lowest K, highest K (then at most UPSAMPLED_MAX and a quarter
 #: of the frame's sides), share on four positions); each for the whole factors between its bounds, then for those
 #: halfway between whole ones (7.5): the first from 6.5 (without a resize about 4 / 6.5 = 0.62 there), the second

@@ -68,8 +68,9 @@ pixels. Where the reading is under ``NOISY_FLOOR``, or ``NoiseProfile.correlatio
 (:func:`searched`), ``auto`` looks for such seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole
 factors from 4 to 15 in the second differences, and for a bicubic resize, which is a cubic between its seams, from 5
 to 15 in the fourth differences; and the factors halfway between, 7.5 for a phone's 256x192 depth brought to its
-1920x1440 colour; last 2.5, 3 and 3.5 on the bends) and, where it finds them, runs ``adaptive_fit`` alone with windows of at least 2 K + 1 pixels
-(2 ceil(K) + 1), about 3 K where the depth reads as sensor depth (:func:`surfnorm._constants.upsampled_window`;
+1920x1440 colour; last 2.5, 3 and 3.5 on the bends) and, where it finds them, runs ``adaptive_fit`` alone with
+windows of at least 2 K + 1 pixels (2 ceil(K) + 1), about 3 K where the depth reads as sensor depth
+(:func:`surfnorm._constants.upsampled_window`;
 bilinear 8x 26 degrees; bicubic 8x 42 -> 30, bicubic 5x, which reads as sensor depth, 41 -> 25).
 
 What each family of depth gets, and the cost of a wrong call, are measured in the

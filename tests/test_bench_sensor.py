@@ -583,7 +583,8 @@ def test_resized_frames_enlarge_a_frame_with_its_reference_and_intrinsics(tmp_pa
     assert script.main([str(tmp_path / "frames"), "--enlarge", "--factors", "16", "--methods", "auto"]) == 2
     captured = capsys.readouterr()
     assert "(left out: a: over 1000 pixels along a side when enlarged)" in captured.out
-    assert captured.err.strip().startswith("resized_frames: ") and captured.err.count("\n") == 1
+    want = f"resized_frames: {tmp_path / 'frames'}: no frame to resize (dense, and small enough)"
+    assert captured.err.strip() == want and captured.err.count("\n") == 1
 
 
 def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):

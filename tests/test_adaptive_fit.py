@@ -232,12 +232,14 @@ def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     from surfnorm.kernels.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
     from surfnorm.kernels.sensor_noise import NoiseProfile
 
-    one = np.ones(1)
-    assert adaptive_weight(NoiseProfile(one, one, CLEAN_FLOOR)) == 0.0
-    assert adaptive_weight(NoiseProfile(one, one, NOISY_FLOOR)) == 1.0
-    assert adaptive_weight(NoiseProfile(one, one, float("nan"))) == 1.0
+    def white(floor):  # white noise: rho as large as the floor (no smooth error)
+        return NoiseProfile(np.ones(1), np.full(1, floor), floor)
+
+    assert adaptive_weight(white(CLEAN_FLOOR)) == 0.0
+    assert adaptive_weight(white(NOISY_FLOOR)) == 1.0
+    assert adaptive_weight(white(float("nan"))) == 1.0
     mid = 0.5 * (CLEAN_FLOOR + NOISY_FLOOR)
-    assert adaptive_weight(NoiseProfile(one, one, mid)) == pytest.approx(0.5)
+    assert adaptive_weight(white(mid)) == pytest.approx(0.5)
     # a sphere with noise that puts the floor inside the band
     H, W = 60, 80
     K = camera(W, H)

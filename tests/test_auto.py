@@ -23,7 +23,7 @@ from surfnorm.kernels.auto import (
     quantisation,
     reading,
 )
-from surfnorm.kernels.sensor_noise import NoiseProfile, kappa_gain, noise_profile
+from surfnorm.kernels.sensor_noise import NoiseProfile, kappa_gain, noise_profile, smooth_error_share
 
 from . import naive_adaptive_fit as naive
 from .conftest import SAMPLE
@@ -211,6 +211,103 @@ def test_smooth_float_error_leans_to_adaptive_fit(simulated):
     assert all(d.smooth > d.floor and d.terraced < TERRACED_LOW for d in decisions)
 
 
+def plane_and_ball(H=240, W=320):
+    """A slanted plane at 2.5 m with a ball of 0.5 m in front of it: depth, exact normals, K."""
+    K = camera(W, H, fov_deg=40)
+    z1, n1, _ = plane(K, H, W, [0.3, -0.2, -1], 2.5)
+    zs, ns, hit = sphere(K, H, W, [0.1, 0.0, 2.2], 0.5)
+    front = hit & (zs < z1)
+    return np.where(front, zs, z1), np.where(front[..., None], ns, n1), K
+
+
+def with_error(z, K, rms, width, seed=0):
+    """``z`` plus Gaussian noise of ``rms`` point spacings (z / f) RMS, smoothed over ``width`` pixels (a Gaussian of
+    that sigma; 0: independent from pixel to pixel), float32."""
+    import cv2
+
+    field = np.random.default_rng(seed).standard_normal(z.shape).astype(np.float32)
+    if width:
+        field = cv2.GaussianBlur(field, (0, 0), width)
+    return (z + rms * field / field.std() * z / K[0, 0]).astype(np.float32)
+
+
+def test_the_smooth_error_share_follows_its_ramps():
+    """smooth_error_share against its definition: ramps of rho / floor (up from SMOOTH_ERROR_LOW to _HIGH, down from
+    SMOOTH_ERROR_SHAPE_LOW to _HIGH), of the floor and of rho (noise, not geometry), multiplied; the reading then
+    lies that share of the way up the blend band, and the check's limits widen by 1 / (1 - share)."""
+    from surfnorm import _constants as c
+
+    def profile(floor, ratio):
+        return NoiseProfile(np.ones(3), np.full(3, floor * ratio), floor, 0.0, 0.0, 0.0)
+
+    mid = 0.5 * (c.SMOOTH_ERROR_LOW + c.SMOOTH_ERROR_HIGH)
+    shape = 0.5 * (c.SMOOTH_ERROR_SHAPE_LOW + c.SMOOTH_ERROR_SHAPE_HIGH)
+    assert smooth_error_share(profile(0.06, 1.0)) == 0.0  # white noise
+    assert smooth_error_share(profile(0.06, mid)) == pytest.approx(0.5)
+    assert smooth_error_share(profile(0.06, 3.0)) == 1.0
+    assert smooth_error_share(profile(0.06, shape)) == pytest.approx(0.5)  # rho on its way to the shape's
+    assert smooth_error_share(profile(0.06, 20.0)) == 0.0
+    floor = 0.5 * (c.SMOOTH_ERROR_FLOOR_LOW + c.SMOOTH_ERROR_FLOOR_HIGH)
+    assert smooth_error_share(profile(floor, 3.0)) == pytest.approx(0.5)
+    assert smooth_error_share(profile(0.01, 3.0)) == 0.0  # too little to move d2nt_v3's normals
+    geometry = 0.5 * (c.GEOMETRY_RHO_LOW + c.GEOMETRY_RHO_HIGH)
+    assert smooth_error_share(profile(geometry / 3.0, 3.0)) == pytest.approx(0.5)
+    assert smooth_error_share(profile(float("nan"), 3.0)) == 0.0 and smooth_error_share(profile(0.0, 3.0)) == 0.0
+    half = profile(0.06, mid)
+    assert reading(half) == pytest.approx(0.5 * (CLEAN_FLOOR + NOISY_FLOOR))
+    assert adaptive_weight(half) == pytest.approx(0.5)
+    assert reading(profile(0.06, 1.0)) == 0.06
+    checked = half._replace(floors=np.full(3, 0.06))
+    edges, limits = consistency_limits(checked)
+    _, unshared = consistency_limits(checked._replace(rho=np.full(3, 0.06)))
+    assert kappa_gain(checked) == 1.0  # independent noise (correlation 1): the same kappa either way
+    np.testing.assert_allclose(limits, 2.0 * unshared)  # 1 / (1 - 0.5)
+    assert consistency_limits(profile(0.06, 3.0)._replace(floors=np.full(3, 0.06))) is None
+
+
+def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
+    """Error of 0.2-0.3 point spacings RMS smoothed over 1-1.5 pixels (a phone's LiDAR depth, a learned stereo
+    matcher's output) reads a floor under CLEAN_FLOOR at the pixel scale, as renders do; its rho is twice its floor
+    and more, so auto runs adaptive_fit, unchecked, and beats d2nt_v3 by far (before, it blended the two, 0.13-0.37
+    of adaptive_fit, by the smooth noise). White noise of the same floor reads as before: d2nt_v3."""
+    from surfnorm.metrics import mean_angular_error
+
+    z, exact, K = plane_and_ball()
+    f = math.sqrt(K[0, 0] * K[1, 1])
+    for width, rms in ((1.0, 0.2), (1.5, 0.3)):
+        smooth = with_error(z, K, rms, width)
+        p = noise_profile(smooth, smooth > 0, f)
+        d = surfnorm.auto_decision(smooth, K)
+        assert p.floor < CLEAN_FLOOR, str(d)  # the pixel scale reads it as clean
+        assert smooth_error_share(p) == 1.0 and (d.method, d.checked) == ("adaptive_fit", False), str(d)
+        assert d.smooth_error == 1.0 and str(d).endswith("smooth error 1.00")
+        e_auto, e_d2nt = (
+            mean_angular_error(surfnorm.estimate(smooth, K, method=m), exact) for m in ("auto", "d2nt_v3")
+        )
+        assert e_auto < 0.6 * e_d2nt, (e_auto, e_d2nt)
+        white = with_error(z, K, p.floor, 0)  # independent noise of the same floor
+        w = surfnorm.auto_decision(white, K)
+        assert w.smooth_error == 0.0 and w.method == "d2nt_v3", str(w)
+
+
+def test_blurred_fine_geometry_is_not_read_as_smooth_error():
+    """The 3F2N sample frames blurred (a Gaussian of 1.5 pixels over the valid depth): their rho is the blurred
+    shape's, 6-18 times the floor on the batman and the temple, so the ones that read clean keep d2nt_v3 (the blur
+    is no noise: d2nt_v3 gives 10.3 degrees on these frames, adaptive_fit 12.8)."""
+    import cv2
+
+    for name in find_frames(SAMPLE):
+        fr = read_frame(SAMPLE, name)
+        valid = fr.mask & (fr.depth > 0)
+        z = np.where(valid, fr.depth, 0.0).astype(np.float32)
+        weight = cv2.GaussianBlur(valid.astype(np.float32), (0, 0), 1.5)
+        blurred = cv2.GaussianBlur(z, (0, 0), 1.5) / np.maximum(weight, 1e-6)
+        blurred = np.where(valid, blurred, 0.0).astype(np.float32)
+        d = surfnorm.auto_decision(blurred, fr.K)
+        if name.split("/")[1] != "tree":  # the tree's blurred leaves read 0.35: sensor depth, as before
+            assert d.method == "d2nt_v3" and d.smooth_error == 0.0, (name, str(d))
+
+
 def test_clean_depth_gets_d2nt_v3(simulated):
     for name, z, K, _ in simulated["exact"]:
         assert surfnorm.auto_decision(z, K).method == "d2nt_v3", name
@@ -255,7 +352,17 @@ def test_torch_reads_the_same(simulated):
             t = _adaptive.noise_tables(torch.where(valid, d, 1.0), valid, f, r_max=15)
             assert t.terraced.item() == p.terraced and t.step.item() == p.step, (sensor, name)
             assert t.smooth.item() == p.smooth, (sensor, name)
+            assert t.smooth_error.item() == smooth_error_share(p), (sensor, name)
             assert _adaptive.adaptive_weight(t).item() == adaptive_weight(p), (sensor, name)
+    z, _, K = plane_and_ball()
+    for width, rms in ((0, 0.06), (1.0, 0.2), (1.5, 0.3), (1.0, 0.08)):  # white, smooth, and smooth in part
+        depth = with_error(z, K, rms, width)
+        p = noise_profile(depth, depth > 0, math.sqrt(K[0, 0] * K[1, 1]))
+        d = torch.from_numpy(depth)[None].double()
+        f = torch.tensor([math.sqrt(K[0, 0] * K[1, 1])], dtype=torch.float64)
+        t = _adaptive.noise_tables(d, d > 0, f, r_max=15)
+        assert t.smooth_error.item() == smooth_error_share(p), (width, rms)
+        assert _adaptive.adaptive_weight(t).item() == adaptive_weight(p), (width, rms)
 
 
 # --- saying what it did -------------------------------------------------------------------------------------
@@ -703,9 +810,12 @@ def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k, interpolation)
 
     z, K, exact = upsampled_scene(k, interpolation)
     d = surfnorm.auto_decision(z, K)
-    assert d.reading < NOISY_FLOOR  # the pixel scale reads it as (nearly) clean
+    assert d.floor < CLEAN_FLOOR  # the pixel scale reads it as (nearly) clean
     assert (d.method, d.weight, d.upsampled, d.checked) == ("adaptive_fit", 1.0, k, False)
-    side = upsampled_window(k)
+    # bicubic 5x: its samples' noise, smoothed by the resize, reads as smooth error (its share 1): sensor depth
+    noisy = (k, interpolation) == (5, "cubic")
+    assert (d.reading >= NOISY_FLOOR, d.smooth_error == 1.0) == (noisy, noisy), str(d)
+    side = upsampled_window(k, noisy)
     assert f"with windows of at least {side} pixels (depth upsampled {k} times)" in str(d)
     got = surfnorm.estimate(z, K)
     np.testing.assert_array_equal(got, surfnorm.estimate(z, K, method="adaptive_fit", window=side))

@@ -127,6 +127,26 @@ TERRACED_LOW = 0.15
 #: ``NoiseProfile.terraced`` at or above which the steps count in full. Raw structured light and stereo matchers
 #: measure 0.4-0.9, and so do registered Kinect v1, RealSense and float16 depth (their floors read noisy already).
 TERRACED_HIGH = 0.30
+#: Error smooth over a few pixels and small (a phone's LiDAR depth through ARKit, a learned stereo matcher's float
+#: output: a network's) shows little at the pixel scale: such frames read floors of 0.04-0.09, as rendered frames do
+#: (0.00-0.07), and ``d2nt_v3`` follows the error. What tells it apart is the noise rho (``NoiseProfile.rho``, the
+#: RMS at strides 1 and 2 with the curvature taken out) over the floor (a median at stride 1): about 1 for white noise
+#: (0.97-1.45 on 3F2N's frames with white noise, 0.6-1.1 with whole millimetres), more where neighbours' errors go
+#: together (1.9 on both ARKit frames, 4.5 on FoundationStereo's, 1.4-3.4 on 3F2N with Gaussian-correlated noise of
+#: 1-2 pixels), and far more where rho is the scene's shape (blurred fine geometry 6-18, clean renders 4-900: their
+#: floors are under 0.02 but the tree's). ``sensor_noise.smooth_error_share`` is the product of a ramp of that ratio
+#: from SMOOTH_ERROR_LOW to SMOOTH_ERROR_HIGH, down again from SMOOTH_ERROR_SHAPE_LOW to SMOOTH_ERROR_SHAPE_HIGH, a
+#: ramp of the floor from SMOOTH_ERROR_FLOOR_LOW to SMOOTH_ERROR_FLOOR_HIGH (under it the error moves d2nt_v3's
+#: normals little; the rendered frames' floors are at most 0.02, the tree's 0.07 aside), and the share of rho that is
+#: noise, not geometry (GEOMETRY_RHO_LOW to GEOMETRY_RHO_HIGH); the frame's reading is then at least that share of
+#: the way from CLEAN_FLOOR to NOISY_FLOOR. Set on 3F2N with correlated, white, millimetre, blurred and smoothly
+#: warped error (``benchmarks/families.py``) and checked on the real frames (docs/choosing.md).
+SMOOTH_ERROR_LOW = 1.3
+SMOOTH_ERROR_HIGH = 1.8
+SMOOTH_ERROR_SHAPE_LOW = 6.0
+SMOOTH_ERROR_SHAPE_HIGH = 9.0
+SMOOTH_ERROR_FLOOR_LOW = 0.02
+SMOOTH_ERROR_FLOOR_HIGH = 0.04
 #: The consistency check (``auto.consistency_limits``): where its two estimators' normals at a pixel are further
 #: apart than CONSISTENT times 2 rho radians (rho: the noise floor at the pixel's depth, in point spacings), the
 #: difference is the scene's, not the noise's: adaptive_fit's window spans detail that d2nt_v3's one-sided
@@ -139,7 +159,8 @@ TERRACED_HIGH = 0.30
 CONSISTENT = 2.0
 #: The check's limits widen as 1 / (1 - s), s going from 0 at this ``NoiseProfile.terraced`` to 1 at TERRACED_HIGH,
 #: where the check stops: depth terraced in full is sensor depth, whose noise the floor does not read (its median
-#: second difference is 0 on terraces). Over the upper third of the terraced ramp, so that depth stored in whole
+#: second difference is 0 on terraces). So does the smooth error's share (``sensor_noise.smooth_error_share``),
+#: where larger: ``d2nt_v3`` follows such error over several pixels, further than the floor explains. Over the upper third of the terraced ramp, so that depth stored in whole
 #: millimetres (terraced 0.06-0.46 by scene) is checked in full up to it: on benchmarks/families.py's millimetres
 #: 8.75 degrees, against 10.93 with the ramp from TERRACED_LOW (its median filter 13.88 against 13.87).
 TERRACED_CHECK = 0.25

@@ -581,8 +581,10 @@ def folder_markdown(result: dict) -> str:
             "## What the default ran",
             "",
             "`auto` decides per frame on its noise reading (point spacings z / f): the largest of the noise floor, "
-            "the smooth noise and the terraces' quantisation noise, and at least 0.20 where the depth is terraced in "
-            "full; `d2nt_v3` at or below 0.10, `adaptive_fit` at or above 0.20, their blend between "
+            "the smooth noise and the terraces' quantisation noise, at least 0.20 where the depth is terraced in "
+            "full, and at least 0.10 + 0.10 s where its error is small and smooth over a few pixels (s, the smooth "
+            "error's share, from 0 to 1: the noise rho over the floor, 1 for white noise); `d2nt_v3` at or below "
+            "0.10, `adaptive_fit` at or above 0.20, their blend between "
             "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
             "pixel (depth not terraced in full, at low noise); upsampled: the factor by which the depth was resized "
             "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
@@ -591,8 +593,8 @@ def folder_markdown(result: dict) -> str:
             "correlation: of the noise between neighbouring pixels (1: independent).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
-            "| checked | upsampled | correlation |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|",
+            "| checked | upsampled | correlation | smooth error |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:
             d = result["decisions"].get(f)
@@ -602,7 +604,7 @@ def folder_markdown(result: dict) -> str:
             checked = "yes" if d.get("checked") else "no"
             out.append(
                 f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1):g} "
-                f"| {_fmt(d.get('correlation'), 2)} |"
+                f"| {_fmt(d.get('correlation'), 2)} | {_fmt(d.get('smooth_error'), 2)} |"
             )
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):

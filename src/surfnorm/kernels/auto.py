@@ -7,7 +7,7 @@ accurate there. Sensor depth (quantised, noisy, sparse) is where wide support
 wins: the adaptive plane fit of inverse depth (``adaptive_fit``).
 
 The choice is made on the frame's *noise reading* (:func:`reading`), in units of
-the point spacing z / f, the largest of three measurements of
+the point spacing z / f, the largest of four measurements of
 :class:`surfnorm.kernels.sensor_noise.NoiseProfile`:
 
 * the noise floor: the median second difference of inverse depth at the pixel
@@ -34,7 +34,17 @@ the point spacing z / f, the largest of three measurements of
   stereo output), which shows little at the pixel scale. Curvature raises one of
   its two estimates and fine detail the other, noise both; the 12 3F2N sample
   frames measure 0.000-0.012, Gaussian-correlated error of one point spacing RMS
-  over 2 pixels 0.14-0.68.
+  over 2 pixels 0.14-0.68;
+* the smooth error's share (:func:`~surfnorm.kernels.sensor_noise.smooth_error_share`),
+  for such error when it is small: a phone's LiDAR depth (ARKit) and a learned
+  stereo matcher's float output read floors of 0.04-0.09 and smooth noise of 0.00-0.04,
+  as renders do, but their noise rho (an RMS at strides 1 and 2, the curvature taken
+  out) is 1.9-4.5 times their floor, where white noise gives about 1 and a render's
+  fine geometry far more (its floor is then under 0.02, or its rho is the shape's).
+  The share goes from 0 to 1 with that ratio and with the floor, and the reading is at
+  least that share of the way from ``CLEAN_FLOOR`` to ``NOISY_FLOOR``; such depth is
+  not checked against ``d2nt_v3`` (below) in the same share: ``d2nt_v3`` follows
+  its error over several pixels, further than the floor explains.
 
 At or below ``CLEAN_FLOOR`` ``d2nt_v3`` runs alone, at or above ``NOISY_FLOOR``
 ``adaptive_fit``; between them the two are blended: the normal is the
@@ -74,11 +84,10 @@ windows of at least 2 K + 1 pixels (2 ceil(K) + 1), about 3 K where the depth re
 bilinear 8x 26 degrees; bicubic 8x 42 -> 30, bicubic 5x, which reads as sensor depth, 41 -> 25).
 
 What each family of depth gets, and the cost of a wrong call, are measured in the
-documentation's "Which method when" page. A limit: error smooth over more than
-a few pixels, small and not quantised shows neither a floor, nor terraces, nor
-much smooth noise, and reads as clean; ``d2nt_v3`` then follows it. Fine clean
-geometry (the foliage of 3F2N's tree) and such error look alike at the pixel
-scale: for depth known to be of that kind, name ``method="adaptive_fit"``.
+documentation's "Which method when" page. A limit: error smooth over many pixels
+(a smooth warp of 15 pixels), whose rho is no more than its floor, reads as clean;
+``d2nt_v3`` then follows it, and so does ``adaptive_fit``'s widest window (on
+``benchmarks/families.py``'s smooth warp the two give 8.5 and 14.1 degrees).
 """
 
 from __future__ import annotations
@@ -121,6 +130,7 @@ from .sensor_noise import (
     quantisation,
     reading,
     reading_weight,
+    smooth_error_share,
     terraced_share,
     upsampling_factor,
 )
@@ -149,8 +159,9 @@ class Decision(NamedTuple):
     weight : float
         ``adaptive_fit``'s weight in the blend: 0 for ``d2nt_v3`` alone, 1 for ``adaptive_fit`` alone.
     reading : float
-        The noise level decided on (point spacings): the largest of ``floor``, ``smooth``, ``quantisation`` and
-        ``NOISY_FLOOR`` times the share in which the frame counts as terraced (:func:`reading`);
+        The noise level decided on (point spacings): the largest of ``floor``, ``smooth``, ``quantisation``,
+        ``NOISY_FLOOR`` times the share in which the frame counts as terraced, and ``smooth_error`` of the way from
+        ``CLEAN_FLOOR`` to ``NOISY_FLOOR`` (:func:`reading`);
         NaN when too few pixels have valid neighbours (sparse depth: ``adaptive_fit``).
     floor, smooth, terraced, step : float
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s.
@@ -170,6 +181,9 @@ class Decision(NamedTuple):
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: how far the noise is correlated between
         neighbouring pixels (1 for independent noise); at or above ``CORRELATED_HIGH`` sensor depth is searched for
         the seams of a resize too (:func:`searched`).
+    smooth_error : float
+        :func:`~surfnorm.kernels.sensor_noise.smooth_error_share`: how far the error is small and smooth over a few
+        pixels (a phone's LiDAR depth, a learned stereo matcher's), from 0 to 1.
     """
 
     method: str
@@ -183,6 +197,7 @@ class Decision(NamedTuple):
     checked: bool = False
     upsampled: float = 1
     correlation: float = 1.0
+    smooth_error: float = 0.0
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
@@ -195,7 +210,8 @@ class Decision(NamedTuple):
             f"auto ran {ran}: noise reading {self.reading:.3f} point spacings (clean at or below {CLEAN_FLOOR:g}, "
             f"sensor at or above {NOISY_FLOOR:g}); floor {self.floor:.3f}, smooth {self.smooth:.3f}, "
             f"terraced {self.terraced:.3f}, "
-            f"step {self.step:.3f}, quantisation {self.quantisation:.3f}, correlation {self.correlation:.2f}"
+            f"step {self.step:.3f}, quantisation {self.quantisation:.3f}, correlation {self.correlation:.2f}, "
+            f"smooth error {self.smooth_error:.2f}"
         )
 
 
@@ -215,6 +231,7 @@ def decision(profile: NoiseProfile, upsampled: float = 1) -> Decision:
         upsampled == 1 and t > 0.0 and consistency_limits(profile) is not None,
         upsampled,
         profile.correlation,
+        smooth_error_share(profile),
     )
 
 
@@ -256,13 +273,15 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     the N - 1 depths between its N bins and each bin's limit on the angle between the two normals at a pixel
     (radians): ``CONSISTENT`` times 2 rho times the frame's :func:`~surfnorm.kernels.sensor_noise.kappa_gain`
     (correlated noise moves a normal more) over 1 - s, s from 0 at ``TERRACED_CHECK`` to 1 at ``TERRACED_HIGH`` of
-    ``NoiseProfile.terraced`` (a frame terraced in full is sensor depth: no limit), where rho is the bin's own noise floor (``NoiseProfile.floors``:
+    ``NoiseProfile.terraced`` (a frame terraced in full is sensor depth: no limit), or the smooth error's share
+    (:func:`~surfnorm.kernels.sensor_noise.smooth_error_share`) where larger (``d2nt_v3`` follows such error), where
+    rho is the bin's own noise floor (``NoiseProfile.floors``:
     noise that grows with depth; the frame's floor where the bin has too few samples), or where the noise is
     correlated (kappa_gain's share of it) the smooth noise if larger: d2nt_v3's small stencils see that. Not the
     frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
     None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
     would not explain), and on a frame terraced in full, without floors, or without a reading (sparse depth)."""
-    share = terraced_share(profile, TERRACED_CHECK)
+    share = max(terraced_share(profile, TERRACED_CHECK), smooth_error_share(profile))
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:
         return None

@@ -40,6 +40,12 @@ from .._constants import (
     MIN_SAMPLES,
     N_BINS,
     NOISY_FLOOR,
+    SMOOTH_ERROR_FLOOR_HIGH,
+    SMOOTH_ERROR_FLOOR_LOW,
+    SMOOTH_ERROR_HIGH,
+    SMOOTH_ERROR_LOW,
+    SMOOTH_ERROR_SHAPE_HIGH,
+    SMOOTH_ERROR_SHAPE_LOW,
     SMOOTH_SHARE,
     TERRACED_HIGH,
     TERRACED_LOW,
@@ -68,6 +74,7 @@ __all__ = [
     "reading",
     "quantisation",
     "terraced_share",
+    "smooth_error_share",
     "upsampling_factor",
 ]
 
@@ -662,17 +669,57 @@ def terraced_share(profile: NoiseProfile, low: float = TERRACED_LOW) -> float:
     return min(max((profile.terraced - low) / (TERRACED_HIGH - low), 0.0), 1.0)
 
 
-def reading(profile: NoiseProfile) -> float:
-    """The noise level ``auto`` decides on: the largest of the floor, the smooth noise, :func:`quantisation` and
-    ``NOISY_FLOOR`` times :func:`terraced_share` (NaN with the floor).
+def _ramp(x: float, low: float, high: float) -> float:
+    """0 at or below ``low``, 1 at or above ``high``, linear between."""
+    return min(max((x - low) / (high - low), 0.0), 1.0)
 
-    The last: depth stored in steps (terraced) is not a float render, whose terraces measure at most 0.10, so its
+
+def smooth_error_share(profile: NoiseProfile) -> float:
+    """How far the frame's error is small and smooth over a few pixels (a phone's LiDAR depth, a learned stereo
+    matcher's output), from 0 to 1: the noise ``rho`` (its median over the depth bins) over the ``floor`` from
+    ``SMOOTH_ERROR_LOW`` to ``SMOOTH_ERROR_HIGH`` (white noise reads about 1, error that neighbours share more), and
+    down again from ``SMOOTH_ERROR_SHAPE_LOW`` to ``SMOOTH_ERROR_SHAPE_HIGH`` (there rho is the scene's shape), times
+    the floor from ``SMOOTH_ERROR_FLOOR_LOW`` to ``SMOOTH_ERROR_FLOOR_HIGH`` and the share of rho that is noise
+    (``GEOMETRY_RHO_LOW`` to ``GEOMETRY_RHO_HIGH``); each a linear ramp (see :mod:`surfnorm._constants`). 0 where
+    the floor is 0 or not a number."""
+    rho = _median(profile.rho)
+    if not (profile.floor > 0.0 and rho == rho):
+        return 0.0
+    ratio = rho / profile.floor
+    correlated = _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH) * (
+        1.0 - _ramp(ratio, SMOOTH_ERROR_SHAPE_LOW, SMOOTH_ERROR_SHAPE_HIGH)
+    )
+    noise = _ramp(profile.floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
+    return correlated * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
+
+
+def smooth_error_reading(profile: NoiseProfile) -> float:
+    """The reading that :func:`smooth_error_share` s gives: s of the way from ``CLEAN_FLOOR`` to ``NOISY_FLOOR``,
+    0 where s is 0."""
+    s = smooth_error_share(profile)
+    return CLEAN_FLOOR + (NOISY_FLOOR - CLEAN_FLOOR) * s if s > 0.0 else 0.0
+
+
+def reading(profile: NoiseProfile) -> float:
+    """The noise level ``auto`` decides on: the largest of the floor, the smooth noise, :func:`quantisation`,
+    ``NOISY_FLOOR`` times :func:`terraced_share` and :func:`smooth_error_reading` (NaN with the floor).
+
+    The fourth: depth stored in steps (terraced) is not a float render, whose terraces measure at most 0.10, so its
     steps are error, however low: a frame terraced in full reads as sensor depth. Without it, millimetre depth
     smoothed by a median filter (steps of a quarter of a point spacing, the noise filtered away) read 0.08-0.17,
-    and ``auto`` gave 15.8 degrees where ``adaptive_fit`` gives 13.3 (``benchmarks/families.py``)."""
+    and ``auto`` gave 15.8 degrees where ``adaptive_fit`` gives 13.3 (``benchmarks/families.py``).
+
+    The last: small error smooth over a few pixels reads floors of 0.04-0.09, as renders do, and ``d2nt_v3``
+    followed it (a phone's LiDAR depth: 5.0 and 5.7 degrees, where ``auto`` now gives 3.5 and 4.2; docs/choosing.md)."""
     if not profile.floor == profile.floor:
         return float("nan")
-    return max(profile.floor, profile.smooth, quantisation(profile), NOISY_FLOOR * terraced_share(profile))
+    return max(
+        profile.floor,
+        profile.smooth,
+        quantisation(profile),
+        NOISY_FLOOR * terraced_share(profile),
+        smooth_error_reading(profile),
+    )
 
 
 def _median(values) -> float:

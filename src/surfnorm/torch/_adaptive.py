@@ -78,6 +78,12 @@ from .._constants import (
     RADII,
     RHO_FLOOR,
     SHIFTS,
+    SMOOTH_ERROR_FLOOR_HIGH,
+    SMOOTH_ERROR_FLOOR_LOW,
+    SMOOTH_ERROR_HIGH,
+    SMOOTH_ERROR_LOW,
+    SMOOTH_ERROR_SHAPE_HIGH,
+    SMOOTH_ERROR_SHAPE_LOW,
     SMOOTH_SHARE,
     TERRACED_CHECK,
     TERRACED_HIGH,
@@ -174,6 +180,7 @@ class NoiseTables(NamedTuple):
     centres: torch.Tensor  # (B, N_BINS) the depth bins' centres (NoiseProfile.depths)
     floors: torch.Tensor  # (B, N_BINS) NoiseProfile.floors (computed for every frame; NaN with too few samples)
     correlation: torch.Tensor  # (B,) NoiseProfile.correlation
+    smooth_error: torch.Tensor  # (B,) sensor_noise.smooth_error_share
 
 
 def _samples(z, valid, f, lo, span):
@@ -391,10 +398,24 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     # sensor_noise.kappa_gain of each frame's profile (its median rho: NumPy's median of the bins' rho; its weight
     # as sensor depth: adaptive_weight below)
     correlated = torch.clamp((correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW), 0.0, 1.0)
-    noise = (GEOMETRY_RHO_HIGH - torch.quantile(rho_bins, 0.5, dim=1)) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
+    rho_median = torch.quantile(rho_bins, 0.5, dim=1)
+    noise = (GEOMETRY_RHO_HIGH - rho_median) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
     ones = torch.ones_like(z0)
     tables = NoiseTables(
-        z0, inv_step, radius, rho_t, floor, terraced, heights, smooth, KAPPA * ones, ones, centres, floors, correlation
+        z0,
+        inv_step,
+        radius,
+        rho_t,
+        floor,
+        terraced,
+        heights,
+        smooth,
+        KAPPA * ones,
+        ones,
+        centres,
+        floors,
+        correlation,
+        smooth_error_share(floor, rho_median),
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -869,12 +890,35 @@ def terraced_share(tables: NoiseTables, low: float = TERRACED_LOW) -> torch.Tens
     return ((tables.terraced - low) / (TERRACED_HIGH - low)).clamp(0.0, 1.0)
 
 
+def _ramp(x: torch.Tensor, low: float, high: float) -> torch.Tensor:
+    """``sensor_noise._ramp``: 0 at or below ``low``, 1 at or above ``high``, linear between."""
+    return ((x - low) / (high - low)).clamp(0.0, 1.0)
+
+
+def smooth_error_share(floor: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
+    """``sensor_noise.smooth_error_share`` per frame, from its floor and its median rho (B,); 0 where the floor is 0
+    or not a number."""
+    measured = (floor > 0.0) & ~torch.isnan(rho)
+    ratio = rho / torch.where(measured, floor, torch.ones_like(floor))
+    correlated = _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH) * (
+        1.0 - _ramp(ratio, SMOOTH_ERROR_SHAPE_LOW, SMOOTH_ERROR_SHAPE_HIGH)
+    )
+    noise = _ramp(floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
+    share = correlated * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
+    return torch.where(measured, share, torch.zeros_like(share))
+
+
 def reading(tables: NoiseTables) -> torch.Tensor:
     """``auto.reading`` per frame: the largest of the noise floor, the smooth noise, the terraces' quantisation
-    noise and NOISY_FLOOR times the share in which the frame counts as terraced (NaN with the floor)."""
+    noise, NOISY_FLOOR times the share in which the frame counts as terraced, and the smooth error's share of the
+    way from CLEAN_FLOOR to NOISY_FLOOR (NaN with the floor)."""
     share = terraced_share(tables)
     quantisation = share * tables.step / math.sqrt(12.0)
     level = torch.maximum(torch.maximum(tables.floor, tables.smooth), torch.maximum(quantisation, NOISY_FLOOR * share))
+    s = tables.smooth_error
+    level = torch.maximum(
+        level, torch.where(s > 0.0, CLEAN_FLOOR + (NOISY_FLOOR - CLEAN_FLOOR) * s, torch.zeros_like(s))
+    )
     return torch.where(torch.isnan(tables.floor), tables.floor, level)
 
 
@@ -999,7 +1043,7 @@ def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
 def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``auto.consistency_limits`` per frame: (checked (B,) bool, edges (B, N_BINS - 1), limits (B, N_BINS)
     radians); where not checked, any edges and limits."""
-    share = terraced_share(tables, TERRACED_CHECK)
+    share = torch.maximum(terraced_share(tables, TERRACED_CHECK), tables.smooth_error)
     level = reading(tables)
     smooth = (tables.gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * tables.smooth
     floors = torch.maximum(

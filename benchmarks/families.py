@@ -18,6 +18,9 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 - ``smooth_warp``: a relative error of 0.2 % RMS smooth over about 15 pixels (a learned depth's, say);
 - ``white:P``: independent Gaussian noise of P % of the depth, nothing else (P from 0 to 5: 0.01 is 0.25 mm at
   2.5 m, a tenth of the distance between neighbouring pixels' points there);
+- ``correlated:P``: Gaussian noise of P % of the depth RMS, smoothed over about a pixel (a Gaussian of 1 pixel) before
+  it is scaled: error that neighbours share, small, in float depth (a phone's LiDAR depth, a learned stereo matcher's
+  output);
 - ``mm``: the exact depth stored in whole millimetres, no noise (a renderer's or a dataset's 16-bit PNG);
 - ``outliers``: 0.2 % noise, and 1 % of the pixels anywhere in 0.8-1.2 times their depth (multipath, specks);
 - ``bilateral``: 0.4 % noise, then OpenCV's bilateral filter (7 pixels, 3 cm, 3 pixels): an edge-keeping clean-up;
@@ -51,6 +54,7 @@ FAMILIES = (
     "tof_mm",
     "smooth_warp",
     "white",
+    "correlated",
     "mm",
     "outliers",
     "bilateral",
@@ -62,25 +66,25 @@ DEFAULT = (
     "upsampled_linear:7.5,upsampled_nearest:8,upsampled_cubic:5,upsampled_cubic:6,upsampled_cubic:8,upsampled_cubic:12,"
     "upsampled_cubic:7.5,median_mm,tof_mm,"
     "smooth_warp,"
-    "white:0.01,white:0.02,white:0.05,white:0.2,mm,outliers,bilateral,flying,blurred"
+    "white:0.01,white:0.02,white:0.05,white:0.2,correlated:0.01,correlated:0.02,mm,outliers,bilateral,flying,blurred"
 )
 
 
 def parse_family(text: str) -> tuple[str, float]:
-    """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); ``"white:0.05"`` -> ("white", 0.05) (percent); other
-    families take no factor (0)."""
+    """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); ``"white:0.05"`` -> ("white", 0.05) (percent), and so
+    ``correlated``; other families take no factor (0)."""
     from surfnorm.errors import InputError
 
     name, _, factor = text.partition(":")
     if name not in FAMILIES:
         raise InputError(f"--families: expected some of {', '.join(FAMILIES)}, got {text!r}")
-    if name == "white":
+    if name in ("white", "correlated"):
         try:
             percent = float(factor)
         except ValueError:
             percent = float("nan")
         if not 0.0 < percent <= 5.0:
-            raise InputError(f"--families: expected white:P with P a percent above 0 and at most 5, got {text!r}")
+            raise InputError(f"--families: expected {name}:P with P a percent above 0 and at most 5, got {text!r}")
         return name, percent
     if not name.startswith("upsampled"):
         if factor:
@@ -149,6 +153,9 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
         out = z * (1.0 + 0.002 * field / field.std())
     elif family == "white":
         out = z * (1.0 + 0.01 * k * rng.standard_normal(z.shape))
+    elif family == "correlated":
+        field = cv2.GaussianBlur(rng.standard_normal(z.shape).astype(np.float32), (0, 0), 1.0)
+        out = z * (1.0 + 0.01 * k * field / field.std())
     elif family == "mm":
         out = np.round(z * 1000.0) / 1000.0
     elif family == "outliers":

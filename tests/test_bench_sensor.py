@@ -523,6 +523,11 @@ def test_families_of_noise_filters_and_mixed_pixels():
     for percent in (0.01, 0.2):
         relative = script.degrade("white", percent, z, valid, rng(0))[valid] / z[valid] - 1.0
         assert 0.9 * percent < 100.0 * relative.std() < 1.1 * percent
+        shared = script.degrade("correlated", percent, z, valid, rng(0)) / np.where(valid, z, 1.0) - 1.0
+        assert 0.9 * percent < 100.0 * shared[valid].std() < 1.1 * percent
+        # smoothed over about a pixel: neighbours' errors go together (a Gaussian of 1 pixel: correlation exp(-1/4))
+        along = np.corrcoef(shared[10:, 10:-1].ravel(), shared[10:, 11:].ravel())[0, 1]
+        assert 0.7 < along < 0.85, along
     mm = script.degrade("mm", 0, z, valid, rng(0)).astype(np.float64)
     np.testing.assert_allclose(mm[valid] * 1000.0, np.round(z[valid] * 1000.0), atol=2e-3)
     relative = np.abs(script.degrade("outliers", 0, z, valid, rng(0))[valid] / z[valid] - 1.0)
@@ -553,6 +558,7 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         ("white:0", "with P a percent above 0 and at most 5, got 'white:0'"),
         ("white:x", "with P a percent above 0 and at most 5, got 'white:x'"),
         ("white", "with P a percent above 0 and at most 5, got 'white'"),
+        ("correlated:9", "expected correlated:P with P a percent above 0 and at most 5, got 'correlated:9'"),
     ):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()

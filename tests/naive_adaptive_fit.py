@@ -77,6 +77,7 @@ def _profile(xs, bins, zmin, zmax, n_bins, min_samples, first):
     # the floor at the pixel scale (stencils at gap 1) where it has min_samples, else over every stencil
     pixel = xs[first] if first.sum() >= min_samples else xs
     floor = float(np.median(np.abs(pixel[:, 0]))) / 0.6745 if len(xs) >= min_samples else float("nan")
+    floor2 = float(np.median(np.abs(pixel[:, 1]))) / 0.6745 if len(xs) >= min_samples else float("nan")
     ms = np.zeros((3, n_bins))
     for i in range(3):
         for b in range(n_bins):
@@ -96,6 +97,7 @@ def _profile(xs, bins, zmin, zmax, n_bins, min_samples, first):
         np.interp(np.log(centres), np.log(centres[ok]), rho[ok]),
         floor,
         correlation(ms, counts, min_samples),
+        floor2,
     )
 
 
@@ -126,25 +128,26 @@ def kappa_gain(corr, rho_bins, weight):
     return 1 + float(np.clip(corr - 2, 0, 1) * np.clip((2.5 - np.median(rho_bins)) / 1.0, 0, 1) * weight)
 
 
-def smooth_error(floor, rho_bins):
+def smooth_error(floor, floor2, rho_bins):
     """The share in which the error is small and smooth over a few pixels: the median rho over the floor rising
-    from 1.3 to 1.8 and falling from 6 to 9, the floor rising from 0.02 to 0.04, the median rho falling from 1.5 to
-    2.5; the product of the four (0 without a positive floor)."""
-    if not floor > 0:
+    from 1.3 to 1.8 and falling from 6 to 9, the floor over the floor at stride 2 rising from 0.3 to 0.4, the floor
+    rising from 0.02 to 0.04, the median rho falling from 1.5 to 2.5; the product of the five (0 without positive
+    floors)."""
+    if not (floor > 0 and floor2 > 0):
         return 0.0
     rho = float(np.median(rho_bins))
-    up = np.interp(rho / floor, [1.3, 1.8, 6.0, 9.0], [0.0, 1.0, 1.0, 0.0])
+    up = np.interp(rho / floor, [1.3, 1.8, 6.0, 9.0], [0.0, 1.0, 1.0, 0.0]) * np.interp(floor / floor2, [0.3, 0.4], [0, 1])
     return float(up * np.interp(floor, [0.02, 0.04], [0.0, 1.0]) * np.interp(rho, [1.5, 2.5], [1.0, 0.0]))
 
 
-def sensor_weight(floor, terraced, step, smooth, rho_bins):
+def sensor_weight(floor, terraced, step, smooth, rho_bins, floor2):
     """auto's weight of the adaptive fit: its noise reading (the largest of the floor, the smooth noise, the
     terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3, 0.2 times that share, and
     0.1 + 0.1 s for a smooth error's share s > 0) from 0.1 (clean) to 0.2."""
     if floor != floor:
         return 1.0
     share = float(np.clip((terraced - 0.15) / 0.15, 0, 1))
-    s = smooth_error(floor, rho_bins)
+    s = smooth_error(floor, floor2, rho_bins)
     level = max(floor, smooth, share * step / math.sqrt(12), 0.2 * share, 0.1 + 0.1 * s if s > 0 else 0.0)
     return float(np.clip((level - 0.1) / 0.1, 0, 1))
 
@@ -210,9 +213,9 @@ def adaptive_fit(
     fx, fy, cx, cy = K[0][0], K[1][1], K[0][2], K[1][2]
     f = math.sqrt(fx * fy)
     z32 = z.astype(np.float32).astype(np.float64)
-    centres, rho_bins, floor, corr = noise_profile(z32, valid, f)
+    centres, rho_bins, floor, corr, floor2 = noise_profile(z32, valid, f)
     terraced, step, smooth = noise_extras(z32, valid, f)
-    kappa = kappa * kappa_gain(corr, rho_bins, sensor_weight(floor, terraced, step, smooth, rho_bins))
+    kappa = kappa * kappa_gain(corr, rho_bins, sensor_weight(floor, terraced, step, smooth, rho_bins, floor2))
     r_max = (max_window - 1) // 2
     zs = np.linspace(centres[0], centres[-1], table)
     rho_t = np.interp(np.log(zs), np.log(centres), rho_bins)

@@ -48,10 +48,11 @@ def test_noise_profile_matches_naive(seed, size):
     valid = z > 0
     f = math.sqrt(K[0, 0] * K[1, 1])
     got = noise_profile(z, valid, f)
-    centres, rho, floor, correlation = naive.noise_profile(z.astype(np.float64), valid, f)
+    centres, rho, floor, correlation, floor2 = naive.noise_profile(z.astype(np.float64), valid, f)
     np.testing.assert_allclose(got.depths, centres, rtol=1e-12)
     np.testing.assert_allclose(got.rho, rho, rtol=1e-9, atol=1e-12)
     assert got.floor == pytest.approx(floor, rel=1e-12)
+    assert got.floor2 == pytest.approx(floor2, rel=1e-12)
     assert got.correlation == pytest.approx(correlation, rel=1e-9)
 
 

@@ -136,17 +136,23 @@ TERRACED_HIGH = 0.30
 #: 1-2 pixels), and far more where rho is the scene's shape (blurred fine geometry 6-18, clean renders 4-900: their
 #: floors are under 0.02 but the tree's). ``sensor_noise.smooth_error_share`` is the product of a ramp of that ratio
 #: from SMOOTH_ERROR_LOW to SMOOTH_ERROR_HIGH, down again from SMOOTH_ERROR_SHAPE_LOW to SMOOTH_ERROR_SHAPE_HIGH, a
-#: ramp of the floor from SMOOTH_ERROR_FLOOR_LOW to SMOOTH_ERROR_FLOOR_HIGH (under it the error moves d2nt_v3's
-#: normals little; the rendered frames' floors are at most 0.02, the tree's 0.07 aside), and the share of rho that is
-#: noise, not geometry (GEOMETRY_RHO_LOW to GEOMETRY_RHO_HIGH); the frame's reading is then at least that share of
-#: the way from CLEAN_FLOOR to NOISY_FLOOR. Set on 3F2N with correlated, white, millimetre, blurred and smoothly
-#: warped error (``benchmarks/families.py``) and checked on the real frames (docs/choosing.md).
+#: ramp of the floor over the floor at stride 2 (``NoiseProfile.floor2``) from SMOOTH_ERROR_PIXEL_LOW to
+#: SMOOTH_ERROR_PIXEL_HIGH (a smooth shape gives 0.25, white noise 1: quarter-size crops of the clean renders read
+#: 0.08-0.26, and the T-rex's read rho / floor 5.6 at a floor of 0.04; the ARKit frames 0.69-0.77, FoundationStereo's
+#: 0.56), a ramp of the floor from SMOOTH_ERROR_FLOOR_LOW to SMOOTH_ERROR_FLOOR_HIGH (under it the error moves
+#: d2nt_v3's normals little; the rendered frames' floors are at most 0.02, the tree's 0.07 aside), and the share of
+#: rho that is noise, not geometry (GEOMETRY_RHO_LOW to GEOMETRY_RHO_HIGH); the frame's reading is then at least
+#: that share of the way from CLEAN_FLOOR to NOISY_FLOOR. Set on 3F2N with correlated, white, millimetre, blurred and
+#: smoothly warped error (``benchmarks/families.py``) and on crops of the clean frames, with the real frames in view
+#: (docs/choosing.md).
 SMOOTH_ERROR_LOW = 1.3
 SMOOTH_ERROR_HIGH = 1.8
 SMOOTH_ERROR_SHAPE_LOW = 6.0
 SMOOTH_ERROR_SHAPE_HIGH = 9.0
 SMOOTH_ERROR_FLOOR_LOW = 0.02
 SMOOTH_ERROR_FLOOR_HIGH = 0.04
+SMOOTH_ERROR_PIXEL_LOW = 0.3
+SMOOTH_ERROR_PIXEL_HIGH = 0.4
 #: The consistency check (``auto.consistency_limits``): where its two estimators' normals at a pixel are further
 #: apart than CONSISTENT times 2 rho radians (rho: the noise floor at the pixel's depth, in point spacings), the
 #: difference is the scene's, not the noise's: adaptive_fit's window spans detail that d2nt_v3's one-sided

@@ -40,8 +40,10 @@ the point spacing z / f, the largest of four measurements of
   stereo matcher's float output read floors of 0.04-0.09 and smooth noise of 0.00-0.04,
   as renders do, but their noise rho (an RMS at strides 1 and 2, the curvature taken
   out) is 1.9-4.5 times their floor, where white noise gives about 1 and a render's
-  fine geometry far more (its floor is then under 0.02, or its rho is the shape's).
-  The share goes from 0 to 1 with that ratio and with the floor, and the reading is at
+  fine geometry far more (its floor is then under 0.02, or its rho is the shape's),
+  and their floor is 0.56-0.77 of the floor at stride 2, where a smooth shape gives
+  0.25 (crops of the clean renders 0.08-0.26). The share goes from 0 to 1 with those
+  ratios and with the floor, and the reading is at
   least that share of the way from ``CLEAN_FLOOR`` to ``NOISY_FLOOR``; such depth is
   not checked against ``d2nt_v3`` (below) in the same share: ``d2nt_v3`` follows
   its error over several pixels, further than the floor explains.

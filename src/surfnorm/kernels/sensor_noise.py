@@ -44,6 +44,8 @@ from .._constants import (
     SMOOTH_ERROR_FLOOR_LOW,
     SMOOTH_ERROR_HIGH,
     SMOOTH_ERROR_LOW,
+    SMOOTH_ERROR_PIXEL_HIGH,
+    SMOOTH_ERROR_PIXEL_LOW,
     SMOOTH_ERROR_SHAPE_HIGH,
     SMOOTH_ERROR_SHAPE_LOW,
     SMOOTH_SHARE,
@@ -426,7 +428,7 @@ _EVERY = np.zeros(0, np.bool_)
 
 def _working_set(size: int) -> tuple:
     """(samples (3, size), bins (size,) int64, jumps (size,), samples grouped by bin (3, size), magnitudes (size,),
-    whether each sample is at the pixel scale (size,) bool)."""
+    whether each sample is at the pixel scale (size,) bool, magnitudes at stride 2 (size,))."""
     return (
         np.empty((3, size)),
         np.empty(size, np.int64),
@@ -434,6 +436,7 @@ def _working_set(size: int) -> tuple:
         np.empty((3, size)),
         np.empty(size),
         np.empty(size, np.bool_),
+        np.empty(size),
     )
 
 
@@ -528,6 +531,10 @@ class NoiseProfile(NamedTuple):
         where a bin has fewer than ``MIN_SAMPLES``; where the noise grows with depth, the far bins' floors exceed
         the frame's. Measured only where the frame is not terraced in full (:func:`terraced_share` under 1: the
         frames on which ``auto`` checks its two estimators against each other); None elsewhere.
+    floor2 : float
+        The same median as ``floor`` of |x_2|, the second differences at stride 2 (of the same stencils): the floor
+        of stride 2. A smooth shape gives 4 times the floor, white noise the floor; noise correlated over a pixel or
+        two between. NaN where the floor is (and on profiles made without it).
     """
 
     depths: np.ndarray
@@ -538,6 +545,7 @@ class NoiseProfile(NamedTuple):
     smooth: float = 0.0
     correlation: float = 1.0
     floors: np.ndarray | None = None
+    floor2: float = float("nan")
 
 
 def _correlation(rms, starts, min_samples):
@@ -598,7 +606,7 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     # curvature); the same samples where no stencil had to bridge a gap.
     n_first = int(np.count_nonzero(firsts))
     keep = firsts if MIN_SAMPLES <= n_first < n else _EVERY
-    median = Part(lambda: _median_abs(xs[0], keep, work[4][:n]))
+    median = Part(lambda: (_median_abs(xs[0], keep, work[4][:n]), _median_abs(xs[1], keep, work[6][:n])))
     smooth = Part(lambda: _quiet(xs, keep, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))
     terraces = Part(lambda: terrace_statistics(jumps, changed))
     if offers is not None:
@@ -611,11 +619,12 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
     terraced, step = terraces.result()
     correlation = _correlation(ms, starts, MIN_SAMPLES)
-    floor = median.result() / 0.6745  # before its scratch is used again below
+    at_1, at_2 = median.result()  # before its scratch is used again below
+    floor, floor2 = at_1 / 0.6745, at_2 / 0.6745
     floors = None
     if terraced < TERRACED_HIGH:  # terraced_share under 1: auto may check its estimators against each other
         floors = _bin_floors(grouped[0], starts, MIN_SAMPLES, work[4][:n]) / 0.6745
-    profile = NoiseProfile(centres, rho, floor, terraced, step, smooth.result(), correlation, floors)
+    profile = NoiseProfile(centres, rho, floor, terraced, step, smooth.result(), correlation, floors, floor2)
     # every part has ended (result() waits for one another thread runs), so nothing reads the arrays any more; on an
     # error they are dropped instead (a part may still be running)
     _working.give(size, work)
@@ -679,18 +688,21 @@ def smooth_error_share(profile: NoiseProfile) -> float:
     matcher's output), from 0 to 1: the noise ``rho`` (its median over the depth bins) over the ``floor`` from
     ``SMOOTH_ERROR_LOW`` to ``SMOOTH_ERROR_HIGH`` (white noise reads about 1, error that neighbours share more), and
     down again from ``SMOOTH_ERROR_SHAPE_LOW`` to ``SMOOTH_ERROR_SHAPE_HIGH`` (there rho is the scene's shape), times
-    the floor from ``SMOOTH_ERROR_FLOOR_LOW`` to ``SMOOTH_ERROR_FLOOR_HIGH`` and the share of rho that is noise
+    the ``floor`` over ``floor2`` from ``SMOOTH_ERROR_PIXEL_LOW`` to ``SMOOTH_ERROR_PIXEL_HIGH`` (a smooth shape
+    reads 0.25: the error must show at the pixel scale, where a render's fine geometry does not), the floor from
+    ``SMOOTH_ERROR_FLOOR_LOW`` to ``SMOOTH_ERROR_FLOOR_HIGH`` and the share of rho that is noise
     (``GEOMETRY_RHO_LOW`` to ``GEOMETRY_RHO_HIGH``); each a linear ramp (see :mod:`surfnorm._constants`). 0 where
-    the floor is 0 or not a number."""
+    either floor is 0 or not a number."""
     rho = _median(profile.rho)
-    if not (profile.floor > 0.0 and rho == rho):
+    if not (profile.floor > 0.0 and profile.floor2 > 0.0 and rho == rho):
         return 0.0
     ratio = rho / profile.floor
     correlated = _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH) * (
         1.0 - _ramp(ratio, SMOOTH_ERROR_SHAPE_LOW, SMOOTH_ERROR_SHAPE_HIGH)
     )
+    pixel = _ramp(profile.floor / profile.floor2, SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH)
     noise = _ramp(profile.floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
-    return correlated * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
+    return correlated * pixel * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
 
 
 def smooth_error_reading(profile: NoiseProfile) -> float:

@@ -82,6 +82,8 @@ from .._constants import (
     SMOOTH_ERROR_FLOOR_LOW,
     SMOOTH_ERROR_HIGH,
     SMOOTH_ERROR_LOW,
+    SMOOTH_ERROR_PIXEL_HIGH,
+    SMOOTH_ERROR_PIXEL_LOW,
     SMOOTH_ERROR_SHAPE_HIGH,
     SMOOTH_ERROR_SHAPE_LOW,
     SMOOTH_SHARE,
@@ -312,6 +314,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     # the floor: median |x_1| / 0.6745, of the stencils at the pixel scale where there are enough of them
     pixel_scale = torch.where((first.sum(dim=1) >= MIN_SAMPLES).view(-1, 1), first, taken)
     floor = torch.where(enough, _median(xs[0].abs(), pixel_scale) / 0.6745, torch.full_like(lo, math.nan))
+    floor2 = torch.where(enough, _median(xs[1].abs(), pixel_scale) / 0.6745, torch.full_like(lo, math.nan))
     # the terraces (sensor_noise.terrace_statistics): the share of jumps among the stencils that changed, their
     # median height; 0 and 0 with fewer than MIN_SAMPLES changed or no jump
     is_jump = ~torch.isnan(jumps)
@@ -415,7 +418,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         centres,
         floors,
         correlation,
-        smooth_error_share(floor, rho_median),
+        smooth_error_share(floor, floor2, rho_median),
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -895,16 +898,19 @@ def _ramp(x: torch.Tensor, low: float, high: float) -> torch.Tensor:
     return ((x - low) / (high - low)).clamp(0.0, 1.0)
 
 
-def smooth_error_share(floor: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
-    """``sensor_noise.smooth_error_share`` per frame, from its floor and its median rho (B,); 0 where the floor is 0
-    or not a number."""
-    measured = (floor > 0.0) & ~torch.isnan(rho)
+def smooth_error_share(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
+    """``sensor_noise.smooth_error_share`` per frame, from its floor, its floor at stride 2 and its median rho (B,); 0
+    where either floor is 0 or not a number."""
+    measured = (floor > 0.0) & (floor2 > 0.0) & ~torch.isnan(rho)
     ratio = rho / torch.where(measured, floor, torch.ones_like(floor))
     correlated = _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH) * (
         1.0 - _ramp(ratio, SMOOTH_ERROR_SHAPE_LOW, SMOOTH_ERROR_SHAPE_HIGH)
     )
+    pixel = _ramp(
+        floor / torch.where(measured, floor2, torch.ones_like(floor2)), SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH
+    )
     noise = _ramp(floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
-    share = correlated * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
+    share = correlated * pixel * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
     return torch.where(measured, share, torch.zeros_like(share))
 
 

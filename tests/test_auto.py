@@ -813,6 +813,22 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     assert upsampling_factor(z, np.zeros(z.shape, bool)) == 1
 
 
+@pytest.mark.parametrize(
+    "name, top, left, rows, cols", [("Hard/room/000001", 0, 0, 240, 320), ("Medium/bunny/000001", 120, 80, 360, 480)]
+)
+def test_crops_of_clean_renders_are_not_read_as_halfway_resizes_in_parts(name, top, left, rows, cols):
+    """A crop of a clean render whose creases lie at a few columns: the fourth differences folded modulo a halfway
+    factor in half-pixel phases, in parts of the frame each at its best phase (the drift round), reached the share
+    asked (0.84 at 6.5 on the room's upper left quarter) where no seams are, and auto ran adaptive_fit with windows
+    of 15 pixels (the room's crop: 10.6 degrees, d2nt_v3 5.2). Halfway factors are not looked for in parts."""
+    from surfnorm.kernels.sensor_noise import upsampling_factor
+
+    fr = read_frame(SAMPLE, name)
+    z = np.where(fr.mask & (fr.depth > 0), fr.depth, 0.0).astype(np.float32)
+    crop = np.ascontiguousarray(z[top : top + rows, left : left + cols])
+    assert upsampling_factor(crop, crop > 0) == 1
+
+
 @pytest.mark.parametrize("k, interpolation", [(5, "linear"), (8, "linear"), (5, "cubic"), (8, "cubic")])
 def test_auto_fits_upsampled_depth_with_windows_over_its_seams(k, interpolation):
     from surfnorm.metrics import mean_angular_error

@@ -994,7 +994,9 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
                 fourths = ()
         if not fourths:
             continue
-        for q in (1, 2):  # whole factors, then those halfway between them
+        # whole factors, then those halfway between them; not in parts (drift): there each part's best of the 2 K
+        # half-pixel phases lifts depth without seams to the share asked (crops of clean renders: 0.84 at 6.5)
+        for q in (1, 2) if chunks == (1, 1) else (1,):
             for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
                 k = int(_seam_factor(*fourths, float(k_low), float(min(k_top, k_high)), share, 4, *chunks, q))
                 if k > 1:

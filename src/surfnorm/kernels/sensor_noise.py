@@ -52,6 +52,7 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     UPSAMPLED_CONTRAST,
+    UPSAMPLED_CUBIC_CLOSE_SHARE,
     UPSAMPLED_DRIFT_SPAN,
     UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
@@ -994,10 +995,12 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
                 fourths = ()
         if not fourths:
             continue
-        # whole factors, then those halfway between them; not in parts (drift): there each part's best of the 2 K
-        # half-pixel phases lifts depth without seams to the share asked (crops of clean renders: 0.84 at 6.5)
-        for q in (1, 2) if chunks == (1, 1) else (1,):
+        for q in (1, 2):  # whole factors, then those halfway between them
             for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
+                if q > 1 and chunks != (1, 1) and share < UPSAMPLED_CUBIC_CLOSE_SHARE:
+                    # in parts (drift), each part's best of the 2 K half-pixel phases lifts depth without seams to
+                    # UPSAMPLED_SHARE (crops of clean renders: 0.84 at 6.5); only the close share is asked there
+                    continue
                 k = int(_seam_factor(*fourths, float(k_low), float(min(k_top, k_high)), share, 4, *chunks, q))
                 if k > 1:
                     return k if q == 1 else k / 2

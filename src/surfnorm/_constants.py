@@ -166,9 +166,10 @@ CONSISTENT = 2.0
 #: The check's limits widen as 1 / (1 - s), s going from 0 at this ``NoiseProfile.terraced`` to 1 at TERRACED_HIGH,
 #: where the check stops: depth terraced in full is sensor depth, whose noise the floor does not read (its median
 #: second difference is 0 on terraces). So does the smooth error's share (``sensor_noise.smooth_error_share``),
-#: where larger: ``d2nt_v3`` follows such error over several pixels, further than the floor explains. Over the upper third of the terraced ramp, so that depth stored in whole
-#: millimetres (terraced 0.06-0.46 by scene) is checked in full up to it: on benchmarks/families.py's millimetres
-#: 8.75 degrees, against 10.93 with the ramp from TERRACED_LOW (its median filter 13.88 against 13.87).
+#: where larger: ``d2nt_v3`` follows such error over several pixels, further than the floor explains. Over the upper
+#: third of the terraced ramp, so that depth stored in whole millimetres (terraced 0.06-0.46 by scene) is checked in
+#: full up to it: on benchmarks/families.py's millimetres 8.75 degrees, against 10.93 with the ramp from
+#: TERRACED_LOW (its median filter 13.88 against 13.87).
 TERRACED_CHECK = 0.25
 CONSISTENT_MAX = math.pi / 2
 #: Upsampled depth (``sensor_noise.upsampling_factor``): depth that a lower-resolution sensor measured and a resize

@@ -813,6 +813,18 @@ def test_depth_that_was_not_resized_has_no_upsampling_factor():
     assert upsampling_factor(z, np.zeros(z.shape, bool)) == 1
 
 
+def test_the_drift_round_asks_halfway_factors_only_the_close_share():
+    """fourth_passes, shared by the NumPy and torch searches: every pass for whole factors and for halfway ones on the
+    whole positions; in parts (the drift round), halfway factors only where the close share is asked (bicubic 5.5x
+    whose seams drift is found there: 640 / 5.5 is not a whole number)."""
+    from surfnorm._constants import UPSAMPLED_CUBIC_CLOSE_SHARE, UPSAMPLED_FOURTH_PASSES, fourth_passes
+
+    assert fourth_passes(1, False) == fourth_passes(2, False) == fourth_passes(1, True) == UPSAMPLED_FOURTH_PASSES
+    in_parts = fourth_passes(2, True)
+    assert in_parts and all(share >= UPSAMPLED_CUBIC_CLOSE_SHARE for _, _, share in in_parts)
+    assert len(in_parts) < len(UPSAMPLED_FOURTH_PASSES)
+
+
 @pytest.mark.parametrize(
     "name, top, left, rows, cols", [("Hard/room/000001", 0, 0, 240, 320), ("Medium/bunny/000001", 120, 80, 360, 480)]
 )

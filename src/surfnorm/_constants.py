@@ -248,6 +248,15 @@ UPSAMPLED_STEP = 2
 UPSAMPLED_DRIFT_SPAN = 160
 
 
+def fourth_passes(q: int, in_parts: bool) -> tuple:
+    """The passes of ``UPSAMPLED_FOURTH_PASSES`` that ``upsampling_factor`` (NumPy and torch) runs for factors k / q,
+    with the positions whole or ``in_parts`` (the drift round): all of them, but only those that ask the close share
+    for halfway factors (q 2) in parts."""
+    if q > 1 and in_parts:
+        return tuple(p for p in UPSAMPLED_FOURTH_PASSES if p[2] >= UPSAMPLED_CUBIC_CLOSE_SHARE)
+    return UPSAMPLED_FOURTH_PASSES
+
+
 def upsampled_window(k: float, noisy: bool = False) -> int:
     """``auto``'s window side on depth upsampled K times: 2 K + 1, two seams in every direction (2 ceil(K) + 1 for a
     factor halfway between whole ones, 7.5: windows have a whole radius); where the depth reads as sensor depth

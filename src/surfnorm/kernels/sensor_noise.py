@@ -52,15 +52,14 @@ from .._constants import (
     TERRACED_HIGH,
     TERRACED_LOW,
     UPSAMPLED_CONTRAST,
-    UPSAMPLED_CUBIC_CLOSE_SHARE,
     UPSAMPLED_DRIFT_SPAN,
-    UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
     UPSAMPLED_SMALL,
     UPSAMPLED_SMALL_SHARE,
     UPSAMPLED_STEP,
+    fourth_passes,
     noise_step,
     stride_gain,
 )
@@ -676,7 +675,7 @@ def quantisation(profile: NoiseProfile) -> float:
 def terraced_share(profile: NoiseProfile, low: float = TERRACED_LOW) -> float:
     """How far the frame counts as terraced: 0 at or below ``low`` (``TERRACED_LOW``; ``auto``'s consistency check
     starts from ``TERRACED_CHECK``), 1 at or above ``TERRACED_HIGH``, linear between."""
-    return min(max((profile.terraced - low) / (TERRACED_HIGH - low), 0.0), 1.0)
+    return _ramp(profile.terraced, low, TERRACED_HIGH)
 
 
 def _ramp(x: float, low: float, high: float) -> float:
@@ -771,7 +770,7 @@ def reading_weight(r: float) -> float:
     """:func:`adaptive_weight` of a frame whose :func:`reading` is ``r`` (1 where NaN)."""
     if not r == r:
         return 1.0
-    return min(max((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR), 0.0), 1.0)
+    return _ramp(r, CLEAN_FLOOR, NOISY_FLOOR)
 
 
 # --- depth upsampled from a lower resolution ----------------------------------------------------------------------
@@ -995,12 +994,8 @@ def upsampling_factor(z: np.ndarray, valid: np.ndarray) -> float:
                 fourths = ()
         if not fourths:
             continue
-        for q in (1, 2):  # whole factors, then those halfway between them
-            for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-                if q > 1 and chunks != (1, 1) and share < UPSAMPLED_CUBIC_CLOSE_SHARE:
-                    # in parts (drift), each part's best of the 2 K half-pixel phases lifts depth without seams to
-                    # UPSAMPLED_SHARE (crops of clean renders: 0.84 at 6.5); only the close share is asked there
-                    continue
+        for q in (1, 2):  # whole factors, then those halfway between them (in parts: the close share only)
+            for k_low, k_top, share in fourth_passes(q, chunks != (1, 1)):
                 k = int(_seam_factor(*fourths, float(k_low), float(min(k_top, k_high)), share, 4, *chunks, q))
                 if k > 1:
                     return k if q == 1 else k / 2

@@ -92,15 +92,14 @@ from .._constants import (
     TERRACED_LOW,
     TIE,
     UPSAMPLED_CONTRAST,
-    UPSAMPLED_CUBIC_CLOSE_SHARE,
     UPSAMPLED_DRIFT_SPAN,
-    UPSAMPLED_FOURTH_PASSES,
     UPSAMPLED_MAX,
     UPSAMPLED_MIN,
     UPSAMPLED_SHARE,
     UPSAMPLED_SMALL,
     UPSAMPLED_SMALL_SHARE,
     UPSAMPLED_STEP,
+    fourth_passes,
     noise_step,
     upsampled_window,
 )
@@ -1030,9 +1029,7 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         out = _factors(bends_u, bends_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out, chunks)
         out = _factors(bends_u, bends_v, bent, UPSAMPLED_MIN, k_high, UPSAMPLED_SHARE, 2, out, chunks, 2)
         for q in (1, 2):
-            for k_low, k_top, share in UPSAMPLED_FOURTH_PASSES:
-                if q > 1 and chunks != (1, 1) and share < UPSAMPLED_CUBIC_CLOSE_SHARE:
-                    continue  # halfway factors in parts: only the close share (as on NumPy)
+            for k_low, k_top, share in fourth_passes(q, chunks != (1, 1)):
                 out = _factors(fourths_u, fourths_v, enough, k_low, min(k_top, k_high), share, 4, out, chunks, q)
     low, high = UPSAMPLED_SMALL  # factors under UPSAMPLED_MIN, last
     for chunks in rounds:

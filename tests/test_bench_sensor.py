@@ -332,6 +332,40 @@ def test_peers_on_one_thread_after_open3d_loaded_its_tbb():
     assert done.stdout.strip() == "1"
 
 
+def test_timed_calls_keep_freed_memory_so_none_pays_for_fresh_pages():
+    """After single_thread (every benchmark's setup), a large temporary allocated and freed again comes back
+    without page faults; before it, glibc hands a block of that size from the system each time (so a peer that
+    allocates its temporaries per call, OpenCV's LINEMOD, paid for them on some runs and not on others). In a fresh
+    process, since the setting is the process's; Linux with glibc only (elsewhere the setting is not made)."""
+    import subprocess
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("glibc's mallopt: Linux only")
+    code = """
+import resource, sys, numpy as np
+def faults():
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(5):
+        a = np.empty(48 << 20, np.uint8); a.fill(1); del a  # 48 MiB: above glibc's largest own threshold
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+faults()
+plain = faults()
+from surfnorm.bench.peers import single_thread
+setting = single_thread()["malloc"]
+faults()
+print(setting, plain, faults())
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    words = done.stdout.split()
+    if words[0] == "unchanged":
+        pytest.skip(f"the C library is not glibc: {done.stdout.strip()}")
+    plain, steady = int(words[-2]), int(words[-1])
+    assert plain >= 5 * (48 << 20) // (2 << 20), plain  # each fill faults its pages in (4 KiB or 2 MiB ones)
+    assert steady < plain // 20, (plain, steady)
+
+
 def test_alternating_medians_runs_each_call_once_a_round_in_turned_orders():
     from surfnorm.bench.sensor import alternating_medians
 

@@ -250,11 +250,39 @@ def peer_versions() -> dict[str, str]:
     return out
 
 
+#: glibc's mallopt parameters: M_TRIM_THRESHOLD, M_MMAP_THRESHOLD.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def steady_allocator() -> str:
+    """Keep freed memory in the process, so that no timed call pays for fresh pages.
+
+    glibc's malloc hands large blocks (from 128 KiB, a threshold it raises as it sees them freed) straight from the
+    system and gives them back on free, and gives back the top of its heap where more than twice that lies free.
+    Then a call that allocates its temporaries anew (OpenCV's LINEMOD: its point cloud and its normals) pays for
+    zeroed pages on some calls and not on others, as earlier allocations left the heap: LINEMOD's median moved
+    2-3x between runs of the same frames (4.3 and 12.8 ms on a 450x375 frame). Large thresholds keep that memory,
+    for every library alike (surfnorm keeps its own buffers, and changed by under the noise). Returns what was
+    set, for results.json; nothing where the C library is not glibc."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return "unchanged (not glibc)"
+    if not (mallopt(_M_MMAP_THRESHOLD, 1 << 30) and mallopt(_M_TRIM_THRESHOLD, 1 << 31)):
+        return "unchanged (mallopt refused)"
+    return "glibc mallopt M_MMAP_THRESHOLD=1 GiB, M_TRIM_THRESHOLD=2 GiB"
+
+
 def single_thread() -> dict[str, str]:
-    """Limit every library we time to one thread. Returns what was set, for results.json."""
+    """Limit every library we time to one thread, and keep freed memory in the process (:func:`steady_allocator`).
+    Returns what was set, for results.json."""
     import os
 
-    done = {}
+    done = {"malloc": steady_allocator()}
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"  # read by libraries imported from now on (Open3D's OpenMP, torch)
     done["env"] = "OMP/MKL/OPENBLAS_NUM_THREADS=1"  # numba: set_num_threads below (its env variable is read once)

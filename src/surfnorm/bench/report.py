@@ -142,7 +142,7 @@ def _markdown(result: BenchResult, summary: dict, meta: dict) -> str:
     out.append("")
     out.append(
         f"surfnorm {meta['surfnorm']} (commit {meta['git_commit'] or 'unknown'}), Python {meta['python']}, "
-        f"CPU: {meta['cpu']} ({meta['cpu_count']} logical cores), timing threads: {meta['threads']}."
+        f"CPU: {meta['cpu']} ({meta['cpu_count']} logical cores), timing setup: {meta['threads']}."
     )
     out.append("")
     if result.unreadable:

@@ -9,6 +9,7 @@ import pytest
 
 import surfnorm
 from surfnorm import InputError
+from surfnorm._bands import on_threads
 from surfnorm.camera import Intrinsics
 from surfnorm.io.threef2n import find_frames, read_frame, sample_root
 from surfnorm.kernels.auto import choose
@@ -283,6 +284,15 @@ def test_blend_matches_the_naive_one_pixel_by_pixel():
         fill = (0.0, -3.0, np.nan)[k % 3]
         got = blend(a, b, t, fill, np.empty_like(a))
         np.testing.assert_array_equal(got, naive.blend(a, b, t, fill), err_msg=f"case {k}, t={t}")
+    # in row bands on threads (of at least MIN_ROWS rows: two of a frame of 96), in place: the same bits
+    a, b = (rng.normal(size=(96, 7, 3)).astype(np.float32) for _ in range(2))
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b /= np.linalg.norm(b, axis=-1, keepdims=True)
+    a[rng.random((96, 7)) < 0.2] = np.nan
+    b[rng.random((96, 7)) < 0.2] = np.nan
+    banded = b.copy()
+    blend(a, banded, t, fill, banded, on_threads(2))
+    np.testing.assert_array_equal(banded, naive.blend(a, b, t, fill))
 
 
 def test_window_ties_go_the_same_way_in_every_unit():

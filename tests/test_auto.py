@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import surfnorm
+from surfnorm._bands import on_threads
 from surfnorm._constants import CORRELATED_HIGH, upsampled_window
 from surfnorm.bench.simulate import SENSORS, simulate
 from surfnorm.io.threef2n import find_frames, read_frame
@@ -511,6 +512,14 @@ def test_consistency_matches_the_naive_check_pixel_by_pixel(t):
     in_place = b.copy()
     consistency(a, in_place, z, limits, t, 0.0, in_place)
     np.testing.assert_array_equal(in_place, ref)
+    # in row bands on threads (of at least MIN_ROWS rows: a taller frame), in place too: the same pixels, the same bits
+    tall = [np.concatenate([x] * 3) for x in (a, b, z)]
+    ref, ref_took = naive.consistency(*tall, *limits, t, 0.0)
+    took = np.empty(tall[2].shape, bool)
+    banded = tall[1].copy()
+    consistency(tall[0], banded, tall[2], limits, t, 0.0, banded, took, bands=on_threads(3))
+    np.testing.assert_array_equal(took, ref_took)
+    np.testing.assert_array_equal(banded, ref)
 
 
 def test_the_check_keeps_fine_detail_and_leaves_noise_alone(monkeypatch):

@@ -121,7 +121,7 @@ from .._constants import (
     upsampled_window,
 )
 from ._schedule import run_bands
-from .adaptive_fit import FitPlan, adaptive_fit
+from .adaptive_fit import FitPlan
 
 # the decision from a measured profile lives beside the profile (the uncertainty needs it too)
 from .sensor_noise import (
@@ -261,13 +261,13 @@ def choose(z: np.ndarray, valid: np.ndarray, cam) -> str:
     return decide(z, valid, cam).method
 
 
-def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray) -> np.ndarray:
+def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray, bands=whole) -> np.ndarray:
     """``out`` = the unit normal along (1 - t) a + t b, from two normal maps with NaN where they have none.
 
     Where only one has a normal, that one; where neither, ``fill``. Where the two point in opposite
     directions (the mean vanishes), the one with the larger weight. (:func:`consistency` without limits.)
     """
-    return consistency(a, b, None, None, t, fill, out, alone=False)
+    return consistency(a, b, None, None, t, fill, out, alone=False, bands=bands)
 
 
 def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] | None:
@@ -308,31 +308,37 @@ def consistency(
     out: np.ndarray,
     took: np.ndarray | None = None,
     alone: bool = True,
+    bands=whole,
 ) -> np.ndarray:
     """``out`` = :func:`blend` of ``a`` (``d2nt_v3``'s normals) and, at each pixel, ``b`` (``adaptive_fit``'s) where
     the two are at most the limit of the pixel's depth ``z`` apart (:func:`consistency_limits`: ``limits``; None:
     no limit, the blend itself), else ``a`` again; NaN where a map has no normal, as for :func:`blend`; at t 1 (and
     ``alone``) the normal taken as it is. ``out`` may be ``b``. ``took``: where given (H, W) bool, the pixels that
-    took ``a`` for ``b``."""
+    took ``a`` for ``b``. ``bands``: row bands on threads (:mod:`surfnorm._bands`); each pixel is its own, so the
+    same bits whatever the split."""
     if limits is None:  # no edges, one bin whose limit every pair passes; z is not read
-        edges, cosines, z = np.zeros(0), np.full(1, -2.0), np.zeros(0, np.float32)
+        edges, cosines = np.zeros(0), np.full(1, -2.0)
     else:
         edges, angles = limits
         cosines = np.where(angles < math.pi, np.cos(np.minimum(angles, math.pi)), -2.0)  # -2: every pair passes
-    _consistency(
-        a.reshape(-1, 3),
-        b.reshape(-1, 3),
-        z.reshape(-1),
-        np.ascontiguousarray(edges, np.float64),
-        np.ascontiguousarray(cosines, np.float64),
-        np.float32(1.0 - t),
-        np.float32(t),
-        t >= 0.5,
-        alone and t == 1.0,
-        np.float32(fill),
-        out.reshape(-1, 3),
-        np.zeros(0, np.bool_) if took is None else took.reshape(-1),
-    )
+    edges = np.ascontiguousarray(edges, np.float64)
+    cosines = np.ascontiguousarray(cosines, np.float64)
+    weights = (np.float32(1.0 - t), np.float32(t), t >= 0.5, alone and t == 1.0, np.float32(fill))
+    no_z, no_took = np.zeros(0, np.float32), np.zeros(0, np.bool_)
+
+    def rows(v0, v1):
+        _consistency(
+            a[v0:v1].reshape(-1, 3),
+            b[v0:v1].reshape(-1, 3),
+            no_z if z is None or limits is None else z[v0:v1].reshape(-1),
+            edges,
+            cosines,
+            *weights,
+            out[v0:v1].reshape(-1, 3),
+            no_took if took is None else took[v0:v1].reshape(-1),
+        )
+
+    bands(rows, a.shape[0])
     return out
 
 
@@ -409,8 +415,8 @@ def auto(
     """
     from .d2nt_v3 import d2nt_v3
 
-    # Sensor depth first: adaptive_fit's bands make their integral rows while the calling thread measures the noise;
-    # the decision, once it is known: fit, or nothing written (d2nt_v3 or the blend below).
+    # adaptive_fit first: its bands make their integral rows while the calling thread measures the noise; the
+    # decision, once it is known: fit (sensor depth, and the blend's share), or nothing written (d2nt_v3 alone).
     frame = FitPlan(z, valid, cam, out, fill=fill, record=record)
     measured: list[NoiseProfile] = []
     checked: list = []
@@ -421,12 +427,13 @@ def auto(
         if k > 1:  # upsampled depth: adaptive_fit alone, with windows that span the seams
             frame.window = upsampled_window(k, adaptive_weight(p) == 1.0)
             return frame.tables(p)
-        sensor = adaptive_weight(p) == 1.0
-        limits = consistency_limits(p) if sensor else None
-        if limits is not None:  # the fit's normals are checked against d2nt_v3's below: NaN where it has none
+        t = adaptive_weight(p)
+        limits = consistency_limits(p) if t > 0.0 else None
+        if 0.0 < t < 1.0 or limits is not None:
+            # blended with d2nt_v3's normals, or checked against them, below: NaN where the fit has none
             checked.append(limits)
             frame.options = frame.options[:4] + (np.float32(np.nan),)
-        return frame.tables(p, fit=sensor)
+        return frame.tables(p, fit=t > 0.0)
 
     if run_bands(frame, bands.get("bands", whole), tables=sensor_depth) and not checked:
         if record is not None:
@@ -448,14 +455,11 @@ def auto(
     if t == 0.0:
         return d2nt_v3(z, valid, cam, out, fill=fill, **d2nt_options)
     a = d2nt_v3(z, valid, cam, np.empty_like(out), fill=np.nan, **d2nt_options)
-    if t == 1.0:  # checked: the fit is in ``out`` already
-        b = out
-    else:
-        b = adaptive_fit(z, valid, cam, np.empty_like(out), fill=np.nan, profile=profile, record=record, **bands)
-        checked.append(consistency_limits(profile))
+    b = out  # the fit (checked, or the blend's share), with NaN where it has none
+    rows = bands.get("bands", whole)
     if checked[0] is None:
-        return blend(a, b, t, fill, out)
+        return blend(a, b, t, fill, out, rows)
     took = None
     if record is not None:
         took = record["took_d2nt"] = np.empty(z.shape, np.bool_)
-    return consistency(a, b, z, checked[0], t, fill, out, took)
+    return consistency(a, b, z, checked[0], t, fill, out, took, bands=rows)

@@ -24,7 +24,7 @@ from surfnorm.kernels.auto import (
     quantisation,
     reading,
 )
-from surfnorm.kernels.sensor_noise import NoiseProfile, kappa_gain, noise_profile, smooth_error_share
+from surfnorm.kernels.sensor_noise import NoiseProfile, geometry_share, kappa_gain, noise_profile, smooth_error_share
 
 from . import naive_adaptive_fit as naive
 from .conftest import SAMPLE
@@ -468,6 +468,17 @@ def test_consistency_limits_on_closed_forms():
     correlated = p._replace(correlation=3.0, smooth=0.15)
     assert kappa_gain(correlated) == 2.0
     np.testing.assert_allclose(consistency_limits(correlated)[1], 2 * CONSISTENT * 2.0 * np.maximum(rho, 0.15))
+    # where rho is the frame's fine geometry (its median from GEOMETRY_RHO_LOW to GEOMETRY_RHO_HIGH), the limits
+    # shrink to GEOMETRY_CHECK of themselves in that share; the check runs where it ran with the limits unshrunk
+    from surfnorm._constants import GEOMETRY_CHECK, GEOMETRY_RHO_HIGH, GEOMETRY_RHO_LOW
+
+    fine = p._replace(rho=np.full(8, GEOMETRY_RHO_HIGH))
+    assert geometry_share(fine) == 1.0 and geometry_share(p) == 0.0
+    np.testing.assert_allclose(consistency_limits(fine)[1], GEOMETRY_CHECK * limits)
+    middle = p._replace(rho=np.full(8, 0.5 * (GEOMETRY_RHO_LOW + GEOMETRY_RHO_HIGH)))
+    np.testing.assert_allclose(consistency_limits(middle)[1], (1 - 0.5 * (1 - GEOMETRY_CHECK)) * limits)
+    assert geometry_share(p._replace(rho=np.full(8, np.nan))) == 0.0
+    assert consistency_limits(loud._replace(rho=fine.rho)) is None  # shrunk under CONSISTENT_MAX, but not before
 
 
 def test_the_noise_profile_measures_each_bins_floor_where_not_terraced_in_full():
@@ -524,8 +535,9 @@ def test_consistency_matches_the_naive_check_pixel_by_pixel(t):
 
 def test_the_check_keeps_fine_detail_and_leaves_noise_alone(monkeypatch):
     """On 3F2N's tree with white noise of 0.01 % (leaves that adaptive_fit's windows span), the check takes d2nt_v3's
-    normal at most pixels and the error falls by half and more against auto without it; on a plane and a sphere with
-    white noise from 0.03 to 0.1 % it takes none (the two estimators differ there only by the noise)."""
+    normal at most pixels and the error falls by half and more against auto without it, to within 10 % of d2nt_v3's
+    (the limits shrunk where rho is the scene's geometry); on a plane and a sphere with white noise from 0.03 to 0.1 %
+    it takes none (the two estimators differ there only by the noise)."""
     from surfnorm.camera import Intrinsics
     from surfnorm.kernels import auto as auto_module
     from surfnorm.metrics import mean_angular_error
@@ -540,6 +552,16 @@ def test_the_check_keeps_fine_detail_and_leaves_noise_alone(monkeypatch):
     e_got, e_unchecked = (mean_angular_error(n, exact, z > 0) for n in (got, unchecked))
     assert e_got < 0.5 * e_unchecked, (e_got, e_unchecked)
     np.testing.assert_array_equal(surfnorm.estimate(z, K), got)
+    # its rho is the leaves' (geometry_share 1), so the limits are GEOMETRY_CHECK of the noise's: within 10 % of
+    # d2nt_v3 alone, where the limits unshrunk left a third more error
+    assert geometry_share(noise_profile(z, z > 0, math.sqrt(K[0, 0] * K[1, 1]))) == 1.0
+    monkeypatch.setattr(auto_module, "GEOMETRY_CHECK", 1.0)
+    unshrunk = surfnorm.estimate(z, K)
+    monkeypatch.undo()
+    e_d2nt, e_unshrunk = (
+        mean_angular_error(n, exact, z > 0) for n in (surfnorm.estimate(z, K, method="d2nt_v3"), unshrunk)
+    )
+    assert e_got < 1.1 * e_d2nt and e_unshrunk > 1.3 * e_got, (e_got, e_d2nt, e_unshrunk)
     Kc = camera(320, 240, fov_deg=50)
     z1, _, _ = plane(Kc, 240, 320, [0.3, -0.2, -1], 2.5)
     zs, _, hit = sphere(Kc, 240, 320, [0.1, 0.0, 2.2], 0.5)

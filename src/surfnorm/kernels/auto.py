@@ -66,8 +66,12 @@ against ``d2nt_v3``'s pixel by pixel (:func:`consistency_limits`, :func:`consist
 where the two differ by more than ``d2nt_v3``'s noise explains (``CONSISTENT`` times
 2 rho radians, rho the noise floor at the pixel's depth), the difference is the scene's
 and the pixel takes ``d2nt_v3``'s normal. On white noise over smooth shapes no pixel
-differs that much; on the tree with white noise of 0.01 % of depth more than half do, and its
-error falls from 53 to 23 degrees (``d2nt_v3`` alone: 14). Depth terraced in full
+differs that much. Where the frame's rho is its fine geometry
+(:func:`~surfnorm.kernels.sensor_noise.geometry_share`), the floor is raised by the
+geometry too, and the limits shrink to ``GEOMETRY_CHECK`` of themselves in that share:
+on the tree with white noise of 0.01 % of depth most pixels then take ``d2nt_v3``'s
+normal, and its error falls from 53 to 14.4 degrees (``d2nt_v3`` alone: 14.3; 23
+with the limits as they were; 0.02 %: 53, 17.4, 17.0 and 44). Depth terraced in full
 (raw structured light, stereo matchers, millimetres: sensor depth) is not checked, so
 the real sensor frames get what they got before, at the same cost; a checked frame
 runs both estimators.
@@ -112,6 +116,7 @@ from .._constants import (
     CORRELATED_HIGH,
     CORRELATED_KAPPA_GAIN,
     DLF_DEFAULT,
+    GEOMETRY_CHECK,
     MNR_DLF_DEFAULT,
     NOISY_FLOOR,
     TERRACED_CHECK,
@@ -127,6 +132,7 @@ from .adaptive_fit import FitPlan
 from .sensor_noise import (
     NoiseProfile,
     adaptive_weight,
+    geometry_share,
     kappa_gain,
     noise_profile,
     quantisation,
@@ -281,8 +287,11 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     noise that grows with depth; the frame's floor where the bin has too few samples), or where the noise is
     correlated (kappa_gain's share of it) the smooth noise if larger: d2nt_v3's small stencils see that. Not the
     frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
-    None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
-    would not explain), and on a frame terraced in full, without floors, or without a reading (sparse depth)."""
+    Where the frame's rho is its fine geometry (:func:`geometry_share`), the floor is partly the geometry's too, and
+    the limits shrink to ``GEOMETRY_CHECK`` of themselves in that share.
+    None where no limit as it was before that is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that
+    the estimators' noise would not explain), and on a frame terraced in full, without floors, or without a reading
+    (sparse depth)."""
     share = max(terraced_share(profile, TERRACED_CHECK), smooth_error_share(profile))
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:
@@ -295,7 +304,7 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     if not limits.min() < CONSISTENT_MAX:
         return None
     c = profile.depths
-    return np.sqrt(c[:-1] * c[1:]), limits
+    return np.sqrt(c[:-1] * c[1:]), limits * (1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile))
 
 
 def consistency(

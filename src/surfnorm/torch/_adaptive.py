@@ -65,6 +65,7 @@ from .._constants import (
     CORRELATED_HIGH,
     CORRELATED_KAPPA_GAIN,
     CORRELATED_LOW,
+    GEOMETRY_CHECK,
     GEOMETRY_RHO_HIGH,
     GEOMETRY_RHO_LOW,
     KAPPA,
@@ -183,6 +184,7 @@ class NoiseTables(NamedTuple):
     floors: torch.Tensor  # (B, N_BINS) NoiseProfile.floors (computed for every frame; NaN with too few samples)
     correlation: torch.Tensor  # (B,) NoiseProfile.correlation
     smooth_error: torch.Tensor  # (B,) sensor_noise.smooth_error_share
+    geometry: torch.Tensor  # (B,) sensor_noise.geometry_share
 
 
 def _samples(z, valid, f, lo, span):
@@ -419,6 +421,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         floors,
         correlation,
         smooth_error_share(floor, floor2, rho_median),
+        torch.where(torch.isnan(rho_median), 0.0, _ramp(rho_median, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH)),
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -1058,6 +1061,8 @@ def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor,
     scale = 2.0 * CONSISTENT * tables.gain / torch.where(share < 1.0, 1.0 - share, torch.ones_like(share))
     limits = scale.view(-1, 1) * floors
     checked = ~torch.isnan(level) & (share < 1.0) & (limits.amin(dim=1) < CONSISTENT_MAX)
+    # where rho is the frame's fine geometry, the limits shrink (after the test above, as in auto.consistency_limits)
+    limits = limits * (1.0 - (1.0 - GEOMETRY_CHECK) * tables.geometry).view(-1, 1)
     c = tables.centres
     return checked, _sqrt(c[:, :-1] * c[:, 1:]), limits
 

@@ -26,7 +26,8 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 - ``bilateral``: 0.4 % noise, then OpenCV's bilateral filter (7 pixels, 3 cm, 3 pixels): an edge-keeping clean-up;
 - ``flying``: 0.2 % noise, and every pixel at a depth edge (its 3x3 mean off its depth by over 2 %) at that mean
   (mixed pixels: a time-of-flight camera's, or a filter's, between the two sides);
-- ``blurred``: the exact depth smoothed by a Gaussian of 1.5 pixels over the valid pixels (a resampling's blur).
+- ``blurred``: the exact depth smoothed by a Gaussian of 1.5 pixels over the valid pixels (a resampling's blur);
+  ``blurred:S``, of S pixels (S above 0 and at most 10).
 
 The scene's background is no depth (0), as the simulator's sensors see it; every family keeps invalid pixels invalid.
 
@@ -72,7 +73,8 @@ DEFAULT = (
 
 def parse_family(text: str) -> tuple[str, float]:
     """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); ``"white:0.05"`` -> ("white", 0.05) (percent), and so
-    ``correlated``; other families take no factor (0)."""
+    ``correlated``; ``"blurred:1"`` -> ("blurred", 1.0) (the Gaussian's pixels; ``"blurred"``: 0, that is 1.5);
+    other families take no factor (0)."""
     from surfnorm.errors import InputError
 
     name, _, factor = text.partition(":")
@@ -86,6 +88,14 @@ def parse_family(text: str) -> tuple[str, float]:
         if not 0.0 < percent <= 5.0:
             raise InputError(f"--families: expected {name}:P with P a percent above 0 and at most 5, got {text!r}")
         return name, percent
+    if name == "blurred" and factor:
+        try:
+            sigma = float(factor)
+        except ValueError:
+            sigma = float("nan")
+        if not 0.0 < sigma <= 10.0:
+            raise InputError(f"--families: expected blurred:S with S pixels above 0 and at most 10, got {text!r}")
+        return name, sigma
     if not name.startswith("upsampled"):
         if factor:
             raise InputError(f"--families: {name} takes no factor, got {text!r}")
@@ -167,8 +177,8 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
     elif family == "flying":
         mean = _valid_mean(z, valid, lambda a: cv2.blur(a, (3, 3)))
         out = np.where(np.abs(mean - z) > 0.02 * z, mean, z * (1.0 + 0.002 * rng.standard_normal(z.shape)))
-    else:  # blurred
-        out = _valid_mean(z, valid, lambda a: cv2.GaussianBlur(a, (0, 0), 1.5))
+    else:  # blurred (k: the Gaussian's pixels; 0: 1.5)
+        out = _valid_mean(z, valid, lambda a: cv2.GaussianBlur(a, (0, 0), k or 1.5))
     return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
 
 

@@ -578,6 +578,11 @@ def test_families_of_noise_filters_and_mixed_pixels():
     far = away & (np.abs(u - 50) > 7)  # beyond the Gaussian's reach of the step
     np.testing.assert_allclose(blurred[far], z[far], rtol=1e-4)
     assert (blurred[~valid] == 0).all() and blurred[6, 0] > 0.99 * z[6, 0]  # next to the hole: not pulled to 0
+    assert script.parse_family("blurred") == ("blurred", 0) and script.parse_family("blurred:0.7") == ("blurred", 0.7)
+    np.testing.assert_array_equal(script.degrade("blurred", 1.5, z, valid, rng(0)), blurred)  # 1.5 px by default
+    wider = script.degrade("blurred", 3.0, z, valid, rng(0))  # reaches further from the step
+    near = valid & (np.abs(u - 50) == 6) & (v > 8) & (v < H - 4)
+    assert (np.abs(wider[near] / z[near] - 1.0) > np.abs(blurred[near] / z[near] - 1.0) + 1e-3).all()
 
 
 def test_families_refuses_an_unknown_family_or_factor(capsys):
@@ -593,6 +598,7 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         ("white:x", "with P a percent above 0 and at most 5, got 'white:x'"),
         ("white", "with P a percent above 0 and at most 5, got 'white'"),
         ("correlated:9", "expected correlated:P with P a percent above 0 and at most 5, got 'correlated:9'"),
+        ("blurred:0", "expected blurred:S with S pixels above 0 and at most 10, got 'blurred:0'"),
     ):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()

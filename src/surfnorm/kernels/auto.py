@@ -418,9 +418,9 @@ def auto(
     of extreme depth (:mod:`surfnorm.units`) scales it with the depth.
     ``tie_tol`` and ``relative`` are the scale-invariant mode's, passed on to ``d2nt_v3``
     (``adaptive_fit`` does not depend on the unit of depth); the row ``bands`` of one frame on several
-    threads go to both, and to their blend or check. ``record``: as ``adaptive_fit``'s, and ``"weight"``, adaptive_fit's in the blend, and where
-    the consistency check ran (:func:`consistency`), ``"took_d2nt"``: (H, W) bool, the pixels that took d2nt_v3's
-    normal for adaptive_fit's.
+    threads go to both, and to their blend or check. ``record``: as ``adaptive_fit``'s, and ``"weight"``,
+    adaptive_fit's in the blend, and where the consistency check ran (:func:`consistency`), ``"took_d2nt"``: (H, W)
+    bool, the pixels that took d2nt_v3's normal for adaptive_fit's.
     """
     from .d2nt_v3 import d2nt_v3
 

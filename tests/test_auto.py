@@ -478,7 +478,12 @@ def test_consistency_limits_on_closed_forms():
     middle = p._replace(rho=np.full(8, 0.5 * (GEOMETRY_RHO_LOW + GEOMETRY_RHO_HIGH)))
     np.testing.assert_allclose(consistency_limits(middle)[1], (1 - 0.5 * (1 - GEOMETRY_CHECK)) * limits)
     assert geometry_share(p._replace(rho=np.full(8, np.nan))) == 0.0
-    assert consistency_limits(loud._replace(rho=fine.rho)) is None  # shrunk under CONSISTENT_MAX, but not before
+    # limits that reach CONSISTENT_MAX until shrunk: the check runs where, shrunk from the larger of the floor and the
+    # smooth noise, they are under it, and not where the smooth noise (correlated noise) is as loud as that
+    shrunk = loud._replace(rho=fine.rho)
+    np.testing.assert_allclose(consistency_limits(shrunk)[1], GEOMETRY_CHECK * 2 * CONSISTENT * shrunk.floors)
+    assert consistency_limits(shrunk._replace(smooth=1.01 * CONSISTENT_MAX / (2 * CONSISTENT * GEOMETRY_CHECK))) is None
+    assert consistency_limits(loud._replace(smooth=0.0)) is None  # no shrink: as before
 
 
 def test_the_noise_profile_measures_each_bins_floor_where_not_terraced_in_full():

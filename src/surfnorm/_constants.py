@@ -177,12 +177,14 @@ CONSISTENT_MAX = math.pi / 2
 #: floor), the floor is its geometry's too: the leaves' and columns' curvature at the pixel scale raises the median
 #: second difference (the tree's floor 0.07 clean, 0.35 with white noise of 0.02 %, 0.28 blurred by a Gaussian of a
 #: pixel), and limits of CONSISTENT times 2 rho let adaptive_fit's windows span that detail. There the limits shrink
-#: to GEOMETRY_CHECK of themselves (linearly with that share). The check still runs only where it ran with the limits
-#: as they were (some under CONSISTENT_MAX): where the noise makes d2nt_v3's normals wander further, limits a quarter
-#: as wide switched the check on and took them (correlated noise of 0.3 % of depth: 15.9 -> 31.2 degrees). Set on the
-#: families of benchmarks/families.py (0.5, 0.35, 0.25 and 0.15 tried; white noise of 0.02 % 10.76 -> 7.54 degrees,
-#: the exact depth blurred by a Gaussian of a pixel 10.09 -> 9.23, whole millimetres 8.75 -> 7.68) and checked on the
-#: simulated sensors (the smooth float error 11.85 -> 11.62, the others unchanged) and the real frames (none checked).
+#: to GEOMETRY_CHECK of themselves (linearly with that share). The check runs where the limits as they were are under
+#: CONSISTENT_MAX, or where they are once shrunk from the larger of the floor and the frame's smooth noise: noise
+#: correlated over a few pixels moves d2nt_v3's normals further than the floor says, and shrunk limits of the floor
+#: alone switched the check on there and took them (correlated noise of 0.3 % of depth: 15.9 -> 31.2 degrees). Set on
+#: the families of benchmarks/families.py (0.5, 0.35, 0.25 and 0.15 tried; white noise of 0.02 % 10.76 -> 7.54
+#: degrees, of 0.05 % 12.84 -> 10.41, the exact depth blurred by a Gaussian of a pixel 10.09 -> 9.23, whole
+#: millimetres 8.75 -> 7.68) and checked on the simulated sensors (the smooth float error 11.85 -> 11.62, time of
+#: flight 12.98 -> 12.84, the others unchanged) and the real frames (none checked).
 GEOMETRY_CHECK = 0.25
 #: Upsampled depth (``sensor_noise.upsampling_factor``): depth that a lower-resolution sensor measured and a resize
 #: brought to the frame (a time-of-flight or phone LiDAR registered to a colour camera, a depth completion's output)

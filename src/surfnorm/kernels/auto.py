@@ -289,9 +289,10 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
     Where the frame's rho is its fine geometry (:func:`geometry_share`), the floor is partly the geometry's too, and
     the limits shrink to ``GEOMETRY_CHECK`` of themselves in that share.
-    None where no limit as it was before that is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that
-    the estimators' noise would not explain), and on a frame terraced in full, without floors, or without a reading
-    (sparse depth)."""
+    None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
+    would not explain), neither as it was before shrinking nor shrunk from the larger of the floor and the frame's
+    smooth noise (noise correlated over a few pixels moves d2nt_v3's normals further than the floor explains), and on
+    a frame terraced in full, without floors, or without a reading (sparse depth)."""
     share = max(terraced_share(profile, TERRACED_CHECK), smooth_error_share(profile))
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:
@@ -300,11 +301,15 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     # correlated noise (kappa_gain's share of it): d2nt_v3's small stencils see the smooth noise, not the floor
     smooth = (gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * profile.smooth
     floors = np.maximum(np.where(np.isnan(profile.floors), profile.floor, profile.floors), smooth)
-    limits = (2.0 * CONSISTENT * gain / (1.0 - share)) * floors
-    if not limits.min() < CONSISTENT_MAX:
+    scale = 2.0 * CONSISTENT * gain / (1.0 - share)
+    limits = scale * floors
+    shrink = 1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile)
+    if not (
+        limits.min() < CONSISTENT_MAX or (shrink * scale * np.maximum(floors, profile.smooth)).min() < CONSISTENT_MAX
+    ):
         return None
     c = profile.depths
-    return np.sqrt(c[:-1] * c[1:]), limits * (1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile))
+    return np.sqrt(c[:-1] * c[1:]), limits * shrink
 
 
 def consistency(

@@ -1060,9 +1060,13 @@ def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor,
     )
     scale = 2.0 * CONSISTENT * tables.gain / torch.where(share < 1.0, 1.0 - share, torch.ones_like(share))
     limits = scale.view(-1, 1) * floors
-    checked = ~torch.isnan(level) & (share < 1.0) & (limits.amin(dim=1) < CONSISTENT_MAX)
-    # where rho is the frame's fine geometry, the limits shrink (after the test above, as in auto.consistency_limits)
-    limits = limits * (1.0 - (1.0 - GEOMETRY_CHECK) * tables.geometry).view(-1, 1)
+    # where rho is the frame's fine geometry, the limits shrink; the check runs where they were under CONSISTENT_MAX,
+    # or are once shrunk from the larger of the floor and the smooth noise (as in auto.consistency_limits)
+    shrink = (1.0 - (1.0 - GEOMETRY_CHECK) * tables.geometry).view(-1, 1)
+    wide = shrink * scale.view(-1, 1) * torch.maximum(floors, tables.smooth.view(-1, 1))
+    on = (limits.amin(dim=1) < CONSISTENT_MAX) | (wide.amin(dim=1) < CONSISTENT_MAX)
+    checked = ~torch.isnan(level) & (share < 1.0) & on
+    limits = limits * shrink
     c = tables.centres
     return checked, _sqrt(c[:, :-1] * c[:, 1:]), limits
 

@@ -71,6 +71,14 @@ DEFAULT = (
 )
 
 
+def _number(text: str) -> float:
+    """``text`` as a float; NaN where it is not a number (so that every range test refuses it)."""
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
 def parse_family(text: str) -> tuple[str, float]:
     """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); ``"white:0.05"`` -> ("white", 0.05) (percent), and so
     ``correlated``; ``"blurred:1"`` -> ("blurred", 1.0) (the Gaussian's pixels; ``"blurred"``: 0, that is 1.5);
@@ -81,18 +89,12 @@ def parse_family(text: str) -> tuple[str, float]:
     if name not in FAMILIES:
         raise InputError(f"--families: expected some of {', '.join(FAMILIES)}, got {text!r}")
     if name in ("white", "correlated"):
-        try:
-            percent = float(factor)
-        except ValueError:
-            percent = float("nan")
+        percent = _number(factor)
         if not 0.0 < percent <= 5.0:
             raise InputError(f"--families: expected {name}:P with P a percent above 0 and at most 5, got {text!r}")
         return name, percent
     if name == "blurred" and factor:
-        try:
-            sigma = float(factor)
-        except ValueError:
-            sigma = float("nan")
+        sigma = _number(factor)
         if not 0.0 < sigma <= 10.0:
             raise InputError(f"--families: expected blurred:S with S pixels above 0 and at most 10, got {text!r}")
         return name, sigma
@@ -100,10 +102,7 @@ def parse_family(text: str) -> tuple[str, float]:
         if factor:
             raise InputError(f"--families: {name} takes no factor, got {text!r}")
         return name, 0
-    try:
-        k = float(factor)
-    except ValueError:
-        k = float("nan")
+    k = _number(factor)
     if not (2 <= k <= 16 and (2 * k).is_integer()):
         raise InputError(f"--families: expected {name}:K with K from 2 to 16, whole or halfway (7.5), got {text!r}")
     return name, int(k) if k.is_integer() else k

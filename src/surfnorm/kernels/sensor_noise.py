@@ -703,7 +703,7 @@ def smooth_error_share(profile: NoiseProfile) -> float:
     )
     pixel = _ramp(profile.floor / profile.floor2, SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH)
     noise = _ramp(profile.floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
-    return correlated * pixel * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
+    return correlated * pixel * noise * (1.0 - _geometry(rho))
 
 
 def smooth_error_reading(profile: NoiseProfile) -> float:
@@ -750,7 +750,12 @@ def geometry_share(profile: NoiseProfile) -> float:
     clean or with white noise of up to 0.05 % of depth; white noise over smooth shapes reads its floor). 0 where it
     is not a number."""
     rho = _median(profile.rho)
-    return _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH) if rho == rho else 0.0
+    return _geometry(rho) if rho == rho else 0.0
+
+
+def _geometry(rho: float) -> float:
+    """:func:`geometry_share` of a median rho (a number)."""
+    return _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH)
 
 
 def kappa_gain(profile: NoiseProfile) -> float:

@@ -21,7 +21,9 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 - ``correlated:P``: Gaussian noise of P % of the depth RMS, smoothed over about a pixel (a Gaussian of 1 pixel) before
   it is scaled: error that neighbours share, small, in float depth (a phone's LiDAR depth, a learned stereo matcher's
   output);
-- ``mm``: the exact depth stored in whole millimetres, no noise (a renderer's or a dataset's 16-bit PNG);
+- ``mm``: the exact depth stored in whole millimetres, no noise (a renderer's or a dataset's 16-bit PNG); ``mm:Q``,
+  in steps of Q millimetres (Q above 0 and at most 20: 2 at 2.5 m is what whole millimetres are at 1.25 m, in point
+  spacings);
 - ``outliers``: 0.2 % noise, and 1 % of the pixels anywhere in 0.8-1.2 times their depth (multipath, specks);
 - ``bilateral``: 0.4 % noise, then OpenCV's bilateral filter (7 pixels, 3 cm, 3 pixels): an edge-keeping clean-up;
 - ``flying``: 0.2 % noise, and every pixel at a depth edge (its 3x3 mean off its depth by over 2 %) at that mean
@@ -67,7 +69,8 @@ DEFAULT = (
     "upsampled_linear:7.5,upsampled_nearest:8,upsampled_cubic:5,upsampled_cubic:6,upsampled_cubic:8,upsampled_cubic:12,"
     "upsampled_cubic:7.5,median_mm,tof_mm,"
     "smooth_warp,"
-    "white:0.01,white:0.02,white:0.05,white:0.2,correlated:0.01,correlated:0.02,mm,outliers,bilateral,flying,blurred"
+    "white:0.01,white:0.02,white:0.05,white:0.2,correlated:0.01,correlated:0.02,mm,mm:1.5,mm:2,mm:4,outliers,"
+    "bilateral,flying,blurred"
 )
 
 
@@ -82,7 +85,8 @@ def _number(text: str) -> float:
 def parse_family(text: str) -> tuple[str, float]:
     """``"upsampled_linear:8"`` -> ("upsampled_linear", 8); ``"white:0.05"`` -> ("white", 0.05) (percent), and so
     ``correlated``; ``"blurred:1"`` -> ("blurred", 1.0) (the Gaussian's pixels; ``"blurred"``: 0, that is 1.5);
-    other families take no factor (0)."""
+    ``"mm:2"`` -> ("mm", 2.0) (the step in millimetres; ``"mm"``: 0, that is 1); other families take no factor
+    (0)."""
     from surfnorm.errors import InputError
 
     name, _, factor = text.partition(":")
@@ -93,6 +97,11 @@ def parse_family(text: str) -> tuple[str, float]:
         if not 0.0 < percent <= 5.0:
             raise InputError(f"--families: expected {name}:P with P a percent above 0 and at most 5, got {text!r}")
         return name, percent
+    if name == "mm" and factor:
+        q = _number(factor)
+        if not 0.0 < q <= 20.0:
+            raise InputError(f"--families: expected mm:Q with Q millimetres above 0 and at most 20, got {text!r}")
+        return name, q
     if name == "blurred" and factor:
         sigma = _number(factor)
         if not 0.0 < sigma <= 10.0:
@@ -165,8 +174,9 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
     elif family == "correlated":
         field = cv2.GaussianBlur(rng.standard_normal(z.shape).astype(np.float32), (0, 0), 1.0)
         out = z * (1.0 + 0.01 * k * field / field.std())
-    elif family == "mm":
-        out = np.round(z * 1000.0) / 1000.0
+    elif family == "mm":  # (k: the step in millimetres; 0: 1)
+        step = (k or 1.0) / 1000.0
+        out = np.round(z / step) * step
     elif family == "outliers":
         out = z * (1.0 + 0.002 * rng.standard_normal(z.shape))
         out = np.where(rng.random(z.shape) < 0.01, z * rng.uniform(0.8, 1.2, z.shape), out)

@@ -406,3 +406,23 @@ def consistency(a, b, z, edges, limits, t, fill):
         out = np.where(np.isnan(r[..., :1]), np.where(np.isnan(a[..., :1]), np.float32(fill), a), r)
         return out.astype(np.float32), took
     return blend(a, r, t, fill), took
+
+
+def depth_grid(z, valid, f, *, samples=12_000, share=0.98, steps=0.1, tolerance=0.02, min_pairs=64):
+    """NoiseProfile.grid: at every sampling_step-th row and column, the difference between the pixel's depth and its
+    right-hand neighbour's where both are valid; where at least ``share`` of them are whole multiples k of the smallest
+    positive one (within ``tolerance`` of it; k = 0 too) and at least ``steps`` of them have k other than 1, that
+    smallest one times f over the depth, averaged over the left pixels of the pairs with k of 1 or more; else 0."""
+    H, W = z.shape
+    step = sampling_step(H, W, samples)
+    pairs = [(v, u) for v in range(0, H, step) for u in range(0, W - 1, step) if valid[v, u] and valid[v, u + 1]]
+    left = np.array([float(z[v, u]) for v, u in pairs])
+    d = np.abs(np.array([float(z[v, u + 1]) for v, u in pairs]) - left)
+    if len(pairs) < min_pairs or not (d > 0).any():
+        return 0.0
+    q = d[d > 0].min()
+    k = np.round(d / q)
+    on = np.abs(d / q - k) <= tolerance
+    if on.sum() < share * len(pairs) or (on & (k != 1)).sum() < steps * len(pairs):
+        return 0.0
+    return float(q * f * np.mean(1.0 / left[on & (k > 0)]))

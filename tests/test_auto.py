@@ -289,7 +289,7 @@ def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
         d = surfnorm.auto_decision(smooth, K)
         assert p.floor < CLEAN_FLOOR + 0.02, str(d)  # the pixel scale reads it as (nearly) clean
         assert d.smooth_error == smooth_error_share(p) >= 0.9 and d.weight >= 0.9 and not d.checked, str(d)
-        assert str(d).endswith(f"smooth error {d.smooth_error:.2f}")
+        assert str(d).endswith(f"smooth error {d.smooth_error:.2f}, grid {d.grid:.3f}")
         e_auto, e_d2nt = (
             mean_angular_error(surfnorm.estimate(smooth, K, method=m), exact) for m in ("auto", "d2nt_v3")
         )
@@ -446,12 +446,12 @@ def check_profile(floors, floor=0.25, **kw):
 
 
 def test_consistency_limits_on_closed_forms():
-    """Each depth bin's limit is CONSISTENT times 2 rho times kappa_gain over 1 - s (s: terraced from TERRACED_CHECK
-    to TERRACED_HIGH), rho the bin's
+    """Each depth bin's limit is CONSISTENT times 2 rho times kappa_gain, rho the bin's
     floor (the frame's where the bin has too few samples) or, where the noise is correlated, the smooth noise in
-    kappa_gain's share of it; no check on a frame terraced in full, without floors or a reading, or whose limits all
-    reach CONSISTENT_MAX."""
-    from surfnorm._constants import CONSISTENT, CONSISTENT_MAX, TERRACED_CHECK
+    kappa_gain's share of it; terraces without a step change nothing (their step is the check's business:
+    test_quantised_depth_is_checked_with_limits_of_its_step); no check without floors or a reading, or where the
+    limits all reach CONSISTENT_MAX."""
+    from surfnorm._constants import CONSISTENT, CONSISTENT_MAX, TERRACED_CHECK, TERRACED_HIGH
 
     p = check_profile([0.1, 0.2, np.nan, 0.3, 0.1, 0.1, 0.1, 0.1])
     rho = np.array([0.1, 0.2, 0.25, 0.3, 0.1, 0.1, 0.1, 0.1])
@@ -459,9 +459,8 @@ def test_consistency_limits_on_closed_forms():
     np.testing.assert_allclose(edges, np.sqrt(p.depths[:-1] * p.depths[1:]))
     np.testing.assert_allclose(limits, 2 * CONSISTENT * rho)
     assert consistency_limits(p._replace(terraced=TERRACED_CHECK))[1] == pytest.approx(limits)
-    half = p._replace(terraced=(TERRACED_CHECK + TERRACED_HIGH) / 2)
-    np.testing.assert_allclose(consistency_limits(half)[1], 2 * limits)
-    for off in (p._replace(terraced=TERRACED_HIGH), p._replace(floors=None), p._replace(floor=float("nan"))):
+    np.testing.assert_allclose(consistency_limits(p._replace(terraced=TERRACED_HIGH))[1], limits)  # no step
+    for off in (p._replace(floors=None), p._replace(floor=float("nan"))):
         assert consistency_limits(off) is None
     loud = p._replace(floors=np.full(8, 1.01 * CONSISTENT_MAX / (2 * CONSISTENT)))
     assert consistency_limits(loud) is None
@@ -484,6 +483,104 @@ def test_consistency_limits_on_closed_forms():
     np.testing.assert_allclose(consistency_limits(shrunk)[1], GEOMETRY_CHECK * 2 * CONSISTENT * shrunk.floors)
     assert consistency_limits(shrunk._replace(smooth=1.01 * CONSISTENT_MAX / (2 * CONSISTENT * GEOMETRY_CHECK))) is None
     assert consistency_limits(loud._replace(smooth=0.0)) is None  # no shrink: as before
+
+
+def test_quantised_depth_is_checked_with_limits_of_its_step():
+    """On quantised depth (terraces, a grid) each limit is at least STEP_CONSISTENT times the quantisation's step Q
+    (the terraces' step in the terraced share from TERRACED_CHECK, or the grid's in its share), and the floor's part
+    is of the floor beyond Q in quadrature; every limit widens as 1 / (1 - s) with the smooth error's share s; no check
+    where STEP_CONSISTENT Q reaches CONSISTENT_MAX and the floor is within the steps."""
+    from surfnorm._constants import (
+        CONSISTENT,
+        CONSISTENT_MAX,
+        GRID_HIGH,
+        GRID_LOW,
+        STEP_CONSISTENT,
+        TERRACED_CHECK,
+        TERRACED_HIGH,
+    )
+    from surfnorm.kernels.sensor_noise import grid_share, quantisation_step
+
+    floors = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8])
+    p = check_profile(floors)
+    terraced = p._replace(terraced=TERRACED_HIGH, step=0.5)
+    assert quantisation_step(terraced) == 0.5
+    expected = np.maximum(STEP_CONSISTENT * 0.5, 2 * CONSISTENT * np.sqrt(np.maximum(floors**2 - 0.25, 0.0)))
+    np.testing.assert_allclose(consistency_limits(terraced)[1], expected)
+    assert expected[0] == STEP_CONSISTENT * 0.5 and expected[-1] > STEP_CONSISTENT * 0.5  # both parts at work
+    # half way up the terraced ramp: half the step
+    half = p._replace(terraced=(TERRACED_CHECK + TERRACED_HIGH) / 2, step=0.5)
+    assert quantisation_step(half) == pytest.approx(0.25)
+    np.testing.assert_allclose(
+        consistency_limits(half)[1],
+        np.maximum(STEP_CONSISTENT * 0.25, 2 * CONSISTENT * np.sqrt(np.maximum(floors**2 - 0.25**2, 0.0))),
+    )
+    # a grid: its step in its share (GRID_LOW to GRID_HIGH), the larger of the two
+    on_grid = p._replace(grid=0.3)
+    assert grid_share(on_grid) == 1.0 and quantisation_step(on_grid) == 0.3
+    assert quantisation_step(p._replace(grid=0.5 * (GRID_LOW + GRID_HIGH))) == pytest.approx(
+        0.25 * (GRID_LOW + GRID_HIGH)
+    )
+    assert grid_share(p._replace(grid=GRID_LOW)) == 0.0
+    assert quantisation_step(terraced._replace(grid=0.3)) == 0.5
+    np.testing.assert_allclose(
+        consistency_limits(on_grid)[1],
+        np.maximum(STEP_CONSISTENT * 0.3, 2 * CONSISTENT * np.sqrt(np.maximum(floors**2 - 0.09, 0.0))),
+    )
+    # the smooth error's share widens every limit
+    from surfnorm.kernels import auto as auto_module
+
+    orig = auto_module.smooth_error_share
+    auto_module.smooth_error_share = lambda profile: 0.5
+    try:
+        np.testing.assert_allclose(consistency_limits(terraced)[1], 2 * expected)
+        auto_module.smooth_error_share = lambda profile: 1.0
+        assert consistency_limits(terraced) is None
+    finally:
+        auto_module.smooth_error_share = orig
+    # steps too coarse for a limit under CONSISTENT_MAX, and a floor within them: no check
+    coarse = check_profile(np.full(8, 0.5), terraced=TERRACED_HIGH, step=1.01 * CONSISTENT_MAX / STEP_CONSISTENT)
+    assert consistency_limits(coarse) is None
+    assert consistency_limits(coarse._replace(step=0.99 * CONSISTENT_MAX / STEP_CONSISTENT)) is not None
+
+
+def test_the_depth_grid_against_the_naive_reference():
+    """NoiseProfile.grid (sensor_noise.depth_grid) against an independent reference on a tilted plane and a sphere
+    stored in whole millimetres: the step (1 mm) times f over the mean depth of the pairs on the grid, in point
+    spacings; the same in millimetre units (it does not depend on the unit of depth); about 0 for float32 depth (its
+    own rounding) and 0 where noise of 0.01 % is added before nothing rounds it, with too few pairs, or on a tilted
+    plane in float depth."""
+    from surfnorm.kernels.sensor_noise import depth_grid
+
+    K = camera(160, 120, fov_deg=50)
+    f = math.sqrt(K[0, 0] * K[1, 1])
+    z1, _, _ = plane(K, 120, 160, [0.3, -0.2, -1], 2.5)
+    zs, _, hit = sphere(K, 120, 160, [0.1, 0.0, 1.6], 0.5)
+    z = np.where(hit & (zs < z1), zs, z1)
+    z[40:50, 60:70] = 0.0  # a hole
+    mm = (np.round(z * 1000.0) / 1000.0).astype(np.float32)
+    valid = mm > 0
+    ref = naive.depth_grid(mm, valid, f)
+    assert ref > 0.1  # 1 mm at about 2 m, 130 px: 0.07 point spacings or more
+    assert depth_grid(mm, valid, f) == pytest.approx(ref, rel=1e-9)
+    assert noise_profile(mm, valid, f).grid == pytest.approx(ref, rel=1e-9)
+    in_mm = np.round(z * 1000.0).astype(np.float32)
+    assert depth_grid(in_mm, valid, f) == pytest.approx(ref, rel=2e-3)  # metres in float32 round the steps
+    assert depth_grid(z.astype(np.float32), z > 0, f) < 1e-3
+    noisy = (z * (1 + 1e-4 * np.random.default_rng(0).standard_normal(z.shape))).astype(np.float32)
+    assert depth_grid(noisy, z > 0, f) == 0.0
+    few = np.zeros_like(mm)
+    few[::20, :4] = mm[::20, :4]
+    assert depth_grid(few, few > 0, f) == 0.0
+    # a tilted plane in float depth: neighbours along a row all differ by about as much (within 2 %), which is no
+    # grid; stored in whole millimetres it is one
+    tilted, _, _ = plane(K, 120, 160, [0.4, 0.0, -1], 2.0)
+    assert depth_grid(tilted.astype(np.float32), tilted > 0, f) == 0.0
+    gentle, _, _ = plane(K, 120, 160, [0.05, 0.0, -1], 2.0)  # under a millimetre from pixel to pixel
+    assert depth_grid(gentle.astype(np.float32), gentle > 0, f) == 0.0
+    in_steps = (np.round(gentle * 1000.0) / 1000.0).astype(np.float32)
+    assert depth_grid(in_steps, in_steps > 0, f) == pytest.approx(naive.depth_grid(in_steps, in_steps > 0, f))
+    assert depth_grid(in_steps, in_steps > 0, f) > 0.05
 
 
 def test_the_noise_profile_measures_each_bins_floor_where_not_terraced_in_full():

@@ -580,6 +580,12 @@ def test_families_of_noise_filters_and_mixed_pixels():
     assert (blurred[~valid] == 0).all() and blurred[6, 0] > 0.99 * z[6, 0]  # next to the hole: not pulled to 0
     assert script.parse_family("blurred") == ("blurred", 0) and script.parse_family("blurred:0.7") == ("blurred", 0.7)
     np.testing.assert_array_equal(script.degrade("blurred", 1.5, z, valid, rng(0)), blurred)  # 1.5 px by default
+    assert script.parse_family("mm") == ("mm", 0) and script.parse_family("mm:2") == ("mm", 2.0)
+    whole = script.degrade("mm", 0, z, valid, rng(0))
+    np.testing.assert_array_equal(script.degrade("mm", 1.0, z, valid, rng(0)), whole)  # 1 mm by default
+    steps = script.degrade("mm", 4.0, z, valid, rng(0)).astype(np.float64)
+    assert (steps[~valid] == 0).all() and np.abs(steps[valid] - z[valid]).max() <= 0.002 + 1e-6
+    np.testing.assert_allclose(steps[valid] / 0.004, np.round(steps[valid] / 0.004), atol=1e-3)  # on the 4 mm grid
     wider = script.degrade("blurred", 3.0, z, valid, rng(0))  # reaches further from the step
     near = valid & (np.abs(u - 50) == 6) & (v > 8) & (v < H - 4)
     assert (np.abs(wider[near] / z[near] - 1.0) > np.abs(blurred[near] / z[near] - 1.0) + 1e-3).all()
@@ -599,6 +605,8 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         ("white", "with P a percent above 0 and at most 5, got 'white'"),
         ("correlated:9", "expected correlated:P with P a percent above 0 and at most 5, got 'correlated:9'"),
         ("blurred:0", "expected blurred:S with S pixels above 0 and at most 10, got 'blurred:0'"),
+        ("mm:0", "expected mm:Q with Q millimetres above 0 and at most 20, got 'mm:0'"),
+        ("mm:x", "expected mm:Q with Q millimetres above 0 and at most 20, got 'mm:x'"),
     ):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()

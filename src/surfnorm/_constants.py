@@ -163,13 +163,16 @@ SMOOTH_ERROR_PIXEL_HIGH = 0.4
 #: families of benchmarks/families.py (CONSISTENT 1.5 and 2, and rho the larger of the bin's floor and the frame's
 #: reading, were tried: see docs/choosing.md) and checked on the simulated sensors, the rooms and the real frames.
 CONSISTENT = 2.0
-#: The check's limits widen as 1 / (1 - s), s going from 0 at this ``NoiseProfile.terraced`` to 1 at TERRACED_HIGH,
-#: where the check stops: depth terraced in full is sensor depth, whose noise the floor does not read (its median
-#: second difference is 0 on terraces). So does the smooth error's share (``sensor_noise.smooth_error_share``),
-#: where larger: ``d2nt_v3`` follows such error over several pixels, further than the floor explains. Over the upper
-#: third of the terraced ramp, so that depth stored in whole millimetres (terraced 0.06-0.46 by scene) is checked in
-#: full up to it: on benchmarks/families.py's millimetres 8.75 degrees, against 10.93 with the ramp from
-#: TERRACED_LOW (its median filter 13.88 against 13.87).
+#: Quantised depth is checked too, with limits of its own: STEP_CONSISTENT times the quantisation's step in point
+#: spacings (``sensor_noise.quantisation_step``), the terraces' step in the share in which the frame is terraced
+#: (s from 0 at this ``NoiseProfile.terraced`` to 1 at TERRACED_HIGH) or the grid's (GRID_LOW, GRID_HIGH), where
+#: larger than CONSISTENT times 2 times the floor beyond that step in quadrature, sqrt(floor^2 - step^2) (the floor of
+#: terraces is their steps', not noise: the median second difference is 0 on wide terraces and about 0.6 of the step
+#: on narrow ones, which d2nt_v3's differences follow no further than a step; where the noise is far above the step
+#: the two add in quadrature). Where the smooth error's share (``sensor_noise.smooth_error_share``)
+#: is s, every limit widens as 1 / (1 - s), and at 1 the check stops: ``d2nt_v3`` follows such error over several
+#: pixels, further than the floor explains. From TERRACED_CHECK, so that depth stored in whole millimetres
+#: (terraced 0.06-0.46 by scene) keeps its floor's limits up to it.
 TERRACED_CHECK = 0.25
 CONSISTENT_MAX = math.pi / 2
 #: Where the frame's rho is its fine geometry (the median rho over the depth bins from GEOMETRY_RHO_LOW to
@@ -186,6 +189,27 @@ CONSISTENT_MAX = math.pi / 2
 #: millimetres 8.75 -> 7.68) and checked on the simulated sensors (the smooth float error 11.85 -> 11.62, time of
 #: flight 12.98 -> 12.84, the others unchanged) and the real frames (none checked).
 GEOMETRY_CHECK = 0.25
+#: Depth stored on a grid (``NoiseProfile.grid``: whole millimetres, 1/5000 m, 1/256 m, ...) is not a float render: its
+#: steps are error, however fine the grid, and ``d2nt_v3``'s one-sided differences follow them where
+#: ``adaptive_fit``'s windows average them away. A frame is on a grid where GRID_SHARE of the differences between
+#: the sampled pixels' valid depths and their right-hand neighbours' are whole multiples of the smallest one (0
+#: included), within GRID_TOLERANCE of it, and GRID_STEPS of them are 0 or 2 and more such steps (along a tilted plane
+#: in float depth neighbours all differ by about as much, one "step" each: no grid); the grid's step in point spacings then goes from GRID_LOW to GRID_HIGH in ``sensor_noise.grid_share``, in
+#: which share ``auto`` runs ``adaptive_fit`` (checked against ``d2nt_v3``, STEP_CONSISTENT above). Float32 renders
+#: read 0.00002-0.0001 (their own rounding), whole millimetres at 2.5 m and 580 px 0.23, at 3 m and 525 px 0.18.
+#: On simulated rooms (benchmarks/rooms.py's, whole millimetres, no noise) ``d2nt_v3`` gives 1.47 degrees,
+#: ``adaptive_fit`` 0.10, ``auto`` now 0.27 (1.47 before).
+GRID_LOW = 0.05
+GRID_HIGH = 0.10
+GRID_SHARE = 0.98
+GRID_STEPS = 0.1
+GRID_TOLERANCE = 0.02
+#: The check's limit on quantised depth, in radians per point spacing of the step (TERRACED_CHECK above): d2nt_v3's
+#: normals on terraces are off by up to about the step's slope, one step over one pixel. Set on 3F2N stored in steps
+#: of 1-4 mm (``benchmarks/families.py``'s ``mm:Q``; 0.75, 1 and 1.5 tried: 1.5 mm 11.85 -> 8.96 degrees, d2nt_v3
+#: 9.85) with the real frames in view: under 1.5 the checked ones (Middlebury Cones through SGBM, an Azure Kinect
+#: frame, both terraced a step of a point spacing) took d2nt_v3's normals where adaptive_fit's were right.
+STEP_CONSISTENT = 1.5
 #: Upsampled depth (``sensor_noise.upsampling_factor``): depth that a lower-resolution sensor measured and a resize
 #: brought to the frame (a time-of-flight or phone LiDAR registered to a colour camera, a depth completion's output)
 #: bends only at the seams between its samples, every K pixels: along the rows and along the columns, at least

@@ -585,16 +585,18 @@ def folder_markdown(result: dict) -> str:
             "full, and at least 0.10 + 0.10 s where its error is small and smooth over a few pixels (s, the smooth "
             "error's share, from 0 to 1: the noise rho over the floor, 1 for white noise); `d2nt_v3` at or below "
             "0.10, `adaptive_fit` at or above 0.20, their blend between "
-            "(`surfnorm.auto_decision`); checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
-            "pixel (depth not terraced in full, at low noise); upsampled: the factor by which the depth was resized "
+            "(`surfnorm.auto_decision`); grid: the step of the grid the depth is stored on (whole millimetres and "
+            "the like; 0 for float depth), from which (0.05 to 0.10) `adaptive_fit`'s weight is at least its share; "
+            "checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
+            "pixel (at low noise, and on quantised depth where its step is small); upsampled: the factor by which the depth was resized "
             "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
             "was found (`adaptive_fit` alone then, with windows of at least 2 K + 1 pixels, 2 ceil(1.5 K) + 1 where the "
             "reading is 0.20 or more), 1 elsewhere; "
             "correlation: of the noise between neighbouring pixels (1: independent).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
-            "| checked | upsampled | correlation | smooth error |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            "| grid | checked | upsampled | correlation | smooth error |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:
             d = result["decisions"].get(f)
@@ -603,7 +605,8 @@ def folder_markdown(result: dict) -> str:
             nums = [_fmt(d[k], 3) for k in ("weight", "reading", "floor", "smooth", "terraced", "step", "quantisation")]
             checked = "yes" if d.get("checked") else "no"
             out.append(
-                f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {checked} | {d.get('upsampled', 1):g} "
+                f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {_fmt(d.get('grid'), 3)} | {checked} "
+                f"| {d.get('upsampled', 1):g} "
                 f"| {_fmt(d.get('correlation'), 2)} | {_fmt(d.get('smooth_error'), 2)} |"
             )
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]

@@ -61,7 +61,7 @@ One decision per frame cannot serve a scene with both: at low noise (a few tenth
 point spacing) ``adaptive_fit`` is far better on smooth surfaces and far worse on fine
 detail (the leaves of 3F2N's tree, the columns of its temple: its windows, even 3x3,
 span them, where ``d2nt_v3``'s one-sided differences keep them apart). So where
-``adaptive_fit`` runs on depth that is not terraced in full, its normals are checked
+``adaptive_fit`` runs at low noise, its normals are checked
 against ``d2nt_v3``'s pixel by pixel (:func:`consistency_limits`, :func:`consistency`):
 where the two differ by more than ``d2nt_v3``'s noise explains (``CONSISTENT`` times
 2 rho radians, rho the noise floor at the pixel's depth), the difference is the scene's
@@ -71,10 +71,22 @@ differs that much. Where the frame's rho is its fine geometry
 geometry too, and the limits shrink to ``GEOMETRY_CHECK`` of themselves in that share:
 on the tree with white noise of 0.01 % of depth most pixels then take ``d2nt_v3``'s
 normal, and its error falls from 53 to 14.4 degrees (``d2nt_v3`` alone: 14.3; 23
-with the limits as they were; 0.02 %: 53, 17.4, 17.0 and 44). Depth terraced in full
-(raw structured light, stereo matchers, millimetres: sensor depth) is not checked, so
-the real sensor frames get what they got before, at the same cost; a checked frame
-runs both estimators.
+with the limits as they were; 0.02 %: 53, 17.4, 17.0 and 44). On quantised depth
+(terraces, a grid: :func:`~surfnorm.kernels.sensor_noise.quantisation_step`) the floor is
+the steps', and ``d2nt_v3``'s normals there are off by up to about a step's slope: the
+limits are at least ``STEP_CONSISTENT`` times the step and the floor's part counts only
+the floor beyond it. Raw structured light and most stereo matchers (steps of one to five
+point spacings) are then not checked and get what they got before, at the same cost;
+3F2N stored in steps of 1.5 mm (a third of a point spacing) is, and gives 8.96 degrees
+where it gave 11.85 (``d2nt_v3`` 9.85, ``adaptive_fit`` 12.17). A checked frame runs
+both estimators.
+
+Depth stored on a grid (``NoiseProfile.grid``: whole millimetres and the like) is not a
+float render: its steps are error, however fine, and from ``GRID_LOW`` to ``GRID_HIGH``
+point spacings ``adaptive_fit``'s weight is at least that share
+(:func:`~surfnorm.kernels.sensor_noise.adaptive_weight`), checked as above: rooms of
+planes in whole millimetres read a floor of 0.00-0.01 and got ``d2nt_v3``'s 1.47 degrees,
+now 0.08 (``adaptive_fit`` 0.10).
 
 Depth resized from a lower resolution (a time-of-flight or phone LiDAR registered to a colour camera, a depth
 completion's output) bends only at the seams between its samples, K pixels apart, and its noise lies in the
@@ -119,7 +131,7 @@ from .._constants import (
     GEOMETRY_CHECK,
     MNR_DLF_DEFAULT,
     NOISY_FLOOR,
-    TERRACED_CHECK,
+    STEP_CONSISTENT,
     TERRACED_HIGH,
     TERRACED_LOW,
     TRUNCATE_DEFAULT,
@@ -136,10 +148,10 @@ from .sensor_noise import (
     kappa_gain,
     noise_profile,
     quantisation,
+    quantisation_step,
     reading,
     reading_weight,
     smooth_error_share,
-    terraced_share,
     upsampling_factor,
 )
 
@@ -192,6 +204,10 @@ class Decision(NamedTuple):
     smooth_error : float
         :func:`~surfnorm.kernels.sensor_noise.smooth_error_share`: how far the error is small and smooth over a few
         pixels (a phone's LiDAR depth, a learned stereo matcher's), from 0 to 1.
+    grid : float
+        The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: the step of the grid the depth is stored on
+        (point spacings; 0 for float depth). From ``GRID_LOW`` to ``GRID_HIGH`` the frame counts as sensor depth
+        (:func:`~surfnorm.kernels.sensor_noise.grid_share`): ``weight`` is at least that share.
     """
 
     method: str
@@ -206,6 +222,7 @@ class Decision(NamedTuple):
     upsampled: float = 1
     correlation: float = 1.0
     smooth_error: float = 0.0
+    grid: float = 0.0
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
@@ -219,7 +236,7 @@ class Decision(NamedTuple):
             f"sensor at or above {NOISY_FLOOR:g}); floor {self.floor:.3f}, smooth {self.smooth:.3f}, "
             f"terraced {self.terraced:.3f}, "
             f"step {self.step:.3f}, quantisation {self.quantisation:.3f}, correlation {self.correlation:.2f}, "
-            f"smooth error {self.smooth_error:.2f}"
+            f"smooth error {self.smooth_error:.2f}, grid {self.grid:.3f}"
         )
 
 
@@ -240,6 +257,7 @@ def decision(profile: NoiseProfile, upsampled: float = 1) -> Decision:
         upsampled,
         profile.correlation,
         smooth_error_share(profile),
+        profile.grid,
     )
 
 
@@ -279,37 +297,46 @@ def blend(a: np.ndarray, b: np.ndarray, t: float, fill: float, out: np.ndarray, 
 def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] | None:
     """Where ``auto`` checks its two estimators against each other, per depth bin of ``profile``: (edges, limits),
     the N - 1 depths between its N bins and each bin's limit on the angle between the two normals at a pixel
-    (radians): ``CONSISTENT`` times 2 rho times the frame's :func:`~surfnorm.kernels.sensor_noise.kappa_gain`
-    (correlated noise moves a normal more) over 1 - s, s from 0 at ``TERRACED_CHECK`` to 1 at ``TERRACED_HIGH`` of
-    ``NoiseProfile.terraced`` (a frame terraced in full is sensor depth: no limit), or the smooth error's share
-    (:func:`~surfnorm.kernels.sensor_noise.smooth_error_share`) where larger (``d2nt_v3`` follows such error), where
-    rho is the bin's own noise floor (``NoiseProfile.floors``:
-    noise that grows with depth; the frame's floor where the bin has too few samples), or where the noise is
-    correlated (kappa_gain's share of it) the smooth noise if larger: d2nt_v3's small stencils see that. Not the
-    frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters most.
-    Where the frame's rho is its fine geometry (:func:`geometry_share`), the floor is partly the geometry's too, and
-    the limits shrink to ``GEOMETRY_CHECK`` of themselves in that share.
+    (radians).
+
+    The limit is ``CONSISTENT`` times 2 rho times the frame's :func:`~surfnorm.kernels.sensor_noise.kappa_gain`
+    (correlated noise moves a normal more), where rho is the bin's own noise floor (``NoiseProfile.floors``: noise
+    that grows with depth; the frame's floor where the bin has too few samples) beyond the frame's quantisation step
+    Q in quadrature, sqrt(floor^2 - Q^2) (:func:`~surfnorm.kernels.sensor_noise.quantisation_step`: the floor of
+    terraces is their steps', at most about 0.6 Q), or where the
+    noise is correlated (kappa_gain's share of it) the smooth noise if larger: d2nt_v3's small stencils see that. Not
+    the frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters
+    most. Where the frame's rho is its fine geometry (:func:`geometry_share`), the floor is partly the geometry's
+    too, and that limit shrinks to ``GEOMETRY_CHECK`` of itself in that share. On quantised depth (terraces, a grid)
+    the limit is at least ``STEP_CONSISTENT`` times Q: d2nt_v3's normals there are off by up to about a step's slope.
+    Every limit widens as 1 / (1 - s), s the smooth error's share
+    (:func:`~surfnorm.kernels.sensor_noise.smooth_error_share`): ``d2nt_v3`` follows such error.
+
     None where no limit is under ``CONSISTENT_MAX`` (then the check cannot pick a normal that the estimators' noise
     would not explain), neither as it was before shrinking nor shrunk from the larger of the floor and the frame's
-    smooth noise (noise correlated over a few pixels moves d2nt_v3's normals further than the floor explains), and on
-    a frame terraced in full, without floors, or without a reading (sparse depth)."""
-    share = max(terraced_share(profile, TERRACED_CHECK), smooth_error_share(profile))
+    smooth noise (noise correlated over a few pixels moves d2nt_v3's normals further than the floor explains), and
+    on a frame whose error is smooth in full, without floors (``noise_profile`` measures them wherever a limit could
+    be under ``CONSISTENT_MAX``) or without a reading (sparse depth)."""
+    share = smooth_error_share(profile)
     level = reading(profile)
     if profile.floors is None or share >= 1.0 or not level == level:
         return None
     gain = kappa_gain(profile)
     # correlated noise (kappa_gain's share of it): d2nt_v3's small stencils see the smooth noise, not the floor
     smooth = (gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * profile.smooth
+    q = quantisation_step(profile)
     floors = np.maximum(np.where(np.isnan(profile.floors), profile.floor, profile.floors), smooth)
+    noise = np.sqrt(
+        np.maximum(floors * floors - q * q, 0.0)
+    )  # the floor beyond the quantisation's steps (in quadrature)
     scale = 2.0 * CONSISTENT * gain / (1.0 - share)
-    limits = scale * floors
+    steps = STEP_CONSISTENT * q / (1.0 - share)
     shrink = 1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile)
-    if not (
-        limits.min() < CONSISTENT_MAX or (shrink * scale * np.maximum(floors, profile.smooth)).min() < CONSISTENT_MAX
-    ):
+    wide = np.maximum(steps, shrink * scale * np.maximum(noise, profile.smooth))
+    if not (np.maximum(steps, scale * noise).min() < CONSISTENT_MAX or wide.min() < CONSISTENT_MAX):
         return None
     c = profile.depths
-    return np.sqrt(c[:-1] * c[1:]), limits * shrink
+    return np.sqrt(c[:-1] * c[1:]), np.maximum(steps, scale * noise * shrink)
 
 
 def consistency(

@@ -32,11 +32,17 @@ from .._constants import (
     _SMOOTH_SAMPLES,
     _STRIDES_SOLVE,
     CLEAN_FLOOR,
+    CONSISTENT_MAX,
     CORRELATED_HIGH,
     CORRELATED_KAPPA_GAIN,
     CORRELATED_LOW,
     GEOMETRY_RHO_HIGH,
     GEOMETRY_RHO_LOW,
+    GRID_HIGH,
+    GRID_LOW,
+    GRID_SHARE,
+    GRID_STEPS,
+    GRID_TOLERANCE,
     MIN_SAMPLES,
     N_BINS,
     NOISY_FLOOR,
@@ -49,6 +55,8 @@ from .._constants import (
     SMOOTH_ERROR_SHAPE_HIGH,
     SMOOTH_ERROR_SHAPE_LOW,
     SMOOTH_SHARE,
+    STEP_CONSISTENT,
+    TERRACED_CHECK,
     TERRACED_HIGH,
     TERRACED_LOW,
     UPSAMPLED_CONTRAST,
@@ -76,6 +84,9 @@ __all__ = [
     "geometry_share",
     "reading",
     "quantisation",
+    "quantisation_step",
+    "grid_share",
+    "depth_grid",
     "terraced_share",
     "smooth_error_share",
     "upsampling_factor",
@@ -144,6 +155,53 @@ def _terrace(z_m, z_0, z_p, f, jumps, n_jumps):
         jumps[n_jumps] = abs(1.0 / z_0 - 1.0 / other) * z_0 * f
         n_jumps += 1
     return 1, n_jumps
+
+
+@ahead_of_time
+@njit(_nrt=False)
+def _grid(z, valid, step, tolerance):
+    """(q, n, on, steps, moved, inverse) over the pixels on every ``step``-th row and column and their right-hand
+    neighbours where both are valid (n pairs): q the smallest positive difference between the two depths (0 without
+    any), ``on`` how many pairs differ by a whole multiple k of q within ``tolerance`` of it (k = 0 included),
+    ``steps`` how many of those by k 0 or 2 and more (a grid's steps, not a plane's even slope, along which
+    neighbours all differ by about as much), ``moved`` how many by k 1 and more, and ``inverse`` the sum of 1/z over
+    those (the left one's)."""
+    H, W = z.shape
+    q = np.inf
+    n = 0
+    for v in range(0, H, step):
+        for u in range(0, W - 1, step):
+            if valid[v, u] and valid[v, u + 1]:
+                n += 1
+                d = abs(float(z[v, u + 1]) - float(z[v, u]))
+                if d > 0.0:
+                    q = min(q, d)
+    if q == np.inf:
+        return 0.0, n, 0, 0, 0, 0.0
+    per_q = 1.0 / q
+    on = steps = moved = 0
+    inverse = 0.0
+    for v in range(0, H, step):
+        for u in range(0, W - 1, step):
+            if valid[v, u] and valid[v, u + 1]:
+                r = abs(float(z[v, u + 1]) - float(z[v, u])) * per_q
+                k = math.floor(r + 0.5)
+                if abs(r - k) <= tolerance:
+                    on += 1
+                    steps += k != 1.0
+                    if k > 0.0:
+                        moved += 1
+                        inverse += 1.0 / z[v, u]
+    return q, n, on, steps, moved, inverse
+
+
+def depth_grid(z: np.ndarray, valid: np.ndarray, f: float) -> float:
+    """:attr:`NoiseProfile.grid`: the step of the grid the depth is stored on, in point spacings (z / f), 0 where it
+    is not on one (see ``GRID_SHARE`` in :mod:`surfnorm._constants`)."""
+    q, n, on, steps, moved, inverse = _grid(z, valid, noise_step(*z.shape), GRID_TOLERANCE)
+    if n < MIN_SAMPLES or moved == 0 or on < GRID_SHARE * n or steps < GRID_STEPS * n:
+        return 0.0
+    return q * f * inverse / moved
 
 
 @ahead_of_time
@@ -530,12 +588,21 @@ class NoiseProfile(NamedTuple):
     floors : ndarray or None
         The floor of each depth bin (the bins of ``depths``: the median |x_1| of its samples over 0.6745), NaN
         where a bin has fewer than ``MIN_SAMPLES``; where the noise grows with depth, the far bins' floors exceed
-        the frame's. Measured only where the frame is not terraced in full (:func:`terraced_share` under 1: the
-        frames on which ``auto`` checks its two estimators against each other); None elsewhere.
+        the frame's. Measured only where ``auto`` may check its two estimators against each other: where the frame is
+        not terraced in full (:func:`terraced_share` under 1), or where its quantisation's step
+        (:func:`quantisation_step`) is small enough for a limit of ``STEP_CONSISTENT`` times it; None elsewhere.
     floor2 : float
         The same median as ``floor`` of |x_2|, the second differences at stride 2 (of the same stencils): the floor
         of stride 2. A smooth shape gives 4 times the floor, white noise the floor; noise correlated over a pixel or
         two between. NaN where the floor is (and on profiles made without it).
+    grid : float
+        The step of the grid the depth is stored on (:func:`depth_grid`: whole millimetres, 1/5000 m, float16's
+        steps within a power of two), in point spacings at the depths of the pixels measured (their mean of f / z
+        times the step), where ``GRID_SHARE`` of the differences between the sampled pixels' valid depths and their
+        right-hand neighbours' are whole multiples of the smallest one; 0 elsewhere. Float32 renders read their own rounding,
+        0.00002-0.0001; whole millimetres at 2.5 m and 580 px 0.23; the Azure Kinect, RealSense and KITTI frames we
+        measured 0.2-1.0; raw Kinect v1 disparity and stereo matchers' float depth 0 (their grid is in 1 / z: see
+        ``step``).
     """
 
     depths: np.ndarray
@@ -547,6 +614,7 @@ class NoiseProfile(NamedTuple):
     correlation: float = 1.0
     floors: np.ndarray | None = None
     floor2: float = float("nan")
+    grid: float = 0.0
 
 
 def _correlation(rms, starts, min_samples):
@@ -622,10 +690,12 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     correlation = _correlation(ms, starts, MIN_SAMPLES)
     at_1, at_2 = median.result()  # before its scratch is used again below
     floor, floor2 = at_1 / 0.6745, at_2 / 0.6745
+    grid = depth_grid(z, valid, f)
     floors = None
-    if terraced < TERRACED_HIGH:  # terraced_share under 1: auto may check its estimators against each other
+    if terraced < TERRACED_HIGH or STEP_CONSISTENT * _step_of(terraced, step, grid) < CONSISTENT_MAX:
+        # auto may check its estimators against each other (consistency_limits)
         floors = _bin_floors(grouped[0], starts, MIN_SAMPLES, work[4][:n]) / 0.6745
-    profile = NoiseProfile(centres, rho, floor, terraced, step, smooth.result(), correlation, floors, floor2)
+    profile = NoiseProfile(centres, rho, floor, terraced, step, smooth.result(), correlation, floors, floor2, grid)
     # every part has ended (result() waits for one another thread runs), so nothing reads the arrays any more; on an
     # error they are dropped instead (a part may still be running)
     _working.give(size, work)
@@ -677,6 +747,25 @@ def terraced_share(profile: NoiseProfile, low: float = TERRACED_LOW) -> float:
     """How far the frame counts as terraced: 0 at or below ``low`` (``TERRACED_LOW``; ``auto``'s consistency check
     starts from ``TERRACED_CHECK``), 1 at or above ``TERRACED_HIGH``, linear between."""
     return _ramp(profile.terraced, low, TERRACED_HIGH)
+
+
+def grid_share(profile: NoiseProfile) -> float:
+    """How far the frame counts as stored on a grid (:attr:`NoiseProfile.grid`): 0 at or below ``GRID_LOW``, 1 at or
+    above ``GRID_HIGH`` point spacings, linear between."""
+    return _ramp(profile.grid, GRID_LOW, GRID_HIGH)
+
+
+def _step_of(terraced: float, step: float, grid: float) -> float:
+    """:func:`quantisation_step` from a profile's terraced, step and grid."""
+    return max(_ramp(terraced, TERRACED_CHECK, TERRACED_HIGH) * step, _ramp(grid, GRID_LOW, GRID_HIGH) * grid)
+
+
+def quantisation_step(profile: NoiseProfile) -> float:
+    """The step of the frame's quantisation in point spacings, in the share in which it is one: the terraces' step
+    (``step``) in the share in which the frame is terraced (from ``TERRACED_CHECK`` to ``TERRACED_HIGH``), or the
+    grid's (``grid``, :func:`grid_share`), the larger. ``auto``'s consistency check takes it as the noise of
+    ``d2nt_v3``'s normals there (``STEP_CONSISTENT``)."""
+    return _step_of(profile.terraced, profile.step, profile.grid)
 
 
 def _ramp(x: float, low: float, high: float) -> float:
@@ -762,23 +851,25 @@ def kappa_gain(profile: NoiseProfile) -> float:
     """The adaptive fit's gain on its noise test's kappa for this frame: 1, up to ``CORRELATED_KAPPA_GAIN`` where the
     noise is correlated across pixels (``correlation`` from ``CORRELATED_LOW`` to ``CORRELATED_HIGH``), the
     measured rho is not the scene's fine geometry (median rho from ``GEOMETRY_RHO_HIGH`` down to
-    ``GEOMETRY_RHO_LOW``) and the frame is sensor depth (:func:`adaptive_weight`: on clean depth there is no noise
-    whose correlation a ratio of second differences could tell); linear in each, so that the normals move
+    ``GEOMETRY_RHO_LOW``) and the frame reads as sensor depth (:func:`reading_weight` of its :func:`reading`: on clean
+    depth, a grid's steps aside, there is no noise whose correlation a ratio of second differences could tell);
+    linear in each, so that the normals move
     continuously with the profile (see :mod:`surfnorm._constants`). 1 where a measure is not a number."""
     correlated = (profile.correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW)
     noise = (GEOMETRY_RHO_HIGH - _median(profile.rho)) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
     if not (correlated == correlated and noise == noise):
         return 1.0
-    share = min(max(correlated, 0.0), 1.0) * min(max(noise, 0.0), 1.0) * adaptive_weight(profile)
+    share = min(max(correlated, 0.0), 1.0) * min(max(noise, 0.0), 1.0) * reading_weight(reading(profile))
     return float(1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share)
 
 
 def adaptive_weight(profile: NoiseProfile) -> float:
-    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth), from :func:`reading`.
+    """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth): from :func:`reading`, or
+    the frame's :func:`grid_share` where larger (depth stored on a grid is not a float render: its steps are error).
 
     A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
     """
-    return reading_weight(reading(profile))
+    return max(reading_weight(reading(profile)), grid_share(profile))
 
 
 def reading_weight(r: float) -> float:

@@ -68,6 +68,11 @@ from .._constants import (
     GEOMETRY_CHECK,
     GEOMETRY_RHO_HIGH,
     GEOMETRY_RHO_LOW,
+    GRID_HIGH,
+    GRID_LOW,
+    GRID_SHARE,
+    GRID_STEPS,
+    GRID_TOLERANCE,
     KAPPA,
     MAX_UNREACHED,
     MAX_WINDOW,
@@ -88,6 +93,7 @@ from .._constants import (
     SMOOTH_ERROR_SHAPE_HIGH,
     SMOOTH_ERROR_SHAPE_LOW,
     SMOOTH_SHARE,
+    STEP_CONSISTENT,
     TERRACED_CHECK,
     TERRACED_HIGH,
     TERRACED_LOW,
@@ -185,6 +191,7 @@ class NoiseTables(NamedTuple):
     correlation: torch.Tensor  # (B,) NoiseProfile.correlation
     smooth_error: torch.Tensor  # (B,) sensor_noise.smooth_error_share
     geometry: torch.Tensor  # (B,) sensor_noise.geometry_share
+    grid: torch.Tensor  # (B,) NoiseProfile.grid
 
 
 def _samples(z, valid, f, lo, span):
@@ -251,6 +258,30 @@ def _samples(z, valid, f, lo, span):
     taken, changed, jumps, first = (interleaved(per_axis[0][i], per_axis[1][i]) for i in (1, 2, 3, 4))
     bins = bins.unsqueeze(-1).expand(-1, -1, -1, 2).reshape(B, -1)
     return xs, taken, bins, changed, jumps, first
+
+
+def _grid(z, valid, f) -> torch.Tensor:
+    """``sensor_noise.depth_grid`` per frame (B,): z (B, H, W) float64, valid (B, H, W), f (B,)."""
+    B, H, W = z.shape
+    step = noise_step(H, W)
+    zr, vr = z[:, ::step], valid[:, ::step]
+    left, right = zr[..., :-1][..., ::step], zr[..., 1:][..., ::step]  # each sampled pixel and its right neighbour
+    pair = (vr[..., :-1][..., ::step] & vr[..., 1:][..., ::step]).reshape(B, -1)
+    left = left.reshape(B, -1)
+    d = torch.abs(right.reshape(B, -1) - left)
+    n = pair.sum(dim=1)
+    q = torch.where(pair & (d > 0.0), d, torch.full_like(d, math.inf)).amin(dim=1)
+    found = q < math.inf
+    r = d * torch.reciprocal(torch.where(found, q, torch.ones_like(q))).view(B, 1)
+    k = torch.floor(r + 0.5)
+    on = pair & (torch.abs(r - k) <= GRID_TOLERANCE)
+    steps = (on & (k != 1.0)).sum(dim=1)
+    moved = on & (k > 0.0)
+    inverse = _sequential_sum(torch.where(moved, torch.reciprocal(left), torch.zeros_like(d)))
+    n_moved = moved.sum(dim=1)
+    grid = q * f * inverse / n_moved.clamp(min=1)
+    ok = found & (n >= MIN_SAMPLES) & (n_moved > 0) & (on.sum(dim=1) >= GRID_SHARE * n) & (steps >= GRID_STEPS * n)
+    return torch.where(ok, grid, torch.zeros_like(grid))
 
 
 def _sequential_sum(x: torch.Tensor) -> torch.Tensor:
@@ -422,8 +453,9 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         correlation,
         smooth_error_share(floor, floor2, rho_median),
         torch.where(torch.isnan(rho_median), 0.0, _ramp(rho_median, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH)),
+        _grid(z, valid, f),
     )
-    share = correlated * torch.clamp(noise, 0.0, 1.0) * adaptive_weight(tables)
+    share = correlated * torch.clamp(noise, 0.0, 1.0) * _reading_weight(reading(tables))
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
     return tables._replace(kappa=KAPPA * gain, gain=gain)
 
@@ -1041,32 +1073,49 @@ def upsampling_factors(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     return out
 
 
-def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
-    """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
-    (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples)."""
-    r = reading(tables)
+def _reading_weight(r: torch.Tensor) -> torch.Tensor:
+    """``sensor_noise.reading_weight`` per frame: 0 at or below CLEAN_FLOOR, 1 at or above NOISY_FLOOR, linear between,
+    1 where NaN."""
     t = ((r - CLEAN_FLOOR) / (NOISY_FLOOR - CLEAN_FLOOR)).clamp(0.0, 1.0)
     return torch.where(torch.isnan(r), torch.ones_like(t), t)
+
+
+def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
+    """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
+    (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples); at least the frame's
+    grid share (``sensor_noise.grid_share``)."""
+    return torch.maximum(_reading_weight(reading(tables)), _ramp(tables.grid, GRID_LOW, GRID_HIGH))
+
+
+def quantisation_step(tables: NoiseTables) -> torch.Tensor:
+    """``sensor_noise.quantisation_step`` per frame (B,)."""
+    return torch.maximum(
+        terraced_share(tables, TERRACED_CHECK) * tables.step, _ramp(tables.grid, GRID_LOW, GRID_HIGH) * tables.grid
+    )
 
 
 def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``auto.consistency_limits`` per frame: (checked (B,) bool, edges (B, N_BINS - 1), limits (B, N_BINS)
     radians); where not checked, any edges and limits."""
-    share = torch.maximum(terraced_share(tables, TERRACED_CHECK), tables.smooth_error)
+    share = tables.smooth_error
     level = reading(tables)
     smooth = (tables.gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * tables.smooth
+    q = quantisation_step(tables).view(-1, 1)
     floors = torch.maximum(
         torch.where(torch.isnan(tables.floors), tables.floor.view(-1, 1), tables.floors), smooth.view(-1, 1)
     )
-    scale = 2.0 * CONSISTENT * tables.gain / torch.where(share < 1.0, 1.0 - share, torch.ones_like(share))
-    limits = scale.view(-1, 1) * floors
-    # where rho is the frame's fine geometry, the limits shrink; the check runs where they were under CONSISTENT_MAX,
-    # or are once shrunk from the larger of the floor and the smooth noise (as in auto.consistency_limits)
+    noise = _sqrt(torch.clamp_min(floors * floors - q * q, 0.0))  # the floor beyond the quantisation's steps
+    keep = torch.where(share < 1.0, 1.0 - share, torch.ones_like(share)).view(-1, 1)
+    scale = 2.0 * CONSISTENT * tables.gain.view(-1, 1) / keep
+    steps = STEP_CONSISTENT * q / keep
+    # where rho is the frame's fine geometry, the floor's limits shrink; the check runs where they were under
+    # CONSISTENT_MAX, or are once shrunk from the larger of the floor and the smooth noise (as in
+    # auto.consistency_limits); quantised depth's are at least STEP_CONSISTENT times its step
     shrink = (1.0 - (1.0 - GEOMETRY_CHECK) * tables.geometry).view(-1, 1)
-    wide = shrink * scale.view(-1, 1) * torch.maximum(floors, tables.smooth.view(-1, 1))
-    on = (limits.amin(dim=1) < CONSISTENT_MAX) | (wide.amin(dim=1) < CONSISTENT_MAX)
+    wide = torch.maximum(steps, shrink * scale * torch.maximum(noise, tables.smooth.view(-1, 1)))
+    on = (torch.maximum(steps, scale * noise).amin(dim=1) < CONSISTENT_MAX) | (wide.amin(dim=1) < CONSISTENT_MAX)
     checked = ~torch.isnan(level) & (share < 1.0) & on
-    limits = limits * shrink
+    limits = torch.maximum(steps, scale * noise * shrink)
     c = tables.centres
     return checked, _sqrt(c[:, :-1] * c[:, 1:]), limits
 

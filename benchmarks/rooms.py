@@ -2,6 +2,7 @@
 
     PYTHONPATH=src python benchmarks/rooms.py
     PYTHONPATH=src python benchmarks/rooms.py --sensors stereo_sgbm,smooth_error --methods auto,opencv_linemod_w5
+    PYTHONPATH=src python benchmarks/rooms.py --steps 1,2 --methods auto,d2nt_v3,adaptive_fit
 
 The 3F2N frames of `benchmarks/sensor_sim.py` are objects at a table's distance, seen mostly face on. A robot's
 camera sees rooms: walls, and a floor at 60-85 degrees from the line of sight. Three rooms, each a floor, a back wall
@@ -9,7 +10,9 @@ and a side wall (camera 0.6-1.2 m above the floor, pitched down 8-25 degrees and
 3-5 m, side wall 1.2-2 m away), 480x640 at f = 525 px, depth in metres, go through each sensor of
 `surfnorm.bench.simulate` (seed 0; the sensors' noise at their own scale: `scale=1`). Per sensor and method: e_A in
 degrees over the pixels with depth and a normal, by the angle between the line of sight and the surface (the floor
-far away is the widest), and over all of them. Every library runs on one thread.
+far away is the widest), and over all of them. Every library runs on one thread. ``--steps Q1,Q2``: instead of the
+sensors, the exact depth stored in steps of Q millimetres (a renderer's or a dataset's 16-bit PNG: whole millimetres
+for Q = 1), no noise.
 """
 
 from __future__ import annotations
@@ -55,6 +58,14 @@ def room(pitch: float, height: float, turn: float, back: float, side: float):
     return depth, normals, view
 
 
+def _millimetres(text: str) -> float:
+    """``text`` as a float; NaN where it is not a number (so that the range test refuses it)."""
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
 def intrinsics() -> np.ndarray:
     return np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])
 
@@ -72,13 +83,20 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sensors", default=",".join(SENSORS), help="comma-separated; default: every sensor")
     ap.add_argument("--methods", default="auto,d2nt_v3,adaptive_fit,opencv_linemod_w5,opencv_fals_w7,open3d_knn30")
+    ap.add_argument("--steps", default=None, help="comma-separated millimetres: the exact depth in such steps instead")
     args = ap.parse_args(argv)
     try:
         entries, missing = make_entries(args.methods.split(","))
-        sensors = args.sensors.split(",")
-        unknown = [s for s in sensors if s not in SENSORS]
-        if unknown:
-            raise SurfnormError(f"--sensors: expected some of {', '.join(SENSORS)}, got {', '.join(unknown)}")
+        if args.steps is not None:
+            sensors = [f"{q} mm" for q in args.steps.split(",")]
+            wrong = [q for q in args.steps.split(",") if not _millimetres(q) > 0.0]
+            if wrong:
+                raise SurfnormError(f"--steps: expected millimetres above 0, got {', '.join(wrong)}")
+        else:
+            sensors = args.sensors.split(",")
+            unknown = [s for s in sensors if s not in SENSORS]
+            if unknown:
+                raise SurfnormError(f"--sensors: expected some of {', '.join(SENSORS)}, got {', '.join(unknown)}")
     except SurfnormError as exc:
         print(f"rooms: {exc}", file=sys.stderr)
         return 2
@@ -92,7 +110,11 @@ def main(argv=None) -> int:
         errors: dict[str, list[list[float]]] = {e.label: [[] for _ in labels] for e in entries}
         weights: list[list[int]] = [[] for _ in labels]
         for k, (depth, normals, view) in enumerate(scenes):
-            z = simulate(depth, K, sensor, seed=frame_seed(0, f"room{k}", sensor), normals=normals, scale=1.0)
+            if args.steps is not None:  # the exact depth in steps of q millimetres
+                q = _millimetres(sensor.split()[0]) / 1000.0
+                z = np.where(depth > 0, np.round(depth / q) * q, 0.0).astype(np.float32)
+            else:
+                z = simulate(depth, K, sensor, seed=frame_seed(0, f"room{k}", sensor), normals=normals, scale=1.0)
             valid = z > 0
             parts = [valid & (view >= a) & (view < b) for a, b in zip(BINS[:-1], BINS[1:])] + [valid]
             for i, part in enumerate(parts):

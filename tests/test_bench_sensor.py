@@ -480,6 +480,24 @@ def test_rooms_refuses_an_unknown_sensor(capsys):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
     assert err.startswith("rooms: --sensors: expected some of kinect_v1, ") and err.endswith("got sonar")
+    for steps, tail in (("1,x", "got x"), ("0", "got 0"), ("-2,1", "got -2")):
+        assert script.main([f"--steps={steps}", "--methods", "auto"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == f"rooms: --steps: expected millimetres above 0, {tail}", err
+
+
+def test_rooms_in_steps_of_millimetres(capsys):
+    """--steps: the exact depth of the rooms in steps of Q millimetres, one table per step; on planes stored in whole
+    millimetres the default is adaptive_fit's (its grid), far below d2nt_v3, which follows the steps."""
+    script = _benchmark_script("rooms")
+    assert script.main(["--steps", "2", "--methods", "auto,d2nt_v3,adaptive_fit"]) == 0
+    out = capsys.readouterr().out
+    assert "### 2 mm: e_A" in out
+    cells = [line.split("|") for line in out.splitlines()]
+    rows = {
+        c[1].strip(): float(c[-2]) for c in cells if len(c) > 8 and c[1].strip() in ("auto", "d2nt_v3", "adaptive_fit")
+    }
+    assert rows["auto"] <= 1.1 * rows["adaptive_fit"] + 0.05 and rows["d2nt_v3"] > 5 * rows["auto"], rows
 
 
 def test_families_deliver_what_they_say():

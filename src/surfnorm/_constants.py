@@ -197,8 +197,8 @@ GEOMETRY_CHECK = 0.25
 #: in float depth neighbours all differ by about as much, one "step" each: no grid); the grid's step in point spacings then goes from GRID_LOW to GRID_HIGH in ``sensor_noise.grid_share``, in
 #: which share ``auto`` runs ``adaptive_fit`` (checked against ``d2nt_v3``, STEP_CONSISTENT above). Float32 renders
 #: read 0.00002-0.0001 (their own rounding), whole millimetres at 2.5 m and 580 px 0.23, at 3 m and 525 px 0.18.
-#: On simulated rooms (benchmarks/rooms.py's, whole millimetres, no noise) ``d2nt_v3`` gives 1.47 degrees,
-#: ``adaptive_fit`` 0.10, ``auto`` now 0.27 (1.47 before).
+#: On simulated rooms in whole millimetres (``benchmarks/rooms.py --steps 1``) ``d2nt_v3`` gives 1.5 degrees,
+#: ``adaptive_fit`` 0.1, ``auto`` now 0.1 (1.5 before).
 GRID_LOW = 0.05
 GRID_HIGH = 0.10
 GRID_SHARE = 0.98

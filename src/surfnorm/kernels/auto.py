@@ -85,8 +85,8 @@ Depth stored on a grid (``NoiseProfile.grid``: whole millimetres and the like) i
 float render: its steps are error, however fine, and from ``GRID_LOW`` to ``GRID_HIGH``
 point spacings ``adaptive_fit``'s weight is at least that share
 (:func:`~surfnorm.kernels.sensor_noise.adaptive_weight`), checked as above: rooms of
-planes in whole millimetres read a floor of 0.00-0.01 and got ``d2nt_v3``'s 1.47 degrees,
-now 0.08 (``adaptive_fit`` 0.10).
+planes in whole millimetres read a floor of 0.00-0.01 and got ``d2nt_v3``'s 1.5 degrees,
+now 0.1 (``adaptive_fit`` 0.1; ``benchmarks/rooms.py --steps 1``).
 
 Depth resized from a lower resolution (a time-of-flight or phone LiDAR registered to a colour camera, a depth
 completion's output) bends only at the seams between its samples, K pixels apart, and its noise lies in the

@@ -158,47 +158,50 @@ def _terrace(z_m, z_0, z_p, f, jumps, n_jumps):
 
 
 @ahead_of_time
-@njit(_nrt=False)
-def _grid(z, valid, step, tolerance):
+@njit(noalias=True, _nrt=False)
+def _grid(z, valid, step, tolerance, d, w):
     """(q, n, on, steps, moved, inverse) over the pixels on every ``step``-th row and column and their right-hand
-    neighbours where both are valid (n pairs): q the smallest positive difference between the two depths (0 without
-    any), ``on`` how many pairs differ by a whole multiple k of q within ``tolerance`` of it (k = 0 included),
-    ``steps`` how many of those by k 0 or 2 and more (a grid's steps, not a plane's even slope, along which
-    neighbours all differ by about as much), ``moved`` how many by k 1 and more, and ``inverse`` the sum of 1/z over
-    those (the left one's)."""
+    neighbours where both are valid (n pairs; ``d`` and ``w`` scratch of at least as many): q the smallest positive
+    difference between the two depths (0 without any), ``on`` how many pairs differ by a whole multiple k of q within
+    ``tolerance`` of it (k = 0 included), ``steps`` how many of those by k 0 or 2 and more (a grid's steps, not a
+    plane's even slope, along which neighbours all differ by about as much), ``moved`` how many by k 1 and more, and
+    ``inverse`` the sum of 1/z over those (the left one's)."""
     H, W = z.shape
     q = np.inf
     n = 0
     for v in range(0, H, step):
+        zv, ok = z[v], valid[v]
         for u in range(0, W - 1, step):
-            if valid[v, u] and valid[v, u + 1]:
+            if ok[u] and ok[u + 1]:
+                d[n] = abs(float(zv[u + 1]) - float(zv[u]))
+                w[n] = 1.0 / zv[u]
+                if d[n] > 0.0:
+                    q = min(q, d[n])
                 n += 1
-                d = abs(float(z[v, u + 1]) - float(z[v, u]))
-                if d > 0.0:
-                    q = min(q, d)
     if q == np.inf:
         return 0.0, n, 0, 0, 0, 0.0
     per_q = 1.0 / q
     on = steps = moved = 0
     inverse = 0.0
-    for v in range(0, H, step):
-        for u in range(0, W - 1, step):
-            if valid[v, u] and valid[v, u + 1]:
-                r = abs(float(z[v, u + 1]) - float(z[v, u])) * per_q
-                k = math.floor(r + 0.5)
-                if abs(r - k) <= tolerance:
-                    on += 1
-                    steps += k != 1.0
-                    if k > 0.0:
-                        moved += 1
-                        inverse += 1.0 / z[v, u]
+    for i in range(n):
+        r = d[i] * per_q
+        k = math.floor(r + 0.5)
+        hit = abs(r - k) <= tolerance
+        on += hit
+        steps += hit and k != 1.0
+        moves = hit and k > 0.0
+        moved += moves
+        inverse += select(moves, w[i], 0.0)
     return q, n, on, steps, moved, inverse
 
 
 def depth_grid(z: np.ndarray, valid: np.ndarray, f: float) -> float:
     """:attr:`NoiseProfile.grid`: the step of the grid the depth is stored on, in point spacings (z / f), 0 where it
     is not on one (see ``GRID_SHARE`` in :mod:`surfnorm._constants`)."""
-    q, n, on, steps, moved, inverse = _grid(z, valid, noise_step(*z.shape), GRID_TOLERANCE)
+    H, W = z.shape
+    step = noise_step(H, W)
+    room = ((H + step - 1) // step) * ((W - 1 + step - 1) // step)
+    q, n, on, steps, moved, inverse = _grid(z, valid, step, GRID_TOLERANCE, np.empty(room), np.empty(room))
     if n < MIN_SAMPLES or moved == 0 or on < GRID_SHARE * n or steps < GRID_STEPS * n:
         return 0.0
     return q * f * inverse / moved
@@ -690,12 +693,11 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     correlation = _correlation(ms, starts, MIN_SAMPLES)
     at_1, at_2 = median.result()  # before its scratch is used again below
     floor, floor2 = at_1 / 0.6745, at_2 / 0.6745
-    grid = depth_grid(z, valid, f)
-    floors = None
-    if terraced < TERRACED_HIGH or STEP_CONSISTENT * _step_of(terraced, step, grid) < CONSISTENT_MAX:
-        # auto may check its estimators against each other (consistency_limits)
-        floors = _bin_floors(grouped[0], starts, MIN_SAMPLES, work[4][:n]) / 0.6745
-    profile = NoiseProfile(centres, rho, floor, terraced, step, smooth.result(), correlation, floors, floor2, grid)
+    profile = NoiseProfile(
+        centres, rho, floor, terraced, step, smooth.result(), correlation, None, floor2, depth_grid(z, valid, f)
+    )
+    if _may_check(profile):  # auto may check its estimators against each other (consistency_limits)
+        profile = profile._replace(floors=_bin_floors(grouped[0], starts, MIN_SAMPLES, work[4][:n]) / 0.6745)
     # every part has ended (result() waits for one another thread runs), so nothing reads the arrays any more; on an
     # error they are dropped instead (a part may still be running)
     _working.give(size, work)
@@ -755,9 +757,14 @@ def grid_share(profile: NoiseProfile) -> float:
     return _ramp(profile.grid, GRID_LOW, GRID_HIGH)
 
 
-def _step_of(terraced: float, step: float, grid: float) -> float:
-    """:func:`quantisation_step` from a profile's terraced, step and grid."""
-    return max(_ramp(terraced, TERRACED_CHECK, TERRACED_HIGH) * step, _ramp(grid, GRID_LOW, GRID_HIGH) * grid)
+def _may_check(profile: NoiseProfile) -> bool:
+    """Whether ``auto`` may check its estimators against each other on this frame, so that its profile needs the
+    bins' floors (``auto.consistency_limits``): where the frame is not terraced in full, or where its quantisation's
+    step makes a limit under ``CONSISTENT_MAX`` (widened by the smooth error's share, as the limits are)."""
+    if profile.terraced < TERRACED_HIGH:
+        return True
+    share = smooth_error_share(profile)
+    return share < 1.0 and STEP_CONSISTENT * quantisation_step(profile) < CONSISTENT_MAX * (1.0 - share)
 
 
 def quantisation_step(profile: NoiseProfile) -> float:
@@ -765,7 +772,7 @@ def quantisation_step(profile: NoiseProfile) -> float:
     (``step``) in the share in which the frame is terraced (from ``TERRACED_CHECK`` to ``TERRACED_HIGH``), or the
     grid's (``grid``, :func:`grid_share`), the larger. ``auto``'s consistency check takes it as the noise of
     ``d2nt_v3``'s normals there (``STEP_CONSISTENT``)."""
-    return _step_of(profile.terraced, profile.step, profile.grid)
+    return max(terraced_share(profile, TERRACED_CHECK) * profile.step, grid_share(profile) * profile.grid)
 
 
 def _ramp(x: float, low: float, high: float) -> float:

@@ -74,12 +74,13 @@ normal, and its error falls from 53 to 14.4 degrees (``d2nt_v3`` alone: 14.3; 23
 with the limits as they were; 0.02 %: 53, 17.4, 17.0 and 44). On quantised depth
 (terraces, a grid: :func:`~surfnorm.kernels.sensor_noise.quantisation_step`) the floor is
 the steps', and ``d2nt_v3``'s normals there are off by up to about a step's slope: the
-limits are at least ``STEP_CONSISTENT`` times the step and the floor's part counts only
-the floor beyond it. Raw structured light and most stereo matchers (steps of one to five
-point spacings) are then not checked and get what they got before, at the same cost;
-3F2N stored in steps of 1.5 mm (a third of a point spacing) is, and gives 8.96 degrees
-where it gave 11.85 (``d2nt_v3`` 9.85, ``adaptive_fit`` 12.17). A checked frame runs
-both estimators.
+limits are at least ``STEP_CONSISTENT`` times the step (times the kappa_gain: correlated
+error, a stereo matcher's, moves them further) and the floor's part counts only the floor
+beyond it. Raw structured light and stereo matchers (steps of one to five point spacings,
+correlated) are then not checked and get what they got before, at the same cost; 3F2N
+stored in steps of 1.5 mm (a third of a point spacing) is, and gives 8.98 degrees where it
+gave 11.85 (``d2nt_v3`` 9.83, ``adaptive_fit`` 12.17). A checked frame runs both
+estimators.
 
 Depth stored on a grid (``NoiseProfile.grid``: whole millimetres and the like) is not a
 float render: its steps are error, however fine, and from ``GRID_LOW`` to ``GRID_HIGH``
@@ -308,7 +309,8 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     the frame's reading: its smooth noise also rises with fine geometry (the tree of 3F2N), where the check matters
     most. Where the frame's rho is its fine geometry (:func:`geometry_share`), the floor is partly the geometry's
     too, and that limit shrinks to ``GEOMETRY_CHECK`` of itself in that share. On quantised depth (terraces, a grid)
-    the limit is at least ``STEP_CONSISTENT`` times Q: d2nt_v3's normals there are off by up to about a step's slope.
+    the limit is at least ``STEP_CONSISTENT`` times Q times the kappa_gain: d2nt_v3's normals there are off by up to
+    about a step's slope, further where the error is correlated (a stereo matcher's).
     Every limit widens as 1 / (1 - s), s the smooth error's share
     (:func:`~surfnorm.kernels.sensor_noise.smooth_error_share`): ``d2nt_v3`` follows such error.
 
@@ -330,7 +332,7 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
         np.maximum(floors * floors - q * q, 0.0)
     )  # the floor beyond the quantisation's steps (in quadrature)
     scale = 2.0 * CONSISTENT * gain / (1.0 - share)
-    steps = STEP_CONSISTENT * q / (1.0 - share)
+    steps = STEP_CONSISTENT * gain * q / (1.0 - share)
     shrink = 1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile)
     wide = np.maximum(steps, shrink * scale * np.maximum(noise, profile.smooth))
     if not (np.maximum(steps, scale * noise).min() < CONSISTENT_MAX or wide.min() < CONSISTENT_MAX):

@@ -1107,7 +1107,7 @@ def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor,
     noise = _sqrt(torch.clamp_min(floors * floors - q * q, 0.0))  # the floor beyond the quantisation's steps
     keep = torch.where(share < 1.0, 1.0 - share, torch.ones_like(share)).view(-1, 1)
     scale = 2.0 * CONSISTENT * tables.gain.view(-1, 1) / keep
-    steps = STEP_CONSISTENT * q / keep
+    steps = STEP_CONSISTENT * tables.gain.view(-1, 1) * q / keep
     # where rho is the frame's fine geometry, the floor's limits shrink; the check runs where they were under
     # CONSISTENT_MAX, or are once shrunk from the larger of the floor and the smooth noise (as in
     # auto.consistency_limits); quantised depth's are at least STEP_CONSISTENT times its step

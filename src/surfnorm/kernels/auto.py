@@ -328,9 +328,8 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     smooth = (gain - 1.0) / (CORRELATED_KAPPA_GAIN - 1.0) * profile.smooth
     q = quantisation_step(profile)
     floors = np.maximum(np.where(np.isnan(profile.floors), profile.floor, profile.floors), smooth)
-    noise = np.sqrt(
-        np.maximum(floors * floors - q * q, 0.0)
-    )  # the floor beyond the quantisation's steps (in quadrature)
+    # the floor beyond the quantisation's steps, in quadrature
+    noise = np.sqrt(np.maximum(floors * floors - q * q, 0.0))
     scale = 2.0 * CONSISTENT * gain / (1.0 - share)
     steps = STEP_CONSISTENT * gain * q / (1.0 - share)
     shrink = 1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile)

@@ -602,10 +602,10 @@ class NoiseProfile(NamedTuple):
         The step of the grid the depth is stored on (:func:`depth_grid`: whole millimetres, 1/5000 m, float16's
         steps within a power of two), in point spacings at the depths of the pixels measured (their mean of f / z
         times the step), where ``GRID_SHARE`` of the differences between the sampled pixels' valid depths and their
-        right-hand neighbours' are whole multiples of the smallest one; 0 elsewhere. Float32 renders read their own rounding,
-        0.00002-0.0001; whole millimetres at 2.5 m and 580 px 0.23; the Azure Kinect, RealSense and KITTI frames we
-        measured 0.2-1.0; raw Kinect v1 disparity and stereo matchers' float depth 0 (their grid is in 1 / z: see
-        ``step``).
+        right-hand neighbours' are whole multiples of the smallest one and ``GRID_STEPS`` of them 0 or 2 and more
+        of it; 0 elsewhere. Float32 renders read their own rounding, under 0.0002; whole millimetres at 2.5 m and
+        580 px about 0.23; the Azure Kinect, RealSense, NYU and KITTI frames we measured 0.2-1.7; raw Kinect v1
+        disparity and stereo matchers' float depth 0 (their grid is in 1 / z: see ``step``).
     """
 
     depths: np.ndarray

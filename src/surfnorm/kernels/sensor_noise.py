@@ -760,11 +760,13 @@ def grid_share(profile: NoiseProfile) -> float:
 def _may_check(profile: NoiseProfile) -> bool:
     """Whether ``auto`` may check its estimators against each other on this frame, so that its profile needs the
     bins' floors (``auto.consistency_limits``): where the frame is not terraced in full, or where its quantisation's
-    step makes a limit under ``CONSISTENT_MAX`` (widened by the smooth error's share, as the limits are)."""
+    step makes a limit under ``CONSISTENT_MAX`` (times the kappa gain and widened by the smooth error's share, as the
+    limits are: every limit is at least that one)."""
     if profile.terraced < TERRACED_HIGH:
         return True
     share = smooth_error_share(profile)
-    return share < 1.0 and STEP_CONSISTENT * quantisation_step(profile) < CONSISTENT_MAX * (1.0 - share)
+    steps = STEP_CONSISTENT * kappa_gain(profile) * quantisation_step(profile)
+    return share < 1.0 and steps < CONSISTENT_MAX * (1.0 - share)
 
 
 def quantisation_step(profile: NoiseProfile) -> float:

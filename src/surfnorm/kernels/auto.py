@@ -132,7 +132,6 @@ from .._constants import (
     GEOMETRY_CHECK,
     MNR_DLF_DEFAULT,
     NOISY_FLOOR,
-    STEP_CONSISTENT,
     TERRACED_HIGH,
     TERRACED_LOW,
     TRUNCATE_DEFAULT,
@@ -153,6 +152,7 @@ from .sensor_noise import (
     reading,
     reading_weight,
     smooth_error_share,
+    step_limit,
     upsampling_factor,
 )
 
@@ -331,7 +331,7 @@ def consistency_limits(profile: NoiseProfile) -> tuple[np.ndarray, np.ndarray] |
     # the floor beyond the quantisation's steps, in quadrature
     noise = np.sqrt(np.maximum(floors * floors - q * q, 0.0))
     scale = 2.0 * CONSISTENT * gain / (1.0 - share)
-    steps = STEP_CONSISTENT * gain * q / (1.0 - share)
+    steps = step_limit(profile, gain, share)
     shrink = 1.0 - (1.0 - GEOMETRY_CHECK) * geometry_share(profile)
     wide = np.maximum(steps, shrink * scale * np.maximum(noise, profile.smooth))
     if not (np.maximum(steps, scale * noise).min() < CONSISTENT_MAX or wide.min() < CONSISTENT_MAX):

@@ -89,6 +89,7 @@ __all__ = [
     "depth_grid",
     "terraced_share",
     "smooth_error_share",
+    "step_limit",
     "upsampling_factor",
 ]
 
@@ -159,13 +160,13 @@ def _terrace(z_m, z_0, z_p, f, jumps, n_jumps):
 
 @ahead_of_time
 @njit(noalias=True, _nrt=False)
-def _grid(z, valid, step, tolerance, d, w):
+def _grid(z, valid, step, tolerance):
     """(q, n, on, steps, moved, inverse) over the pixels on every ``step``-th row and column and their right-hand
-    neighbours where both are valid (n pairs; ``d`` and ``w`` scratch of at least as many): q the smallest positive
-    difference between the two depths (0 without any), ``on`` how many pairs differ by a whole multiple k of q within
-    ``tolerance`` of it (k = 0 included), ``steps`` how many of those by k 0 or 2 and more (a grid's steps, not a
-    plane's even slope, along which neighbours all differ by about as much), ``moved`` how many by k 1 and more, and
-    ``inverse`` the sum of 1/z over those (the left one's)."""
+    neighbours where both are valid (n pairs): q the smallest positive difference between the two depths (0 without
+    any), ``on`` how many pairs differ by a whole multiple k of q within ``tolerance`` of it (k = 0 included),
+    ``steps`` how many of those by k 0 or 2 and more (a grid's steps, not a plane's even slope, along which
+    neighbours all differ by about as much), ``moved`` how many by k 1 and more, and ``inverse`` the sum of 1/z over
+    those (the left one's). Two sweeps over the pairs, the first for q: no scratch."""
     H, W = z.shape
     q = np.inf
     n = 0
@@ -173,25 +174,27 @@ def _grid(z, valid, step, tolerance, d, w):
         zv, ok = z[v], valid[v]
         for u in range(0, W - 1, step):
             if ok[u] and ok[u + 1]:
-                d[n] = abs(float(zv[u + 1]) - float(zv[u]))
-                w[n] = 1.0 / zv[u]
-                if d[n] > 0.0:
-                    q = min(q, d[n])
+                d = abs(float(zv[u + 1]) - float(zv[u]))
+                if d > 0.0:
+                    q = min(q, d)
                 n += 1
     if q == np.inf:
         return 0.0, n, 0, 0, 0, 0.0
     per_q = 1.0 / q
     on = steps = moved = 0
     inverse = 0.0
-    for i in range(n):
-        r = d[i] * per_q
-        k = math.floor(r + 0.5)
-        hit = abs(r - k) <= tolerance
-        on += hit
-        steps += hit and k != 1.0
-        moves = hit and k > 0.0
-        moved += moves
-        inverse += select(moves, w[i], 0.0)
+    for v in range(0, H, step):
+        zv, ok = z[v], valid[v]
+        for u in range(0, W - 1, step):
+            if ok[u] and ok[u + 1]:
+                r = abs(float(zv[u + 1]) - float(zv[u])) * per_q
+                k = math.floor(r + 0.5)
+                hit = abs(r - k) <= tolerance
+                on += hit
+                steps += hit and k != 1.0
+                moves = hit and k > 0.0
+                moved += moves
+                inverse += select(moves, 1.0 / zv[u], 0.0)
     return q, n, on, steps, moved, inverse
 
 
@@ -199,9 +202,7 @@ def depth_grid(z: np.ndarray, valid: np.ndarray, f: float) -> float:
     """:attr:`NoiseProfile.grid`: the step of the grid the depth is stored on, in point spacings (z / f), 0 where it
     is not on one (see ``GRID_SHARE`` in :mod:`surfnorm._constants`)."""
     H, W = z.shape
-    step = noise_step(H, W)
-    room = ((H + step - 1) // step) * ((W - 1 + step - 1) // step)
-    q, n, on, steps, moved, inverse = _grid(z, valid, step, GRID_TOLERANCE, np.empty(room), np.empty(room))
+    q, n, on, steps, moved, inverse = _grid(z, valid, noise_step(H, W), GRID_TOLERANCE)
     if n < MIN_SAMPLES or moved == 0 or on < GRID_SHARE * n or steps < GRID_STEPS * n:
         return 0.0
     return q * f * inverse / moved
@@ -759,14 +760,20 @@ def grid_share(profile: NoiseProfile) -> float:
 
 def _may_check(profile: NoiseProfile) -> bool:
     """Whether ``auto`` may check its estimators against each other on this frame, so that its profile needs the
-    bins' floors (``auto.consistency_limits``): where the frame is not terraced in full, or where its quantisation's
-    step makes a limit under ``CONSISTENT_MAX`` (times the kappa gain and widened by the smooth error's share, as the
-    limits are: every limit is at least that one)."""
+    bins' floors (``auto.consistency_limits``): where the frame is not terraced in full, or where its
+    :func:`step_limit` (every limit is at least that one) is under ``CONSISTENT_MAX``."""
     if profile.terraced < TERRACED_HIGH:
         return True
     share = smooth_error_share(profile)
-    steps = STEP_CONSISTENT * kappa_gain(profile) * quantisation_step(profile)
-    return share < 1.0 and steps < CONSISTENT_MAX * (1.0 - share)
+    return share < 1.0 and step_limit(profile, kappa_gain(profile), share) < CONSISTENT_MAX
+
+
+def step_limit(profile: NoiseProfile, gain: float, share: float) -> float:
+    """The least limit of ``auto``'s consistency check on this frame (radians; ``auto.consistency_limits``):
+    ``STEP_CONSISTENT`` times the kappa ``gain`` (:func:`kappa_gain`) times the quantisation's step
+    (:func:`quantisation_step`), widened as 1 / (1 - ``share``), the smooth error's share
+    (:func:`smooth_error_share`, under 1)."""
+    return STEP_CONSISTENT * gain * quantisation_step(profile) / (1.0 - share)
 
 
 def quantisation_step(profile: NoiseProfile) -> float:

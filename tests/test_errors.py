@@ -491,6 +491,14 @@ def test_depth_and_mask_files(tmp_path):
     np.save(tmp_path / "d.npy", np.zeros((4, 4, 2)))
     with pytest.raises(DataFileError, match=r"d.npy: expected a 2-D depth image, got an array of shape \(4, 4, 2\)"):
         read_depth(tmp_path / "d.npy")
+    one = np.arange(12.0).reshape(3, 4, 1)  # one channel: (H, W, 1), as some datasets save depth
+    np.save(tmp_path / "one.npy", one)
+    np.testing.assert_array_equal(read_depth(tmp_path / "one.npy"), one[..., 0].astype(np.float32))
+    np.save(tmp_path / "first.npy", np.zeros((1, 4, 4)))
+    with pytest.raises(
+        DataFileError, match=r"first.npy: expected a 2-D depth image, got an array of shape \(1, 4, 4\)"
+    ):
+        read_depth(tmp_path / "first.npy")
     with pytest.raises(DataFileError, match=r"missing.png: cannot read mask file"):
         read_mask(tmp_path / "missing.png")
     np.save(tmp_path / "m.npy", np.zeros((4, 4, 2), bool))

@@ -148,7 +148,8 @@ def read_depth(
     ----------
     path : str or Path
         ``.png`` (16-bit, one channel), ``.tif``/``.tiff`` (float or 16-bit),
-        ``.npy``, ``.npz`` (array ``depth`` or the only array), 3F2N ``.bin``
+        ``.npy``, ``.npz`` (array ``depth`` or the only array; (H, W) or
+        (H, W, 1)), 3F2N ``.bin``
         or ``.bin.gz`` (raw float32 of ``shape``), ``.exr`` (float16 or
         float32 channel, needs ``surfnorm[exr]``), ``.pgm`` (16-bit P5).
     depth_scale : float, optional
@@ -197,6 +198,8 @@ def read_depth(
         depth = read_depth_bin(path, shape)
     elif suffix in (".npy", ".npz"):
         depth = _read_numpy(path, suffix)
+        if depth.ndim == 3 and depth.shape[2] == 1:  # (H, W, 1), as image libraries and some datasets save depth
+            depth = depth[..., 0]
     elif suffix in (".png", ".tif", ".tiff", ".pgm"):
         depth = _read_image(path)
     elif suffix == ".exr":

@@ -3,6 +3,7 @@
     PYTHONPATH=src python benchmarks/rooms.py
     PYTHONPATH=src python benchmarks/rooms.py --sensors stereo_sgbm,smooth_error --methods auto,opencv_linemod_w5
     PYTHONPATH=src python benchmarks/rooms.py --steps 1,2 --methods auto,d2nt_v3,adaptive_fit
+    PYTHONPATH=src python benchmarks/rooms.py --white 0.005,0.01,0.02 --methods auto,d2nt_v3,adaptive_fit
 
 The 3F2N frames of `benchmarks/sensor_sim.py` are objects at a table's distance, seen mostly face on. A robot's
 camera sees rooms: walls, and a floor at 60-85 degrees from the line of sight. Three rooms, each a floor, a back wall
@@ -12,7 +13,8 @@ and a side wall (camera 0.6-1.2 m above the floor, pitched down 8-25 degrees and
 degrees over the pixels with depth and a normal, by the angle between the line of sight and the surface (the floor
 far away is the widest), and over all of them. Every library runs on one thread. ``--steps Q1,Q2``: instead of the
 sensors, the exact depth stored in steps of Q millimetres (a renderer's or a dataset's 16-bit PNG: whole millimetres
-for Q = 1), no noise.
+for Q = 1), no noise. ``--white P1,P2``: instead, the exact depth in float32 with white noise of P percent of depth
+(Gaussian, independent from pixel to pixel: a high-end structured-light camera's, a simulation's), seed 0.
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ def room(pitch: float, height: float, turn: float, back: float, side: float):
     return depth, normals, view
 
 
-def _millimetres(text: str) -> float:
+def _number(text: str) -> float:
     """``text`` as a float; NaN where it is not a number (so that the range test refuses it)."""
     try:
         return float(text)
@@ -84,14 +86,22 @@ def main(argv=None) -> int:
     ap.add_argument("--sensors", default=",".join(SENSORS), help="comma-separated; default: every sensor")
     ap.add_argument("--methods", default="auto,d2nt_v3,adaptive_fit,opencv_linemod_w5,opencv_fals_w7,open3d_knn30")
     ap.add_argument("--steps", default=None, help="comma-separated millimetres: the exact depth in such steps instead")
+    ap.add_argument("--white", default=None, help="comma-separated percents: the exact depth with such white noise")
     args = ap.parse_args(argv)
     try:
         entries, missing = make_entries(args.methods.split(","))
+        if args.steps is not None and args.white is not None:
+            raise SurfnormError("--steps, --white: expected one of them, got both")
         if args.steps is not None:
             sensors = [f"{q} mm" for q in args.steps.split(",")]
-            wrong = [q for q in args.steps.split(",") if not _millimetres(q) > 0.0]
+            wrong = [q for q in args.steps.split(",") if not _number(q) > 0.0]
             if wrong:
                 raise SurfnormError(f"--steps: expected millimetres above 0, got {', '.join(wrong)}")
+        elif args.white is not None:
+            sensors = [f"white noise {p} %" for p in args.white.split(",")]
+            wrong = [p for p in args.white.split(",") if not 0.0 < _number(p) <= 5.0]
+            if wrong:
+                raise SurfnormError(f"--white: expected percents above 0 and at most 5, got {', '.join(wrong)}")
         else:
             sensors = args.sensors.split(",")
             unknown = [s for s in sensors if s not in SENSORS]
@@ -111,8 +121,12 @@ def main(argv=None) -> int:
         weights: list[list[int]] = [[] for _ in labels]
         for k, (depth, normals, view) in enumerate(scenes):
             if args.steps is not None:  # the exact depth in steps of q millimetres
-                q = _millimetres(sensor.split()[0]) / 1000.0
+                q = _number(sensor.split()[0]) / 1000.0
                 z = np.where(depth > 0, np.round(depth / q) * q, 0.0).astype(np.float32)
+            elif args.white is not None:  # the exact depth with white noise of p percent of depth
+                p = _number(sensor.split()[2]) / 100.0
+                noise = np.random.default_rng(frame_seed(0, f"room{k}", sensor)).standard_normal(depth.shape)
+                z = np.where(depth > 0, depth * (1.0 + p * noise), 0.0).astype(np.float32)
             else:
                 z = simulate(depth, K, sensor, seed=frame_seed(0, f"room{k}", sensor), normals=normals, scale=1.0)
             valid = z > 0

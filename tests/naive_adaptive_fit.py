@@ -140,6 +140,24 @@ def smooth_error(floor, floor2, rho_bins):
     return float(up * np.interp(floor, [0.02, 0.04], [0.0, 1.0]) * np.interp(rho, [1.5, 2.5], [1.0, 0.0]))
 
 
+def white_noise(floor, floor2, rho_bins):
+    """The share in which the error is white noise, however small: the floor over the floor at stride 2 rising from
+    0.6 to 0.8, the median rho over the floor falling from 1.3 to 1.8, the floor rising from 0.005 to 0.015, the
+    median rho falling from 1.5 to 2.5; the product of the four (0 without positive floors or with a NaN rho)."""
+    if not (floor > 0 and floor2 > 0):
+        return 0.0
+    rho = float(np.median(rho_bins))
+    if rho != rho:
+        return 0.0
+    parts = (
+        np.interp(floor / floor2, [0.6, 0.8], [0.0, 1.0]),
+        np.interp(rho / floor, [1.3, 1.8], [1.0, 0.0]),
+        np.interp(floor, [0.005, 0.015], [0.0, 1.0]),
+        np.interp(rho, [1.5, 2.5], [1.0, 0.0]),
+    )
+    return float(np.prod(parts))
+
+
 def sensor_weight(floor, terraced, step, smooth, rho_bins, floor2):
     """auto's weight of the adaptive fit: its noise reading (the largest of the floor, the smooth noise, the
     terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3, 0.2 times that share, and

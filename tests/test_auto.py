@@ -24,7 +24,14 @@ from surfnorm.kernels.auto import (
     quantisation,
     reading,
 )
-from surfnorm.kernels.sensor_noise import NoiseProfile, geometry_share, kappa_gain, noise_profile, smooth_error_share
+from surfnorm.kernels.sensor_noise import (
+    NoiseProfile,
+    geometry_share,
+    kappa_gain,
+    noise_profile,
+    smooth_error_share,
+    white_noise_share,
+)
 
 from . import naive_adaptive_fit as naive
 from .conftest import SAMPLE
@@ -271,12 +278,60 @@ def test_the_smooth_error_share_follows_its_ramps():
     assert consistency_limits(profile(0.06, 3.0)._replace(floors=np.full(3, 0.06))) is None
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_white_noise_share_against_the_naive_reference(seed):
+    """white_noise_share against an independent reference on profiles around each of its ramps (the floor over the
+    floor at stride 2, rho over the floor, the floor, rho), with floors 0 and NaN and a NaN rho; adaptive_weight is
+    at least that share."""
+    rng = np.random.default_rng(seed)
+    for _ in range(400):
+        floor = float(rng.choice([0.0, np.nan, rng.uniform(0.0, 0.03), rng.uniform(0.0, 0.3)]))
+        floor2 = float(rng.choice([0.0, np.nan, floor / rng.uniform(0.4, 1.1)]))
+        rho = np.abs(floor * rng.uniform(0.8, 2.2) + rng.normal(0.0, 0.01, rng.integers(1, 6)))
+        if rng.random() < 0.1:
+            rho = rng.uniform(1.0, 3.0, 5)  # rho from fine geometry
+        if rng.random() < 0.05:
+            rho[0] = np.nan
+        p = NoiseProfile(np.ones(rho.size), rho, floor, floor2=floor2)
+        ref = naive.white_noise(floor, floor2, rho)
+        assert white_noise_share(p) == pytest.approx(ref, abs=1e-12), (floor, floor2, rho)
+        if floor == floor:
+            assert adaptive_weight(p) >= ref
+
+
+def test_small_white_noise_gets_the_fit_checked_and_renders_do_not():
+    """White noise of 0.01-0.03 % of depth on a slanted plane at 2 m reads a floor under CLEAN_FLOOR (0.03-0.08 point
+    spacings), as renders do, but as much at the pixel scale as at stride 2 and with rho about its floor: auto runs
+    adaptive_fit checked against d2nt_v3 (white noise share 1) and gives adaptive_fit's error, a fraction of
+    d2nt_v3's; the clean 3F2N sample frames read a white noise share of 0."""
+    from surfnorm.metrics import mean_angular_error
+
+    z, K = slanted_plane(H=240, W=320)
+    exact = surfnorm.estimate(z, K, method="adaptive_fit")  # exact on a plane without noise
+    for percent in (0.01, 0.02, 0.03):
+        noisy = np.where(z > 0, z * (1.0 + percent / 100.0 * np.random.default_rng(3).standard_normal(z.shape)), 0.0)
+        noisy = noisy.astype(np.float32)
+        d = surfnorm.auto_decision(noisy, K)
+        assert d.floor < CLEAN_FLOOR and d.white == 1.0 and d.weight == 1.0 and d.checked, str(d)
+        e_auto, e_fit, e_d2nt = (
+            mean_angular_error(surfnorm.estimate(noisy, K, method=m), exact, noisy > 0)
+            for m in ("auto", "adaptive_fit", "d2nt_v3")
+        )
+        assert e_auto <= 1.1 * e_fit and e_auto < 0.25 * e_d2nt, (percent, e_auto, e_fit, e_d2nt)
+    for name in find_frames(SAMPLE):
+        f = read_frame(SAMPLE, name)
+        depth = np.where(f.mask & (f.depth > 0), f.depth, 0.0).astype(np.float32)
+        p = noise_profile(depth, depth > 0, math.sqrt(f.K.fx * f.K.fy))
+        assert white_noise_share(p) == 0.0, (name, p.floor, p.floor2)
+
+
 def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
     """Error of 0.2-0.3 point spacings RMS smoothed over a pixel (a phone's LiDAR depth, a learned stereo matcher's
     output), in float or in whole millimetres, reads a floor under CLEAN_FLOOR at the pixel scale (0.06, 0.11 with
     the millimetres), as renders do; its rho is twice its floor and more, and its floor 0.4-0.5 of its floor at stride
     2 (a smooth shape: 0.25), so auto runs adaptive_fit (a blend of at least 0.9 of it), unchecked, and beats
-    d2nt_v3 by far. White noise of the same floor reads as before: d2nt_v3."""
+    d2nt_v3 by far. White noise of the same floor is no smooth error: it is white noise (white_noise_share), and
+    auto runs adaptive_fit checked against d2nt_v3."""
     from surfnorm.metrics import mean_angular_error
 
     z, exact, K = plane_and_ball()
@@ -289,7 +344,7 @@ def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
         d = surfnorm.auto_decision(smooth, K)
         assert p.floor < CLEAN_FLOOR + 0.02, str(d)  # the pixel scale reads it as (nearly) clean
         assert d.smooth_error == smooth_error_share(p) >= 0.9 and d.weight >= 0.9 and not d.checked, str(d)
-        assert str(d).endswith(f"smooth error {d.smooth_error:.2f}, grid {d.grid:.3f}")
+        assert str(d).endswith(f"smooth error {d.smooth_error:.2f}, grid {d.grid:.3f}, white noise {d.white:.2f}")
         e_auto, e_d2nt = (
             mean_angular_error(surfnorm.estimate(smooth, K, method=m), exact) for m in ("auto", "d2nt_v3")
         )
@@ -297,6 +352,7 @@ def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
         white = with_error(z, K, p.floor, 0)  # independent noise of the same floor
         w = surfnorm.auto_decision(white, K)
         assert w.smooth_error == 0.0 and w.weight == adaptive_weight(noise_profile(white, white > 0, f)), str(w)
+        assert w.white == 1.0 and w.weight == 1.0 and w.checked, str(w)
         assert w.reading == pytest.approx(w.floor, rel=0.2), str(w)
 
 

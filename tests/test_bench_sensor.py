@@ -484,6 +484,12 @@ def test_rooms_refuses_an_unknown_sensor(capsys):
         assert script.main([f"--steps={steps}", "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()
         assert err == f"rooms: --steps: expected millimetres above 0, {tail}", err
+    for white, tail in (("0.01,x", "got x"), ("0", "got 0"), ("6", "got 6")):
+        assert script.main([f"--white={white}", "--methods", "auto"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == f"rooms: --white: expected percents above 0 and at most 5, {tail}", err
+    assert script.main(["--steps", "1", "--white", "0.01", "--methods", "auto"]) == 2
+    assert capsys.readouterr().err.strip() == "rooms: --steps, --white: expected one of them, got both"
 
 
 def test_rooms_in_steps_of_millimetres(capsys):
@@ -493,6 +499,20 @@ def test_rooms_in_steps_of_millimetres(capsys):
     assert script.main(["--steps", "2", "--methods", "auto,d2nt_v3,adaptive_fit"]) == 0
     out = capsys.readouterr().out
     assert "### 2 mm: e_A" in out
+    cells = [line.split("|") for line in out.splitlines()]
+    rows = {
+        c[1].strip(): float(c[-2]) for c in cells if len(c) > 8 and c[1].strip() in ("auto", "d2nt_v3", "adaptive_fit")
+    }
+    assert rows["auto"] <= 1.1 * rows["adaptive_fit"] + 0.05 and rows["d2nt_v3"] > 5 * rows["auto"], rows
+
+
+def test_rooms_with_small_white_noise(capsys):
+    """--white: the exact depth of the rooms with white noise of P percent of depth, one table per level; at 0.01 %
+    (a floor of about 0.05 point spacings, under CLEAN_FLOOR) the default is adaptive_fit's, far below d2nt_v3's."""
+    script = _benchmark_script("rooms")
+    assert script.main(["--white", "0.01", "--methods", "auto,d2nt_v3,adaptive_fit"]) == 0
+    out = capsys.readouterr().out
+    assert "### white noise 0.01 %: e_A" in out
     cells = [line.split("|") for line in out.splitlines()]
     rows = {
         c[1].strip(): float(c[-2]) for c in cells if len(c) > 8 and c[1].strip() in ("auto", "d2nt_v3", "adaptive_fit")

@@ -319,6 +319,28 @@ class TestAdaptive:
             seen.append(kappa_gain(profile))
         assert max(seen) > 1.5 and min(seen) == 1.0, seen
 
+    def test_noise_tables_white_noise_share_as_numpy(self):
+        """The torch tables' white noise share and adaptive_fit's weight are the NumPy profile's: a plane with white
+        noise of 0.005-0.03 % of depth (shares 0 to 1), a clean 3F2N frame (0) and the tables' other scenes."""
+        from surfnorm.kernels.sensor_noise import adaptive_weight, white_noise_share
+        from surfnorm.torch import _adaptive
+
+        Kp = camera(320, 240, fov_deg=60)
+        z, _, hit = plane(Kp, 240, 320, [0.4, 0.3, -1.0], 2.0)
+        rng = np.random.default_rng(5)
+        cases = [(name, depth, Km, mask) for name, depth, Km, mask in self.scenes()]
+        for percent in (0.005, 0.007, 0.01, 0.03):
+            noisy = np.where(hit, z * (1.0 + percent / 100.0 * rng.standard_normal(z.shape)), 0.0)
+            cases.append((f"plane, {percent} %", noisy.astype(np.float32), Kp, None))
+        seen = []
+        for name, depth, Km, mask in cases:
+            profile, _ = self.numpy_tables(depth, Km, mask)
+            got = self.torch_tables(depth, Km, mask)
+            assert got.white.item() == pytest.approx(white_noise_share(profile), abs=1e-12), name
+            assert _adaptive.adaptive_weight(got).item() == pytest.approx(adaptive_weight(profile), abs=1e-12), name
+            seen.append(got.white.item())
+        assert min(seen) == 0.0 and max(seen) == 1.0 and any(0.0 < s < 1.0 for s in seen), seen
+
     def test_choices_differ_across_the_scene(self):
         # the parity tests on sensor_like() scenes are only worth something if the scene exercises every choice
         from surfnorm.torch import _adaptive

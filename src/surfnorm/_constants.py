@@ -204,6 +204,26 @@ GRID_HIGH = 0.10
 GRID_SHARE = 0.98
 GRID_STEPS = 0.1
 GRID_TOLERANCE = 0.02
+#: White noise is error however small: on planes in float depth with white noise of 0.01-0.02 % of depth (floors of
+#: 0.05-0.11 point spacings) ``d2nt_v3`` gives 1.8-3.6 degrees, ``adaptive_fit`` 0.1, and the floor alone kept
+#: ``auto`` on ``d2nt_v3`` below CLEAN_FLOOR. What tells white noise from a render's fine geometry is that it shows
+#: as much at the pixel scale as at stride 2 (the floor over the floor at stride 2: 0.9-1.0 for white noise over
+#: 3F2N's smooth shapes and the rooms' planes, 0.09-0.2 on the clean renders whose floors are not 0, the
+#: ARKit and FoundationStereo frames 0.56-0.77) and that rho is about its floor (not correlated: rho / floor under
+#: SMOOTH_ERROR_LOW, where the smooth error's share starts; not the scene's shape: ``GEOMETRY_RHO_LOW``).
+#: ``sensor_noise.white_noise_share`` is the product of a ramp of the floor over the floor at stride 2 from
+#: WHITE_PIXEL_LOW to WHITE_PIXEL_HIGH, 1 - the ramp of rho / floor from SMOOTH_ERROR_LOW to SMOOTH_ERROR_HIGH, the
+#: share of rho that is noise and a ramp of the floor from WHITE_FLOOR_LOW to WHITE_FLOOR_HIGH (float32 rounding
+#: reads under 0.0002). The rest of the ramp of rho / floor is the smooth error's share: ``adaptive_fit``'s weight is
+#: at least the sum of the two (at most 1; noise either way), checked against ``d2nt_v3`` pixel by pixel as for any
+#: weight (CONSISTENT above keeps d2nt_v3's normals on the fine geometry). Set on the rooms of
+#: ``benchmarks/rooms.py`` and 3F2N with white noise of 0.002-0.05 % (``benchmarks/families.py``; floors 0.01-0.02
+#: and 0.01-0.03 tried); the sum, not the larger of the two, on a Photoneo PhoXi frame (rho / floor 1.48, floor
+#: 0.11: 13.71 degrees before, 12.92 with the larger, 12.38 with the sum, ``adaptive_fit`` 12.37; docs/choosing.md).
+WHITE_PIXEL_LOW = 0.6
+WHITE_PIXEL_HIGH = 0.8
+WHITE_FLOOR_LOW = 0.005
+WHITE_FLOOR_HIGH = 0.015
 #: The check's limit on quantised depth, in radians per point spacing of the step (TERRACED_CHECK above), times the
 #: frame's kappa_gain (correlated error moves d2nt_v3's normals further): d2nt_v3's normals on terraces are off by up
 #: to about the step's slope, one step over one pixel. Set on 3F2N stored in steps of 1-4 mm

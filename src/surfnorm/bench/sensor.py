@@ -587,6 +587,8 @@ def folder_markdown(result: dict) -> str:
             "0.10, `adaptive_fit` at or above 0.20, their blend between "
             "(`surfnorm.auto_decision`); grid: the step of the grid the depth is stored on (whole millimetres and "
             "the like; 0 for float depth), from which (0.05 to 0.10) `adaptive_fit`'s weight is at least its share; "
+            "white noise: how far the error is white noise however small (as much at the pixel scale as at stride "
+            "2, rho about the floor: 0 to 1), and `adaptive_fit`'s weight at least that share plus the smooth error's; "
             "checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
             "pixel (at low noise, and on quantised depth where its step is small); upsampled: the factor by which the depth was resized "
             "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
@@ -595,8 +597,8 @@ def folder_markdown(result: dict) -> str:
             "correlation: of the noise between neighbouring pixels (1: independent).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
-            "| grid | checked | upsampled | correlation | smooth error |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            "| grid | checked | upsampled | correlation | smooth error | white noise |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for f in frames:
             d = result["decisions"].get(f)
@@ -607,7 +609,7 @@ def folder_markdown(result: dict) -> str:
             out.append(
                 f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {_fmt(d.get('grid'), 3)} | {checked} "
                 f"| {d.get('upsampled', 1):g} "
-                f"| {_fmt(d.get('correlation'), 2)} | {_fmt(d.get('smooth_error'), 2)} |"
+                f"| {_fmt(d.get('correlation'), 2)} | {_fmt(d.get('smooth_error'), 2)} | {_fmt(d.get('white'), 2)} |"
             )
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):

@@ -154,6 +154,7 @@ from .sensor_noise import (
     smooth_error_share,
     step_limit,
     upsampling_factor,
+    white_noise_share,
 )
 
 __all__ = [
@@ -209,6 +210,10 @@ class Decision(NamedTuple):
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: the step of the grid the depth is stored on
         (point spacings; 0 for float depth). From ``GRID_LOW`` to ``GRID_HIGH`` the frame counts as sensor depth
         (:func:`~surfnorm.kernels.sensor_noise.grid_share`): ``weight`` is at least that share.
+    white : float
+        :func:`~surfnorm.kernels.sensor_noise.white_noise_share`: how far the error is white noise, however small
+        (it shows as much at the pixel scale as at stride 2, and rho is about the floor), from 0 to 1: ``weight`` is
+        at least that share plus ``smooth_error`` (at most 1).
     """
 
     method: str
@@ -224,6 +229,7 @@ class Decision(NamedTuple):
     correlation: float = 1.0
     smooth_error: float = 0.0
     grid: float = 0.0
+    white: float = 0.0
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
@@ -237,7 +243,7 @@ class Decision(NamedTuple):
             f"sensor at or above {NOISY_FLOOR:g}); floor {self.floor:.3f}, smooth {self.smooth:.3f}, "
             f"terraced {self.terraced:.3f}, "
             f"step {self.step:.3f}, quantisation {self.quantisation:.3f}, correlation {self.correlation:.2f}, "
-            f"smooth error {self.smooth_error:.2f}, grid {self.grid:.3f}"
+            f"smooth error {self.smooth_error:.2f}, grid {self.grid:.3f}, white noise {self.white:.2f}"
         )
 
 
@@ -259,6 +265,7 @@ def decision(profile: NoiseProfile, upsampled: float = 1) -> Decision:
         profile.correlation,
         smooth_error_share(profile),
         profile.grid,
+        white_noise_share(profile),
     )
 
 

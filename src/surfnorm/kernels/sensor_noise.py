@@ -67,6 +67,10 @@ from .._constants import (
     UPSAMPLED_SMALL,
     UPSAMPLED_SMALL_SHARE,
     UPSAMPLED_STEP,
+    WHITE_FLOOR_HIGH,
+    WHITE_FLOOR_LOW,
+    WHITE_PIXEL_HIGH,
+    WHITE_PIXEL_LOW,
     fourth_passes,
     noise_step,
     stride_gain,
@@ -89,6 +93,7 @@ __all__ = [
     "depth_grid",
     "terraced_share",
     "smooth_error_share",
+    "white_noise_share",
     "step_limit",
     "upsampling_factor",
 ]
@@ -811,6 +816,24 @@ def smooth_error_share(profile: NoiseProfile) -> float:
     return correlated * pixel * noise * (1.0 - _geometry(rho))
 
 
+def white_noise_share(profile: NoiseProfile) -> float:
+    """How far the frame's error is white noise, from 0 to 1, however small: the ``floor`` over ``floor2`` from
+    ``WHITE_PIXEL_LOW`` to ``WHITE_PIXEL_HIGH`` (white noise shows as much at the pixel scale as at stride 2, a
+    render's fine geometry far less), 1 less the ramp of the noise ``rho`` (its median over the depth bins) over the
+    floor from ``SMOOTH_ERROR_LOW`` to ``SMOOTH_ERROR_HIGH`` (where the smooth error's share starts), the share of rho
+    that is noise (``GEOMETRY_RHO_LOW`` to ``GEOMETRY_RHO_HIGH``) and the floor from ``WHITE_FLOOR_LOW`` to
+    ``WHITE_FLOOR_HIGH``; each a linear ramp (see :mod:`surfnorm._constants`). 0 where either floor is 0 or not a
+    number. Where rho over the floor lies between those two, the rest of its ramp is the smooth error's share
+    (:func:`smooth_error_share`): :func:`adaptive_weight` is at least the sum of the two, error either way."""
+    rho = _median(profile.rho)
+    if not (profile.floor > 0.0 and profile.floor2 > 0.0 and rho == rho):
+        return 0.0
+    pixel = _ramp(profile.floor / profile.floor2, WHITE_PIXEL_LOW, WHITE_PIXEL_HIGH)
+    uncorrelated = 1.0 - _ramp(rho / profile.floor, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH)
+    noise = _ramp(profile.floor, WHITE_FLOOR_LOW, WHITE_FLOOR_HIGH)
+    return pixel * uncorrelated * noise * (1.0 - _geometry(rho))
+
+
 def smooth_error_reading(profile: NoiseProfile) -> float:
     """The reading that :func:`smooth_error_share` s gives: s of the way from ``CLEAN_FLOOR`` to ``NOISY_FLOOR``,
     0 where s is 0."""
@@ -881,11 +904,14 @@ def kappa_gain(profile: NoiseProfile) -> float:
 
 def adaptive_weight(profile: NoiseProfile) -> float:
     """The weight of ``adaptive_fit`` in the blend, from 0 (clean depth) to 1 (sensor depth): from :func:`reading`, or
-    the frame's :func:`grid_share` where larger (depth stored on a grid is not a float render: its steps are error).
+    where larger the frame's :func:`grid_share` (depth stored on a grid is not a float render: its steps are error)
+    or its :func:`white_noise_share` plus its :func:`smooth_error_share`, at most 1 (noise however small, white or
+    smooth over a few pixels, is error too: the two shares split the ramp of rho over the floor between them).
 
     A NaN floor (too few pixels with valid neighbours to measure one: sparse depth, as from a LiDAR) gives 1.
     """
-    return max(reading_weight(reading(profile)), grid_share(profile))
+    noise = min(white_noise_share(profile) + smooth_error_share(profile), 1.0)
+    return max(reading_weight(reading(profile)), grid_share(profile), noise)
 
 
 def reading_weight(r: float) -> float:

@@ -106,6 +106,10 @@ from .._constants import (
     UPSAMPLED_SMALL,
     UPSAMPLED_SMALL_SHARE,
     UPSAMPLED_STEP,
+    WHITE_FLOOR_HIGH,
+    WHITE_FLOOR_LOW,
+    WHITE_PIXEL_HIGH,
+    WHITE_PIXEL_LOW,
     fourth_passes,
     noise_step,
     upsampled_window,
@@ -192,6 +196,7 @@ class NoiseTables(NamedTuple):
     smooth_error: torch.Tensor  # (B,) sensor_noise.smooth_error_share
     geometry: torch.Tensor  # (B,) sensor_noise.geometry_share
     grid: torch.Tensor  # (B,) NoiseProfile.grid
+    white: torch.Tensor  # (B,) sensor_noise.white_noise_share
 
 
 def _samples(z, valid, f, lo, span):
@@ -454,6 +459,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         smooth_error_share(floor, floor2, rho_median),
         torch.where(torch.isnan(rho_median), 0.0, _ramp(rho_median, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH)),
         _grid(z, valid, f),
+        white_noise_share(floor, floor2, rho_median),
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * _reading_weight(reading(tables))
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -949,6 +955,19 @@ def smooth_error_share(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Ten
     return torch.where(measured, share, torch.zeros_like(share))
 
 
+def white_noise_share(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
+    """``sensor_noise.white_noise_share`` per frame, from its floor, its floor at stride 2 and its median rho (B,); 0
+    where either floor is 0 or not a number."""
+    measured = (floor > 0.0) & (floor2 > 0.0) & ~torch.isnan(rho)
+    pixel = _ramp(floor / torch.where(measured, floor2, torch.ones_like(floor2)), WHITE_PIXEL_LOW, WHITE_PIXEL_HIGH)
+    uncorrelated = 1.0 - _ramp(
+        rho / torch.where(measured, floor, torch.ones_like(floor)), SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH
+    )
+    noise = _ramp(floor, WHITE_FLOOR_LOW, WHITE_FLOOR_HIGH)
+    share = pixel * uncorrelated * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
+    return torch.where(measured, share, torch.zeros_like(share))
+
+
 def reading(tables: NoiseTables) -> torch.Tensor:
     """``auto.reading`` per frame: the largest of the noise floor, the smooth noise, the terraces' quantisation
     noise, NOISY_FLOOR times the share in which the frame counts as terraced, and the smooth error's share of the
@@ -1083,8 +1102,10 @@ def _reading_weight(r: torch.Tensor) -> torch.Tensor:
 def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
     """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
     (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples); at least the frame's
-    grid share (``sensor_noise.grid_share``)."""
-    return torch.maximum(_reading_weight(reading(tables)), _ramp(tables.grid, GRID_LOW, GRID_HIGH))
+    grid share (``sensor_noise.grid_share``) and its white noise's plus its smooth error's, at most 1."""
+    grid = _ramp(tables.grid, GRID_LOW, GRID_HIGH)
+    noise = torch.clamp(tables.white + tables.smooth_error, max=1.0)
+    return torch.maximum(torch.maximum(_reading_weight(reading(tables)), grid), noise)
 
 
 def quantisation_step(tables: NoiseTables) -> torch.Tensor:

@@ -29,7 +29,9 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 - ``flying``: 0.2 % noise, and every pixel at a depth edge (its 3x3 mean off its depth by over 2 %) at that mean
   (mixed pixels: a time-of-flight camera's, or a filter's, between the two sides);
 - ``blurred``: the exact depth smoothed by a Gaussian of 1.5 pixels over the valid pixels (a resampling's blur);
-  ``blurred:S``, of S pixels (S above 0 and at most 10).
+  ``blurred:S``, of S pixels (S above 0 and at most 10);
+- ``dropped:H``: white noise of 0.005 % of depth, and H percent of the pixels (above 0, at most 90) dropped at random
+  (no depth): holes that the noise measurement's stencils must bridge, on small white noise.
 
 The scene's background is no depth (0), as the simulator's sensors see it; every family keeps invalid pixels invalid.
 
@@ -63,6 +65,7 @@ FAMILIES = (
     "bilateral",
     "flying",
     "blurred",
+    "dropped",
 )
 DEFAULT = (
     "upsampled_linear:4,upsampled_linear:5,upsampled_linear:6,upsampled_linear:8,upsampled_linear:12,"
@@ -92,6 +95,11 @@ def parse_family(text: str) -> tuple[str, float]:
     name, _, factor = text.partition(":")
     if name not in FAMILIES:
         raise InputError(f"--families: expected some of {', '.join(FAMILIES)}, got {text!r}")
+    if name == "dropped":
+        percent = _number(factor)
+        if not 0.0 < percent <= 90.0:
+            raise InputError(f"--families: expected dropped:H with H a percent above 0 and at most 90, got {text!r}")
+        return name, percent
     if name in ("white", "correlated"):
         percent = _number(factor)
         if not 0.0 < percent <= 5.0:
@@ -171,6 +179,9 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
         out = z * (1.0 + 0.002 * field / field.std())
     elif family == "white":
         out = z * (1.0 + 0.01 * k * rng.standard_normal(z.shape))
+    elif family == "dropped":  # (k: the percent of pixels dropped)
+        dropped = rng.random(z.shape) < 0.01 * k
+        out = np.where(dropped, 0.0, z * (1.0 + 0.00005 * rng.standard_normal(z.shape)))
     elif family == "correlated":
         field = cv2.GaussianBlur(rng.standard_normal(z.shape).astype(np.float32), (0, 0), 1.0)
         out = z * (1.0 + 0.01 * k * field / field.std())

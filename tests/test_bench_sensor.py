@@ -624,6 +624,11 @@ def test_families_of_noise_filters_and_mixed_pixels():
     steps = script.degrade("mm", 4.0, z, valid, rng(0)).astype(np.float64)
     assert (steps[~valid] == 0).all() and np.abs(steps[valid] - z[valid]).max() <= 0.002 + 1e-6
     np.testing.assert_allclose(steps[valid] / 0.004, np.round(steps[valid] / 0.004), atol=1e-3)  # on the 4 mm grid
+    assert script.parse_family("dropped:20") == ("dropped", 20.0)
+    dropped = script.degrade("dropped", 20.0, z, valid, rng(0))
+    kept = valid & (dropped > 0)
+    assert (dropped[~valid] == 0).all() and 0.17 < 1.0 - kept.sum() / valid.sum() < 0.23
+    assert 0.004 < 100.0 * (dropped[kept] / z[kept] - 1.0).std() < 0.006  # white noise of 0.005 %
     wider = script.degrade("blurred", 3.0, z, valid, rng(0))  # reaches further from the step
     near = valid & (np.abs(u - 50) == 6) & (v > 8) & (v < H - 4)
     assert (np.abs(wider[near] / z[near] - 1.0) > np.abs(blurred[near] / z[near] - 1.0) + 1e-3).all()
@@ -645,6 +650,8 @@ def test_families_refuses_an_unknown_family_or_factor(capsys):
         ("blurred:0", "expected blurred:S with S pixels above 0 and at most 10, got 'blurred:0'"),
         ("mm:0", "expected mm:Q with Q millimetres above 0 and at most 20, got 'mm:0'"),
         ("mm:x", "expected mm:Q with Q millimetres above 0 and at most 20, got 'mm:x'"),
+        ("dropped", "expected dropped:H with H a percent above 0 and at most 90, got 'dropped'"),
+        ("dropped:95", "expected dropped:H with H a percent above 0 and at most 90, got 'dropped:95'"),
     ):
         assert script.main(["--families", arg, "--methods", "auto"]) == 2
         err = capsys.readouterr().err.strip()

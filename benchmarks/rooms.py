@@ -98,10 +98,10 @@ def main(argv=None) -> int:
             if wrong:
                 raise SurfnormError(f"--steps: expected millimetres above 0, got {', '.join(wrong)}")
         elif args.white is not None:
-            sensors = [f"white noise {p} %" for p in args.white.split(",")]
             wrong = [p for p in args.white.split(",") if not 0.0 < _number(p) <= 5.0]
             if wrong:
                 raise SurfnormError(f"--white: expected percents above 0 and at most 5, got {', '.join(wrong)}")
+            sensors = [f"white noise {_number(p):g} %" for p in args.white.split(",")]  # (the seed: 0.01 as 0.010)
         else:
             sensors = args.sensors.split(",")
             unknown = [s for s in sensors if s not in SENSORS]

@@ -159,9 +159,10 @@ def white_noise(floor, floor2, rho_bins):
 
 
 def sensor_weight(floor, terraced, step, smooth, rho_bins, floor2):
-    """auto's weight of the adaptive fit: its noise reading (the largest of the floor, the smooth noise, the
-    terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3, 0.2 times that share, and
-    0.1 + 0.1 s for a smooth error's share s > 0) from 0.1 (clean) to 0.2."""
+    """The weight of the adaptive fit from auto's noise reading alone (what the kappa gain scales with; auto's weight
+    is at least it, and at least the grid's and the white noise's shares): its noise reading (the largest of the
+    floor, the smooth noise, the terraces' quantisation noise, step / sqrt(12) times their share from 0.15 to 0.3,
+    0.2 times that share, and 0.1 + 0.1 s for a smooth error's share s > 0) from 0.1 (clean) to 0.2."""
     if floor != floor:
         return 1.0
     share = float(np.clip((terraced - 0.15) / 0.15, 0, 1))

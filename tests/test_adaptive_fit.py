@@ -234,7 +234,7 @@ def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     from surfnorm.kernels.auto import CLEAN_FLOOR, NOISY_FLOOR, adaptive_weight
     from surfnorm.kernels.sensor_noise import NoiseProfile
 
-    def white(floor):  # white noise: rho as large as the floor (no smooth error)
+    def white(floor):  # noise read by its floor alone: rho as large as it, no floor2 (no smooth error, no white share)
         return NoiseProfile(np.ones(1), np.full(1, floor), floor)
 
     assert adaptive_weight(white(CLEAN_FLOOR)) == 0.0
@@ -242,7 +242,8 @@ def test_auto_blends_between_the_floors_so_that_its_output_moves_continuously():
     assert adaptive_weight(white(float("nan"))) == 1.0
     mid = 0.5 * (CLEAN_FLOOR + NOISY_FLOOR)
     assert adaptive_weight(white(mid)) == pytest.approx(0.5)
-    # a sphere with noise that puts the floor inside the band
+    # a sphere with noise that puts adaptive_fit's weight strictly between 0 and 1 (its floor in the band, or the white
+    # noise's share under 1)
     H, W = 60, 80
     K = camera(W, H)
     cam = Intrinsics.from_matrix(K)

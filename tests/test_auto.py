@@ -281,11 +281,11 @@ def test_the_smooth_error_share_follows_its_ramps():
 @pytest.mark.parametrize("seed", range(3))
 def test_the_white_noise_share_against_the_naive_reference(seed):
     """white_noise_share against an independent reference on profiles around each of its ramps (the floor over the
-    floor at stride 2, rho over the floor, the floor, rho), with floors 0 and NaN and a NaN rho; adaptive_weight is
-    at least that share."""
+    floor at stride 2, rho over the floor, the floor, and rho itself from 1.5 to 2.5 with the floor near it), with
+    floors 0 and NaN and a NaN rho; adaptive_weight is at least that share."""
     rng = np.random.default_rng(seed)
     for _ in range(400):
-        floor = float(rng.choice([0.0, np.nan, rng.uniform(0.0, 0.03), rng.uniform(0.0, 0.3)]))
+        floor = float(rng.choice([0.0, np.nan, rng.uniform(0.0, 0.03), rng.uniform(0.0, 0.3), rng.uniform(1.2, 2.4)]))
         floor2 = float(rng.choice([0.0, np.nan, floor / rng.uniform(0.4, 1.1)]))
         rho = np.abs(floor * rng.uniform(0.8, 2.2) + rng.normal(0.0, 0.01, rng.integers(1, 6)))
         if rng.random() < 0.1:
@@ -297,6 +297,23 @@ def test_the_white_noise_share_against_the_naive_reference(seed):
         assert white_noise_share(p) == pytest.approx(ref, abs=1e-12), (floor, floor2, rho)
         if floor == floor:
             assert adaptive_weight(p) >= ref
+    geometry = NoiseProfile(np.ones(1), np.full(1, 2.0), 1.6, floor2=1.6)  # rho halfway up the geometry's ramp
+    assert white_noise_share(geometry) == pytest.approx(0.5) == naive.white_noise(1.6, 1.6, np.full(1, 2.0))
+
+
+def test_small_noise_partly_white_partly_smooth_weighs_the_sum_of_the_shares():
+    """Where rho over the floor lies on the ramp between white noise and smooth error, the two shares split it and
+    adaptive_fit's weight is their sum (noise either way), not the larger of the two, nor the reading's."""
+    from surfnorm import _constants as c
+
+    mid = 0.5 * (c.SMOOTH_ERROR_LOW + c.SMOOTH_ERROR_HIGH)
+    floor = 0.5 * (c.SMOOTH_ERROR_FLOOR_LOW + c.SMOOTH_ERROR_FLOOR_HIGH)  # 0.03: half the smooth error's floor ramp
+    p = NoiseProfile(np.ones(3), np.full(3, floor * mid), floor, floor2=floor)
+    white, smooth = white_noise_share(p), smooth_error_share(p)
+    assert white == pytest.approx(0.5) and smooth == pytest.approx(0.25)
+    assert reading(p) == pytest.approx(CLEAN_FLOOR + 0.25 * (NOISY_FLOOR - CLEAN_FLOOR))  # its weight 0.25
+    assert adaptive_weight(p) == pytest.approx(0.75)
+    assert adaptive_weight(p._replace(floor2=4.0 * floor)) == 0.0  # a smooth shape's floors: neither share, clean
 
 
 def test_small_white_noise_gets_the_fit_checked_and_renders_do_not():
@@ -312,7 +329,7 @@ def test_small_white_noise_gets_the_fit_checked_and_renders_do_not():
         noisy = np.where(z > 0, z * (1.0 + percent / 100.0 * np.random.default_rng(3).standard_normal(z.shape)), 0.0)
         noisy = noisy.astype(np.float32)
         d = surfnorm.auto_decision(noisy, K)
-        assert d.floor < CLEAN_FLOOR and d.white == 1.0 and d.weight == 1.0 and d.checked, str(d)
+        assert d.floor < CLEAN_FLOOR and d.white_noise == 1.0 and d.weight == 1.0 and d.checked, str(d)
         e_auto, e_fit, e_d2nt = (
             mean_angular_error(surfnorm.estimate(noisy, K, method=m), exact, noisy > 0)
             for m in ("auto", "adaptive_fit", "d2nt_v3")
@@ -344,7 +361,7 @@ def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
         d = surfnorm.auto_decision(smooth, K)
         assert p.floor < CLEAN_FLOOR + 0.02, str(d)  # the pixel scale reads it as (nearly) clean
         assert d.smooth_error == smooth_error_share(p) >= 0.9 and d.weight >= 0.9 and not d.checked, str(d)
-        assert str(d).endswith(f"smooth error {d.smooth_error:.2f}, grid {d.grid:.3f}, white noise {d.white:.2f}")
+        assert str(d).endswith(f"smooth error {d.smooth_error:.2f}, grid {d.grid:.3f}, white noise {d.white_noise:.2f}")
         e_auto, e_d2nt = (
             mean_angular_error(surfnorm.estimate(smooth, K, method=m), exact) for m in ("auto", "d2nt_v3")
         )
@@ -352,7 +369,7 @@ def test_small_error_smooth_over_a_few_pixels_gets_adaptive_fit():
         white = with_error(z, K, p.floor, 0)  # independent noise of the same floor
         w = surfnorm.auto_decision(white, K)
         assert w.smooth_error == 0.0 and w.weight == adaptive_weight(noise_profile(white, white > 0, f)), str(w)
-        assert w.white == 1.0 and w.weight == 1.0 and w.checked, str(w)
+        assert w.white_noise == 1.0 and w.weight == 1.0 and w.checked, str(w)
         assert w.reading == pytest.approx(w.floor, rel=0.2), str(w)
 
 

@@ -120,6 +120,7 @@ class TestSensorBench:
             d = doc["decisions"][frame]
             row = f"| {frame} | {d['method']} | {d['weight']:.3f} | {d['reading']:.3f} |"
             assert row in text and f"| {d['upsampled']} | {d['correlation']:.2f} |" in text
+            assert f"| {d['smooth_error']:.2f} | {d['white_noise']:.2f} |" in text
 
     @pytest.mark.slow
     def test_absent_peer_is_reported_and_a_failing_one_recorded(self, folder, tmp_path, monkeypatch):

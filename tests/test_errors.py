@@ -501,6 +501,8 @@ def test_depth_and_mask_files(tmp_path):
         read_depth(tmp_path / "first.npy")
     with pytest.raises(DataFileError, match=r"missing.png: cannot read mask file"):
         read_mask(tmp_path / "missing.png")
+    np.save(tmp_path / "m1.npy", np.eye(4)[..., None])
+    np.testing.assert_array_equal(read_mask(tmp_path / "m1.npy"), np.eye(4, dtype=bool))  # (H, W, 1) as (H, W)
     np.save(tmp_path / "m.npy", np.zeros((4, 4, 2), bool))
     with pytest.raises(DataFileError, match=r"m.npy: expected a 2-D mask, got an array of shape \(4, 4, 2\)"):
         read_mask(tmp_path / "m.npy")

@@ -321,14 +321,15 @@ class TestAdaptive:
 
     def test_noise_tables_white_noise_share_as_numpy(self):
         """The torch tables' white noise share and adaptive_fit's weight are the NumPy profile's: a plane with white
-        noise of 0.005-0.03 % of depth (shares 0 to 1), a clean 3F2N frame (0) and the tables' other scenes."""
+        noise of 0.005-0.03 % of depth (shares between 0 and 1, and 1), the tables' scenes (a clean 3F2N frame: 0);
+        and the weight is the sum of the white noise's and the smooth error's shares where both are partial."""
         from surfnorm.kernels.sensor_noise import adaptive_weight, white_noise_share
         from surfnorm.torch import _adaptive
 
         Kp = camera(320, 240, fov_deg=60)
         z, _, hit = plane(Kp, 240, 320, [0.4, 0.3, -1.0], 2.0)
         rng = np.random.default_rng(5)
-        cases = [(name, depth, Km, mask) for name, depth, Km, mask in self.scenes()]
+        cases = list(self.scenes())
         for percent in (0.005, 0.007, 0.01, 0.03):
             noisy = np.where(hit, z * (1.0 + percent / 100.0 * rng.standard_normal(z.shape)), 0.0)
             cases.append((f"plane, {percent} %", noisy.astype(np.float32), Kp, None))
@@ -336,10 +337,19 @@ class TestAdaptive:
         for name, depth, Km, mask in cases:
             profile, _ = self.numpy_tables(depth, Km, mask)
             got = self.torch_tables(depth, Km, mask)
-            assert got.white.item() == pytest.approx(white_noise_share(profile), abs=1e-12), name
+            assert got.white_noise.item() == pytest.approx(white_noise_share(profile), abs=1e-12), name
             assert _adaptive.adaptive_weight(got).item() == pytest.approx(adaptive_weight(profile), abs=1e-12), name
-            seen.append(got.white.item())
+            seen.append(got.white_noise.item())
         assert min(seen) == 0.0 and max(seen) == 1.0 and any(0.0 < s < 1.0 for s in seen), seen
+        half = got._replace(
+            floor=torch.full_like(got.floor, 0.03),
+            smooth=torch.zeros_like(got.smooth),
+            terraced=torch.zeros_like(got.terraced),
+            grid=torch.zeros_like(got.grid),
+            smooth_error=torch.full_like(got.smooth_error, 0.25),
+            white_noise=torch.full_like(got.white_noise, 0.5),
+        )
+        assert _adaptive.adaptive_weight(half).item() == pytest.approx(0.75)  # not the larger share, nor the reading's
 
     def test_choices_differ_across_the_scene(self):
         # the parity tests on sensor_like() scenes are only worth something if the scene exercises every choice

@@ -38,7 +38,8 @@ RHO_FLOOR = 0.25
 #: a share that goes from 1 at a median rho of GEOMETRY_RHO_LOW (point spacings) to 0 at GEOMETRY_RHO_HIGH: where
 #: the second differences are mostly the scene's fine geometry (the tree, temple and batman frames of 3F2N through
 #: any sensor: rho 2.5-13), their correlation says nothing about the noise, and a wider test there only blurs
-#: detail. Times the frame's weight as sensor depth (auto's adaptive_weight): clean depth has no noise to correlate.
+#: detail. Times the frame's weight as sensor depth from its noise reading (``sensor_noise.reading_weight``, not the
+#: grid's or the white noise's share): clean depth has no noise to correlate.
 #: Set on the simulated sensors (``python benchmarks/sensor_sim.py``: stereo_sgbm 20.39 -> 17.70, the smooth error
 #: 16.12 -> 13.83 degrees, the other sensors unchanged) and checked on real frames and simulated rooms
 #: (``docs/choosing.md``).

@@ -591,9 +591,9 @@ def folder_markdown(result: dict) -> str:
             "2, rho about the floor: 0 to 1), and `adaptive_fit`'s weight at least that share plus the smooth error's; "
             "checked: `adaptive_fit`'s normals checked against `d2nt_v3`'s pixel by "
             "pixel (at low noise, and on quantised depth where its step is small); upsampled: the factor by which the depth was resized "
-            "from a lower resolution, where the reading is under 0.20 or the noise is correlated (at least 3) and one "
-            "was found (`adaptive_fit` alone then, with windows of at least 2 K + 1 pixels, 2 ceil(1.5 K) + 1 where the "
-            "reading is 0.20 or more), 1 elsewhere; "
+            "from a lower resolution, where `adaptive_fit`'s weight is under 1 or the noise is correlated (at least 3) "
+            "and one was found (`adaptive_fit` alone then, with windows of at least 2 K + 1 pixels, 2 ceil(1.5 K) + 1 "
+            "where its weight is 1), 1 elsewhere; "
             "correlation: of the noise between neighbouring pixels (1: independent).",
             "",
             "| frame | ran | adaptive_fit's weight | reading | floor | smooth | terraced | step | quantisation "
@@ -609,7 +609,7 @@ def folder_markdown(result: dict) -> str:
             out.append(
                 f"| {f} | {d['method']} | " + " | ".join(nums) + f" | {_fmt(d.get('grid'), 3)} | {checked} "
                 f"| {d.get('upsampled', 1):g} "
-                f"| {_fmt(d.get('correlation'), 2)} | {_fmt(d.get('smooth_error'), 2)} | {_fmt(d.get('white'), 2)} |"
+                f"| {_fmt(d.get('correlation'), 2)} | {_fmt(d.get('smooth_error'), 2)} | {_fmt(d.get('white_noise'), 2)} |"
             )
     out += ["", "## Entries", ""] + [f"- {e}: {result['summaries'][e]}" for e in entries]
     if result.get("absent"):

@@ -119,6 +119,11 @@ def _read_numpy(path: Path, suffix: str, name: str = "depth") -> np.ndarray:
         raise DataFileError(f"{path}: cannot read as NumPy {suffix} {name} (truncated or corrupt: {exc})") from exc
 
 
+def _one_channel(arr: np.ndarray) -> np.ndarray:
+    """An (H, W, 1) array as (H, W), as image libraries and some datasets save one channel; others as they are."""
+    return arr[..., 0] if arr.ndim == 3 and arr.shape[2] == 1 else arr
+
+
 def _read_image(path: Path) -> np.ndarray:
     img = decode_image(path, read_bytes(path, "depth"), cv2.IMREAD_UNCHANGED)
     if img.ndim != 2:
@@ -197,9 +202,7 @@ def read_depth(
     if suffix in (".bin", ".bin.gz"):
         depth = read_depth_bin(path, shape)
     elif suffix in (".npy", ".npz"):
-        depth = _read_numpy(path, suffix)
-        if depth.ndim == 3 and depth.shape[2] == 1:  # (H, W, 1), as image libraries and some datasets save depth
-            depth = depth[..., 0]
+        depth = _one_channel(_read_numpy(path, suffix))
     elif suffix in (".png", ".tif", ".tiff", ".pgm"):
         depth = _read_image(path)
     elif suffix == ".exr":
@@ -237,11 +240,15 @@ def _scaled(depth: np.ndarray, depth_scale: float) -> np.ndarray:
 
 
 def read_mask(path) -> np.ndarray:
-    """A mask file as bool (H, W): any image, ``.npy`` or ``.npz`` (array ``mask`` or the only one); non-zero = usable."""
+    """A mask file as bool (H, W): any image, ``.npy`` or ``.npz`` (the array ``mask`` or the only one).
+
+    Arrays of shape (H, W, 1) are read as (H, W). Non-zero means usable.
+    """
     path = as_path(path)
     suffix = depth_suffix(path)
     if suffix in (".npy", ".npz"):
         arr = _read_numpy(path, suffix, "mask")
+        arr = _one_channel(arr)
     else:
         arr = decode_image(path, read_bytes(path, "mask"), cv2.IMREAD_GRAYSCALE)
     real = arr.dtype.kind in "bfiu"

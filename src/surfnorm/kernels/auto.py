@@ -89,11 +89,17 @@ point spacings ``adaptive_fit``'s weight is at least that share
 planes in whole millimetres read a floor of 0.00-0.01 and got ``d2nt_v3``'s 1.5 degrees,
 now 0.1 (``adaptive_fit`` 0.1; ``benchmarks/rooms.py --steps 1``).
 
+Nor is white noise, however small (:func:`~surfnorm.kernels.sensor_noise.white_noise_share`: the floor as large at
+the pixel scale as at stride 2, rho about the floor, a floor from ``WHITE_FLOOR_LOW`` to ``WHITE_FLOOR_HIGH``):
+``adaptive_fit``'s weight is at least that share plus the smooth error's, checked as above. Planes in float depth
+with white noise of 0.01 % of depth read a floor of 0.05 and got ``d2nt_v3``'s 1.8 degrees, now 0.1
+(``benchmarks/rooms.py --white 0.01``).
+
 Depth resized from a lower resolution (a time-of-flight or phone LiDAR registered to a colour camera, a depth
 completion's output) bends only at the seams between its samples, K pixels apart, and its noise lies in the
 samples: at the pixel scale it reads as clean, and ``d2nt_v3`` follows each sample's error (bilinear 8x: 34
 degrees, against 30 for OpenCV's LINEMOD); noisier samples read as sensor depth whose noise is correlated over K
-pixels. Where the reading is under ``NOISY_FLOOR``, or ``NoiseProfile.correlation`` is at least ``CORRELATED_HIGH``
+pixels. Where ``adaptive_fit``'s weight is under 1, or ``NoiseProfile.correlation`` is at least ``CORRELATED_HIGH``
 (:func:`searched`), ``auto`` looks for such seams (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: whole
 factors from 4 to 15 in the second differences, and for a bicubic resize, which is a cubic between its seams, from 5
 to 15 in the fourth differences; and the factors halfway between, 7.5 for a phone's 256x192 depth brought to its
@@ -150,7 +156,6 @@ from .sensor_noise import (
     quantisation,
     quantisation_step,
     reading,
-    reading_weight,
     smooth_error_share,
     step_limit,
     upsampling_factor,
@@ -197,7 +202,7 @@ class Decision(NamedTuple):
         The factor K by which the depth was resized from a lower resolution, where ``auto`` looked for one
         (:func:`searched`) and found it (:func:`surfnorm.kernels.sensor_noise.upsampling_factor`: a whole number, or
         one halfway between two, 7.5): ``adaptive_fit`` then runs alone (``weight`` 1), with windows of at least
-        ``upsampled_window(K, noisy)`` pixels (2 K + 1, or about 3 K where the reading is ``NOISY_FLOOR`` or more).
+        ``window`` pixels (2 K + 1, or about 3 K where ``adaptive_weight`` of the profile is 1: sensor depth).
         1 elsewhere.
     correlation : float
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: how far the noise is correlated between
@@ -210,7 +215,10 @@ class Decision(NamedTuple):
         The :class:`~surfnorm.kernels.sensor_noise.NoiseProfile`'s: the step of the grid the depth is stored on
         (point spacings; 0 for float depth). From ``GRID_LOW`` to ``GRID_HIGH`` the frame counts as sensor depth
         (:func:`~surfnorm.kernels.sensor_noise.grid_share`): ``weight`` is at least that share.
-    white : float
+    window : int
+        The least side of ``adaptive_fit``'s windows on depth resized from a lower resolution
+        (:func:`surfnorm._constants.upsampled_window`), 0 where ``upsampled`` is 1.
+    white_noise : float
         :func:`~surfnorm.kernels.sensor_noise.white_noise_share`: how far the error is white noise, however small
         (it shows as much at the pixel scale as at stride 2, and rho is about the floor), from 0 to 1: ``weight`` is
         at least that share plus ``smooth_error`` (at most 1).
@@ -229,13 +237,13 @@ class Decision(NamedTuple):
     correlation: float = 1.0
     smooth_error: float = 0.0
     grid: float = 0.0
-    white: float = 0.0
+    window: int = 0
+    white_noise: float = 0.0
 
     def __str__(self) -> str:
         ran = self.method if self.method != "blend" else f"blend ({self.weight:.2f} of adaptive_fit)"
         if self.upsampled > 1:
-            side = upsampled_window(self.upsampled, reading_weight(self.reading) == 1.0)
-            ran += f" with windows of at least {side} pixels (depth upsampled {self.upsampled:g} times)"
+            ran += f" with windows of at least {self.window} pixels (depth upsampled {self.upsampled:g} times)"
         if self.checked:
             ran += ", checked against d2nt_v3 pixel by pixel"
         return (
@@ -243,7 +251,7 @@ class Decision(NamedTuple):
             f"sensor at or above {NOISY_FLOOR:g}); floor {self.floor:.3f}, smooth {self.smooth:.3f}, "
             f"terraced {self.terraced:.3f}, "
             f"step {self.step:.3f}, quantisation {self.quantisation:.3f}, correlation {self.correlation:.2f}, "
-            f"smooth error {self.smooth_error:.2f}, grid {self.grid:.3f}, white noise {self.white:.2f}"
+            f"smooth error {self.smooth_error:.2f}, grid {self.grid:.3f}, white noise {self.white_noise:.2f}"
         )
 
 
@@ -265,13 +273,14 @@ def decision(profile: NoiseProfile, upsampled: float = 1) -> Decision:
         profile.correlation,
         smooth_error_share(profile),
         profile.grid,
+        upsampled_window(upsampled, adaptive_weight(profile) == 1.0) if upsampled > 1 else 0,
         white_noise_share(profile),
     )
 
 
 def searched(profile: NoiseProfile) -> bool:
-    """Whether ``auto`` looks for the seams of upsampled depth (:func:`upsampled`): where the reading is under
-    ``NOISY_FLOOR``, or where the noise is correlated across pixels (``NoiseProfile.correlation`` at least
+    """Whether ``auto`` looks for the seams of upsampled depth (:func:`upsampled`): where ``adaptive_fit``'s weight
+    (:func:`adaptive_weight`) is under 1 (a reading under ``NOISY_FLOOR``, no grid, no white noise), or where the noise is correlated across pixels (``NoiseProfile.correlation`` at least
     ``CORRELATED_HIGH``), as resizing makes it: noisy samples resized 4-6 times read 0.1-0.9 point spacings and
     6-40 there, most real sensor frames 0.5-2.9 (their frames do not pay for the search)."""
     return adaptive_weight(profile) < 1.0 or profile.correlation >= CORRELATED_HIGH

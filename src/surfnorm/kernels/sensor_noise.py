@@ -804,14 +804,14 @@ def smooth_error_share(profile: NoiseProfile) -> float:
     ``SMOOTH_ERROR_FLOOR_LOW`` to ``SMOOTH_ERROR_FLOOR_HIGH`` and the share of rho that is noise
     (``GEOMETRY_RHO_LOW`` to ``GEOMETRY_RHO_HIGH``); each a linear ramp (see :mod:`surfnorm._constants`). 0 where
     either floor is 0 or not a number."""
-    rho = _median(profile.rho)
-    if not (profile.floor > 0.0 and profile.floor2 > 0.0 and rho == rho):
+    ratios = _noise_ratios(profile)
+    if ratios is None:
         return 0.0
-    ratio = rho / profile.floor
+    rho, ratio, pixel_ratio = ratios
     correlated = _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH) * (
         1.0 - _ramp(ratio, SMOOTH_ERROR_SHAPE_LOW, SMOOTH_ERROR_SHAPE_HIGH)
     )
-    pixel = _ramp(profile.floor / profile.floor2, SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH)
+    pixel = _ramp(pixel_ratio, SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH)
     noise = _ramp(profile.floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
     return correlated * pixel * noise * (1.0 - _geometry(rho))
 
@@ -824,14 +824,26 @@ def white_noise_share(profile: NoiseProfile) -> float:
     that is noise (``GEOMETRY_RHO_LOW`` to ``GEOMETRY_RHO_HIGH``) and the floor from ``WHITE_FLOOR_LOW`` to
     ``WHITE_FLOOR_HIGH``; each a linear ramp (see :mod:`surfnorm._constants`). 0 where either floor is 0 or not a
     number. Where rho over the floor lies between those two, the rest of its ramp is the smooth error's share
-    (:func:`smooth_error_share`): :func:`adaptive_weight` is at least the sum of the two, error either way."""
-    rho = _median(profile.rho)
-    if not (profile.floor > 0.0 and profile.floor2 > 0.0 and rho == rho):
+    (:func:`smooth_error_share`): :func:`adaptive_weight` is at least the sum of the two, error either way. (The
+    share of rho that is noise falls under 1 only where the floor is over about 0.8, which reads as sensor depth
+    anyway: it moves the share reported, not the weight.)"""
+    ratios = _noise_ratios(profile)
+    if ratios is None:
         return 0.0
-    pixel = _ramp(profile.floor / profile.floor2, WHITE_PIXEL_LOW, WHITE_PIXEL_HIGH)
-    uncorrelated = 1.0 - _ramp(rho / profile.floor, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH)
+    rho, ratio, pixel_ratio = ratios
+    pixel = _ramp(pixel_ratio, WHITE_PIXEL_LOW, WHITE_PIXEL_HIGH)
+    uncorrelated = 1.0 - _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH)
     noise = _ramp(profile.floor, WHITE_FLOOR_LOW, WHITE_FLOOR_HIGH)
     return pixel * uncorrelated * noise * (1.0 - _geometry(rho))
+
+
+def _noise_ratios(profile: NoiseProfile) -> tuple[float, float, float] | None:
+    """(the median rho over the depth bins, rho over the ``floor``, the floor over ``floor2``) that the smooth error's
+    and the white noise's shares read; None where either floor is 0 or not a number, or rho is not a number."""
+    rho = _median(profile.rho)
+    if not (profile.floor > 0.0 and profile.floor2 > 0.0 and rho == rho):
+        return None
+    return rho, rho / profile.floor, profile.floor / profile.floor2
 
 
 def smooth_error_reading(profile: NoiseProfile) -> float:

@@ -48,9 +48,9 @@ neighbourhood's plane, the same formulas at r = 1 (a fit of every pixel's 3x3 wi
   within the noise (the adaptive fit's noise test), times ``D2NT_TURN``, is added to the variance. Planes give 0.
 - The angle between the normal and the pixel's best plane, times ``D2NT_DISAGREEMENT``.
 
-On a clean frame (its noise reading clean, ``adaptive_weight`` 0, where ``auto`` runs ``d2nt_v3`` alone) there is
-no noise to weigh, the 3x3 fits would cost as much as ``d2nt_v3`` itself, and the error is the surface's shape
-between pixels. Sigma there comes from two quantities that cost a pass over the normals and the depth
+On a clean frame (``adaptive_weight`` 0: its noise reading clean, no grid, no white noise; where ``auto`` runs
+``d2nt_v3`` alone) there is no noise to weigh, the 3x3 fits would cost as much as ``d2nt_v3`` itself, and the error
+is the surface's shape between pixels. Sigma there comes from two quantities that cost a pass over the normals and the depth
 (:func:`_clean_sigma`):
 
 - the bend b: the larger of the relative second differences |w_- - 2 w + w_+| / w of w = 1/z down the pixel's

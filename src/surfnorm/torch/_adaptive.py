@@ -196,7 +196,7 @@ class NoiseTables(NamedTuple):
     smooth_error: torch.Tensor  # (B,) sensor_noise.smooth_error_share
     geometry: torch.Tensor  # (B,) sensor_noise.geometry_share
     grid: torch.Tensor  # (B,) NoiseProfile.grid
-    white: torch.Tensor  # (B,) sensor_noise.white_noise_share
+    white_noise: torch.Tensor  # (B,) sensor_noise.white_noise_share
 
 
 def _samples(z, valid, f, lo, span):
@@ -437,7 +437,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         wide, torch.full_like(z0, _TABLE - 1) / torch.where(wide, z1 - z0, 1.0), torch.zeros_like(z0)
     )
     # sensor_noise.kappa_gain of each frame's profile (its median rho: NumPy's median of the bins' rho; its weight
-    # as sensor depth: adaptive_weight below)
+    # as sensor depth: the reading's, _reading_weight below)
     correlated = torch.clamp((correlation - CORRELATED_LOW) / (CORRELATED_HIGH - CORRELATED_LOW), 0.0, 1.0)
     rho_median = torch.quantile(rho_bins, 0.5, dim=1)
     noise = (GEOMETRY_RHO_HIGH - rho_median) / (GEOMETRY_RHO_HIGH - GEOMETRY_RHO_LOW)
@@ -939,17 +939,22 @@ def _ramp(x: torch.Tensor, low: float, high: float) -> torch.Tensor:
     return ((x - low) / (high - low)).clamp(0.0, 1.0)
 
 
+def _noise_ratios(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Tensor):
+    """``sensor_noise._noise_ratios`` per frame (B,): (measured, rho over the floor, the floor over floor2), the
+    ratios 1 where not measured (either floor 0 or not a number, or rho not a number)."""
+    measured = (floor > 0.0) & (floor2 > 0.0) & ~torch.isnan(rho)
+    ratio = rho / torch.where(measured, floor, torch.ones_like(floor))
+    return measured, ratio, floor / torch.where(measured, floor2, torch.ones_like(floor2))
+
+
 def smooth_error_share(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
     """``sensor_noise.smooth_error_share`` per frame, from its floor, its floor at stride 2 and its median rho (B,); 0
     where either floor is 0 or not a number."""
-    measured = (floor > 0.0) & (floor2 > 0.0) & ~torch.isnan(rho)
-    ratio = rho / torch.where(measured, floor, torch.ones_like(floor))
+    measured, ratio, pixel_ratio = _noise_ratios(floor, floor2, rho)
     correlated = _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH) * (
         1.0 - _ramp(ratio, SMOOTH_ERROR_SHAPE_LOW, SMOOTH_ERROR_SHAPE_HIGH)
     )
-    pixel = _ramp(
-        floor / torch.where(measured, floor2, torch.ones_like(floor2)), SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH
-    )
+    pixel = _ramp(pixel_ratio, SMOOTH_ERROR_PIXEL_LOW, SMOOTH_ERROR_PIXEL_HIGH)
     noise = _ramp(floor, SMOOTH_ERROR_FLOOR_LOW, SMOOTH_ERROR_FLOOR_HIGH)
     share = correlated * pixel * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
     return torch.where(measured, share, torch.zeros_like(share))
@@ -958,11 +963,9 @@ def smooth_error_share(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Ten
 def white_noise_share(floor: torch.Tensor, floor2: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
     """``sensor_noise.white_noise_share`` per frame, from its floor, its floor at stride 2 and its median rho (B,); 0
     where either floor is 0 or not a number."""
-    measured = (floor > 0.0) & (floor2 > 0.0) & ~torch.isnan(rho)
-    pixel = _ramp(floor / torch.where(measured, floor2, torch.ones_like(floor2)), WHITE_PIXEL_LOW, WHITE_PIXEL_HIGH)
-    uncorrelated = 1.0 - _ramp(
-        rho / torch.where(measured, floor, torch.ones_like(floor)), SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH
-    )
+    measured, ratio, pixel_ratio = _noise_ratios(floor, floor2, rho)
+    pixel = _ramp(pixel_ratio, WHITE_PIXEL_LOW, WHITE_PIXEL_HIGH)
+    uncorrelated = 1.0 - _ramp(ratio, SMOOTH_ERROR_LOW, SMOOTH_ERROR_HIGH)
     noise = _ramp(floor, WHITE_FLOOR_LOW, WHITE_FLOOR_HIGH)
     share = pixel * uncorrelated * noise * (1.0 - _ramp(rho, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH))
     return torch.where(measured, share, torch.zeros_like(share))
@@ -1104,7 +1107,7 @@ def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
     (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples); at least the frame's
     grid share (``sensor_noise.grid_share``) and its white noise's plus its smooth error's, at most 1."""
     grid = _ramp(tables.grid, GRID_LOW, GRID_HIGH)
-    noise = torch.clamp(tables.white + tables.smooth_error, max=1.0)
+    noise = torch.clamp(tables.white_noise + tables.smooth_error, max=1.0)
     return torch.maximum(torch.maximum(_reading_weight(reading(tables)), grid), noise)
 
 
@@ -1180,8 +1183,9 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
 
 
 def auto(g: Grid, cam, *, tau: float, fill: float):
-    """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where the depth's noise reading is at or below CLEAN_FLOOR,
-    ``adaptive_fit`` at or above NOISY_FLOOR, their blend between, and ``adaptive_fit`` with windows of at least
+    """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where ``adaptive_fit``'s weight (:func:`adaptive_weight`: from
+    the noise reading, CLEAN_FLOOR to NOISY_FLOOR, or the grid's or the white noise's share) is 0, ``adaptive_fit``
+    where it is 1, their blend between, and ``adaptive_fit`` with windows of at least
     upsampled_window(K, noisy) pixels on depth upsampled K times (:func:`upsampling_factors`, where auto.searched);
     ``cam`` in float64.
 

@@ -493,27 +493,18 @@ def test_rooms_refuses_an_unknown_sensor(capsys):
     assert capsys.readouterr().err.strip() == "rooms: --steps, --white: expected one of them, got both"
 
 
-def test_rooms_in_steps_of_millimetres(capsys):
-    """--steps: the exact depth of the rooms in steps of Q millimetres, one table per step; on planes stored in whole
-    millimetres the default is adaptive_fit's (its grid), far below d2nt_v3, which follows the steps."""
+@pytest.mark.parametrize(
+    ("option", "value", "title"), [("--steps", "2", "2 mm"), ("--white", "0.01", "white noise 0.01 %")]
+)
+def test_rooms_quantised_or_with_small_white_noise(capsys, option, value, title):
+    """--steps: the exact depth of the rooms in steps of Q millimetres; --white: with white noise of P percent of
+    depth; one table per value. On planes stored in whole millimetres (its grid) or with white noise of 0.01 % (a
+    floor of about 0.05 point spacings, under CLEAN_FLOOR) the default is adaptive_fit's, far below d2nt_v3's, which
+    follows the steps or the noise."""
     script = _benchmark_script("rooms")
-    assert script.main(["--steps", "2", "--methods", "auto,d2nt_v3,adaptive_fit"]) == 0
+    assert script.main([option, value, "--methods", "auto,d2nt_v3,adaptive_fit"]) == 0
     out = capsys.readouterr().out
-    assert "### 2 mm: e_A" in out
-    cells = [line.split("|") for line in out.splitlines()]
-    rows = {
-        c[1].strip(): float(c[-2]) for c in cells if len(c) > 8 and c[1].strip() in ("auto", "d2nt_v3", "adaptive_fit")
-    }
-    assert rows["auto"] <= 1.1 * rows["adaptive_fit"] + 0.05 and rows["d2nt_v3"] > 5 * rows["auto"], rows
-
-
-def test_rooms_with_small_white_noise(capsys):
-    """--white: the exact depth of the rooms with white noise of P percent of depth, one table per level; at 0.01 %
-    (a floor of about 0.05 point spacings, under CLEAN_FLOOR) the default is adaptive_fit's, far below d2nt_v3's."""
-    script = _benchmark_script("rooms")
-    assert script.main(["--white", "0.01", "--methods", "auto,d2nt_v3,adaptive_fit"]) == 0
-    out = capsys.readouterr().out
-    assert "### white noise 0.01 %: e_A" in out
+    assert f"### {title}: e_A" in out
     cells = [line.split("|") for line in out.splitlines()]
     rows = {
         c[1].strip(): float(c[-2]) for c in cells if len(c) > 8 and c[1].strip() in ("auto", "d2nt_v3", "adaptive_fit")

@@ -280,9 +280,10 @@ def decision(profile: NoiseProfile, upsampled: float = 1) -> Decision:
 
 def searched(profile: NoiseProfile) -> bool:
     """Whether ``auto`` looks for the seams of upsampled depth (:func:`upsampled`): where ``adaptive_fit``'s weight
-    (:func:`adaptive_weight`) is under 1 (a reading under ``NOISY_FLOOR``, no grid, no white noise), or where the noise is correlated across pixels (``NoiseProfile.correlation`` at least
-    ``CORRELATED_HIGH``), as resizing makes it: noisy samples resized 4-6 times read 0.1-0.9 point spacings and
-    6-40 there, most real sensor frames 0.5-2.9 (their frames do not pay for the search)."""
+    (:func:`adaptive_weight`) is under 1 (a reading under ``NOISY_FLOOR``, no grid, no white noise), or where the
+    noise is correlated across pixels (``NoiseProfile.correlation`` at least ``CORRELATED_HIGH``), as resizing makes
+    it: noisy samples resized 4-6 times read 0.1-0.9 point spacings and 6-40 there, most real sensor frames 0.5-2.9
+    (their frames do not pay for the search)."""
     return adaptive_weight(profile) < 1.0 or profile.correlation >= CORRELATED_HIGH
 
 

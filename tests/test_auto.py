@@ -278,6 +278,18 @@ def test_the_smooth_error_share_follows_its_ramps():
     assert consistency_limits(profile(0.06, 3.0)._replace(floors=np.full(3, 0.06))) is None
 
 
+def test_the_decisions_median_is_numpys():
+    """sensor_noise._median (the median of the profile's rho that the decision reads) is np.median's value, to the
+    bit, for odd and even counts, ties and one value; NaN where a value is NaN or there are none."""
+    from surfnorm.kernels.sensor_noise import _median
+
+    rng = np.random.default_rng(0)
+    for n in range(1, 20):
+        for values in (rng.random(n), rng.integers(0, 3, n).astype(np.float64), -rng.random(n)):
+            assert _median(values) == np.median(values), values
+    assert np.isnan(_median(np.array([1.0, np.nan, 2.0]))) and np.isnan(_median(np.zeros(0)))
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_the_white_noise_share_against_the_naive_reference(seed):
     """white_noise_share against an independent reference on profiles around each of its ramps (the floor over the

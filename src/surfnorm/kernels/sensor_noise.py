@@ -876,12 +876,16 @@ def reading(profile: NoiseProfile) -> float:
 
 
 def _median(values) -> float:
-    """np.median of a few values (the same value; NaN where one is NaN or there are none), without NumPy's overhead:
-    on the calling thread between the noise and the fit, np.median took 0.09 ms of a 3.5 ms call."""
-    a = np.array(values, dtype=np.float64).reshape(-1)  # a copy: _median_in_place reorders it
-    if a.size == 0 or np.isnan(a).any():
+    """np.median of a few values (the same value: the mean of the two middle ones for an even count; NaN where one
+    is NaN or there are none), in Python: the decision reads the median of the profile's ``N_BINS`` rho several times
+    a frame, on the calling thread between the noise and the fit, where np.median took 0.09 ms of a 3.5 ms call and a
+    compiled selection 5 us each."""
+    a = np.asarray(values, dtype=np.float64).ravel().tolist()
+    if not a or any(v != v for v in a):
         return float("nan")
-    return float(_median_in_place(a))
+    a.sort()
+    k = (len(a) - 1) // 2
+    return a[k] if len(a) % 2 else (a[k] + a[k + 1]) / 2.0
 
 
 def geometry_share(profile: NoiseProfile) -> float:

@@ -1106,16 +1106,18 @@ def adaptive_weight(tables: NoiseTables) -> torch.Tensor:
     """``auto.adaptive_weight`` per frame: 0 at or below CLEAN_FLOOR (d2nt_v3), 1 at or above NOISY_FLOOR
     (adaptive_fit), linear between, of the :func:`reading`; 1 for a NaN floor (too few samples); at least the frame's
     grid share (``sensor_noise.grid_share``) and its white noise's plus its smooth error's, at most 1."""
-    grid = _ramp(tables.grid, GRID_LOW, GRID_HIGH)
     noise = torch.clamp(tables.white_noise + tables.smooth_error, max=1.0)
-    return torch.maximum(torch.maximum(_reading_weight(reading(tables)), grid), noise)
+    return torch.maximum(torch.maximum(_reading_weight(reading(tables)), grid_share(tables)), noise)
+
+
+def grid_share(tables: NoiseTables) -> torch.Tensor:
+    """``sensor_noise.grid_share`` per frame (B,): 0 at or below GRID_LOW, 1 at or above GRID_HIGH, linear between."""
+    return _ramp(tables.grid, GRID_LOW, GRID_HIGH)
 
 
 def quantisation_step(tables: NoiseTables) -> torch.Tensor:
     """``sensor_noise.quantisation_step`` per frame (B,)."""
-    return torch.maximum(
-        terraced_share(tables, TERRACED_CHECK) * tables.step, _ramp(tables.grid, GRID_LOW, GRID_HIGH) * tables.grid
-    )
+    return torch.maximum(terraced_share(tables, TERRACED_CHECK) * tables.step, grid_share(tables) * tables.grid)
 
 
 def consistency_limits(tables: NoiseTables) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

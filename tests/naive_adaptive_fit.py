@@ -31,12 +31,20 @@ def sampling_step(H, W, samples=12_000):
 
 def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
     xs, bins, zmin, zmax, first = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
-    return _profile(xs, bins, zmin, zmax, n_bins, min_samples, first)
+    return _profile(xs, bins, zmin, zmax, n_bins, min_samples, first, binned_first(valid, first, min_samples))
+
+
+def binned_first(valid, first, min_samples):
+    """Whether the depth bins take the stencils at gap 1 alone, as the floor: on dense depth (the fit's stride 2)
+    where there are min_samples of them; on sparse depth (stride 1: LiDAR lines) every stencil."""
+    return stride_for(valid) == 2 and first.sum() >= min_samples
 
 
 def bin_floors(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
     """NoiseProfile.floors: per depth bin, the median |x_1| of its samples over 0.6745, NaN with too few."""
-    xs, bins, _, _, _ = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
+    xs, bins, _, _, first = samples_and_bins(z, valid, f, n_bins=n_bins, samples=samples, max_gap=max_gap)
+    if binned_first(valid, first, min_samples):
+        xs, bins = xs[first], bins[first]
     out = np.full(n_bins, np.nan)
     for b in range(n_bins):
         x = xs[bins == b, 0]
@@ -73,11 +81,13 @@ def samples_and_bins(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4):
     return np.array(xs).reshape(-1, 3), np.array(bins, dtype=int), zmin, zmax, np.array(first, dtype=bool)
 
 
-def _profile(xs, bins, zmin, zmax, n_bins, min_samples, first):
+def _profile(xs, bins, zmin, zmax, n_bins, min_samples, first, by_first):
     # the floor at the pixel scale (stencils at gap 1) where it has min_samples, else over every stencil
     pixel = xs[first] if first.sum() >= min_samples else xs
     floor = float(np.median(np.abs(pixel[:, 0]))) / 0.6745 if len(xs) >= min_samples else float("nan")
     floor2 = float(np.median(np.abs(pixel[:, 1]))) / 0.6745 if len(xs) >= min_samples else float("nan")
+    if by_first:  # the bins too (dense depth: wider stencils bridge random holes)
+        xs, bins = xs[first], bins[first]
     ms = np.zeros((3, n_bins))
     for i in range(3):
         for b in range(n_bins):

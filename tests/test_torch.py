@@ -277,6 +277,11 @@ class TestAdaptive:
         yield "3F2N frame", f.depth, f.K.matrix, None
         yield "3F2N frame, foreground", f.depth, f.K.matrix, f.mask
         yield "sensor-like", sensor_like(seed=1), K, None
+        rng = np.random.default_rng(3)  # dense, with random holes: the bins of the pixel scale's stencils alone
+        holes = np.where(
+            rng.random(f.depth.shape) < 0.2, 0.0, f.depth * (1.0 + 1e-4 * rng.standard_normal(f.depth.shape))
+        )
+        yield "3F2N frame, white noise, random holes", holes.astype(np.float32), f.K.matrix, f.mask
         yield "sparse", sparse, K, None
         yield "flat", np.full((40, 50), 2.0, np.float32), K, None  # one depth: no depth range
         yield "tiny", sensor_like(8, 9, seed=2), K, None  # too few samples: no profile, NaN floor

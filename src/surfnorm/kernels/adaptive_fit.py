@@ -726,6 +726,7 @@ class FitPlan:
         self.f = math.sqrt(cam.fx * cam.fy)
         self.r_max = (max_window - 1) // 2
         self.stride = choose_stride(valid) if stride is None else stride
+        self.sparse = self.stride == 1 if stride is None else None  # (the noise profile's, when it is measured here)
         self.key = (z.shape, self.stride, max_window, window)  # the frame's kind, for the bands' balance
         H, W = z.shape
         if record is None:
@@ -745,7 +746,7 @@ class FitPlan:
     def measure(self, offers) -> NoiseProfile:
         """The frame's noise profile: ``profile`` as given (called, if a function), or :func:`noise_profile`."""
         if self.profile is None:
-            return noise_profile(self.z, self.valid, self.f, offers)
+            return noise_profile(self.z, self.valid, self.f, offers, sparse=self.sparse)
         return self.profile() if callable(self.profile) else self.profile
 
     def tables(self, p: NoiseProfile, fit: bool = True):

@@ -75,6 +75,7 @@ from .._constants import (
     noise_step,
     stride_gain,
 )
+from ._schedule import choose_stride
 from ._spare import Spares
 
 __all__ = [
@@ -557,7 +558,9 @@ class NoiseProfile(NamedTuple):
     """The frame's noise, measured by :func:`noise_profile`.
 
     depths, rho : ndarray
-        rho (units of the point spacing z / f) at the centres of log-spaced depth bins.
+        rho (units of the point spacing z / f) at the centres of log-spaced depth bins. On dense
+        depth, of the same stencils as ``floor`` (so too ``correlation`` and ``floors``); on sparse depth
+        (:func:`noise_profile`), of every stencil.
     floor : float
         The median |second difference of inverse depth| at stride 1 in the same units, over
         0.6745 (white Gaussian noise of rho gives rho). Depth rendered without noise has most
@@ -652,7 +655,9 @@ def terrace_statistics(jumps: np.ndarray, changed: int) -> tuple[float, float]:
     return jumps.size / changed, float(_median_in_place(jumps))
 
 
-def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> NoiseProfile:
+def noise_profile(
+    z: np.ndarray, valid: np.ndarray, f: float, offers=None, *, sparse: bool | None = None
+) -> NoiseProfile:
     """The frame's noise against depth (see :class:`NoiseProfile`).
 
     In each depth bin (log-spaced between the nearest and farthest valid depth),
@@ -666,7 +671,9 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     stride-1 estimate and (16 v_2 - v_4) / 15. Sampled on every step-th row and column
     (:func:`surfnorm._constants.noise_step`). Bins with fewer than ``MIN_SAMPLES`` samples
     take the value of the nearest bins that have enough; with none, rho is 0
-    (3x3 windows).
+    (3x3 windows). On dense depth with holes, of the stencils at the pixel scale alone where there are
+    ``MIN_SAMPLES`` of them, as the floor (``sparse``: whether the depth is sparse, as
+    :func:`surfnorm.kernels._schedule.choose_stride` finds it; found here where not given).
 
     ``offers``: a :class:`surfnorm._bands.Offers` of the bands waiting for this profile, one of which may take
     the floor's median while this thread sums the bins (the same value either way).
@@ -684,6 +691,14 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
     # curvature); the same samples where no stencil had to bridge a gap.
     n_first = int(np.count_nonzero(firsts))
     keep = firsts if MIN_SAMPLES <= n_first < n else _EVERY
+    if sparse is None:
+        sparse = choose_stride(valid) == 1
+    # The bins (rho, the correlation, the bins' floors) from the same samples on dense depth: there the wider stencils
+    # bridge random holes and read fine geometry's curvature as noise (the 12 3F2N frames with white noise of 0.005 %
+    # of depth and a fifth of their pixels dropped: their median rho over that without holes was 0.8-1.2 on 5 frames
+    # from every stencil, on 9 from these; 1.57 and 1.02 in the median). Sparse depth (LiDAR scanlines,
+    # :func:`surfnorm.kernels._schedule.choose_stride`) has stencils at gap 1 along its lines alone.
+    binned = (xs, bins) if keep is _EVERY or sparse else (xs[:, keep], bins[keep])
     median = Part(lambda: (_median_abs(xs[0], keep, work[4][:n]), _median_abs(xs[1], keep, work[6][:n])))
     smooth = Part(lambda: _quiet(xs, keep, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))
     terraces = Part(lambda: terrace_statistics(jumps, changed))
@@ -691,8 +706,8 @@ def noise_profile(z: np.ndarray, valid: np.ndarray, f: float, offers=None) -> No
         for part in (median, smooth, terraces):
             offers.offer(part)
     ms = np.empty((3, N_BINS))
-    grouped = work[3][:, :n]
-    starts = _by_bin(xs, bins, N_BINS, grouped)
+    grouped = work[3][:, : binned[1].shape[0]]
+    starts = _by_bin(*binned, N_BINS, grouped)
     _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
     centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
     terraced, step = terraces.result()

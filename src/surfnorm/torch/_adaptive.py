@@ -376,8 +376,10 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
 
     fourth = torch.abs(xs[2] - 4.0 * xs[1]) / _FOURTH_RMS
     smooth = torch.where(enough, _sqrt(quiet(xs[1].abs()) * quiet(fourth)) / _SMOOTH_GAUSS, torch.zeros_like(lo))
-    # the clipped mean squares per depth bin and stride
-    member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & taken.unsqueeze(1)
+    # the clipped mean squares per depth bin and stride: of the same samples as the floor on dense depth, of every
+    # sample on sparse depth (sensor_noise.noise_profile)
+    binned = torch.where(((choose_stride(valid) == 2) & (first.sum(dim=1) >= MIN_SAMPLES)).view(-1, 1), first, taken)
+    member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & binned.unsqueeze(1)
     # each bin's floor (NoiseProfile.floors): median |x_1| / 0.6745, NaN with fewer than MIN_SAMPLES samples
     floors = torch.stack(
         [

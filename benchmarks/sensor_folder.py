@@ -3,6 +3,9 @@
     # a depth file as a camera wrote it (any file surfnorm.io.read_depth reads), with its intrinsics
     PYTHONPATH=src python benchmarks/sensor_folder.py depth OUT/tum_fr2 1_depth.png --depth-scale 5000 \\
         --fx 520.9 --fy 521.0 --cx 325.1 --cy 249.7 --source "TUM RGB-D fr2 desk, CC BY 4.0"
+    # NYU Depth v2's raw Kinect disparity (a little-endian 16-bit PGM, as libfreenect writes it)
+    PYTHONPATH=src python benchmarks/sensor_folder.py depth OUT/nyu_raw d-1.pgm --kinect-disparity --byte-order little \\
+        --fx 582.62 --fy 582.69 --cx 313.04 --cy 238.44 --source "NYU Depth v2 raw, research use"
     # OpenCV's SGBM on a rectified pair with ground-truth disparity (reference planes from the ground truth)
     PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2003_teddy im2.png im6.png disp2.png \\
         --gt-scale 4 --fx 450 --baseline 0.16 --source "Middlebury 2003 Teddy (quarter size)"
@@ -148,6 +151,9 @@ def main(argv=None) -> int:
     d.add_argument("depth", type=Path)
     d.add_argument("--depth-scale", type=float, default=None, help="stored units per metre (1000 mm, 5000 TUM)")
     d.add_argument("--kinect-disparity", action="store_true", help="NYU raw PGM: Kinect disparity")
+    d.add_argument(
+        "--byte-order", choices=("big", "little"), default=None, help="16-bit PGM samples' order (NYU raw: little)"
+    )
     s = sub.add_parser("stereo", help="a rectified pair and its ground-truth disparity")
     s.add_argument("out", type=Path)
     s.add_argument("left", type=Path)
@@ -176,7 +182,9 @@ def main(argv=None) -> int:
     if args.kind == "depth":
         from surfnorm.io.depth import read_depth
 
-        depth = read_depth(args.depth, depth_scale=args.depth_scale, kinect_disparity=args.kinect_disparity)
+        depth = read_depth(
+            args.depth, depth_scale=args.depth_scale, kinect_disparity=args.kinect_disparity, byte_order=args.byte_order
+        )
         K = intrinsics(*depth.shape)
         raw = {"raw" + args.depth.suffix: args.depth}
         write(args.out, depth, K, depth, raw, {"source": args.source, "depth": "as read by surfnorm.io.read_depth"})

@@ -305,7 +305,7 @@ def test_bands_waiting_for_the_noise_never_wait_for_ever_when_measuring_it_fails
 
     from surfnorm.kernels import adaptive_fit as af
 
-    def broken(z, valid, f, offers=None):
+    def broken(z, valid, f, offers=None, *, sparse=None):
         raise RuntimeError("noise measurement failed")
 
     monkeypatch.setattr(af, "noise_profile", broken)

@@ -360,16 +360,20 @@ def _clipped_rms(xs, starts, rounds, sigmas, rms):
 
 @ahead_of_time
 @njit
-def _by_bin(xs, bins, nbins, grouped):
-    """The columns of ``xs`` grouped by bin, in their order within each bin, into ``grouped`` (the shape of ``xs``);
-    returns each bin's start (nbins + 1)."""
+def _by_bin(xs, bins, nbins, grouped, keep):
+    """The columns of ``xs`` where ``keep`` (all where it is empty) grouped by bin, in their order within each bin,
+    into ``grouped`` (the shape of ``xs``); returns each bin's start (nbins + 1)."""
+    every = keep.shape[0] == 0
     starts = np.zeros(nbins + 1, np.int64)
-    for b in bins:
-        starts[b + 1] += 1
+    for j in range(bins.shape[0]):
+        if every or keep[j]:
+            starts[bins[j] + 1] += 1
     for b in range(nbins):
         starts[b + 1] += starts[b]
     at = starts[:-1].copy()
     for j in range(bins.shape[0]):
+        if not (every or keep[j]):
+            continue
         k = at[bins[j]]
         at[bins[j]] = k + 1
         for i in range(xs.shape[0]):
@@ -698,7 +702,7 @@ def noise_profile(
     # of depth and a fifth of their pixels dropped: their median rho over that without holes was 0.8-1.2 on 5 frames
     # from every stencil, on 9 from these; 1.57 and 1.02 in the median). Sparse depth (LiDAR scanlines,
     # :func:`surfnorm.kernels._schedule.choose_stride`) has stencils at gap 1 along its lines alone.
-    binned = (xs, bins) if keep is _EVERY or sparse else (xs[:, keep], bins[keep])
+    binned = _EVERY if sparse else keep
     median = Part(lambda: (_median_abs(xs[0], keep, work[4][:n]), _median_abs(xs[1], keep, work[6][:n])))
     smooth = Part(lambda: _quiet(xs, keep, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))
     terraces = Part(lambda: terrace_statistics(jumps, changed))
@@ -706,8 +710,9 @@ def noise_profile(
         for part in (median, smooth, terraces):
             offers.offer(part)
     ms = np.empty((3, N_BINS))
-    grouped = work[3][:, : binned[1].shape[0]]
-    starts = _by_bin(*binned, N_BINS, grouped)
+    grouped = work[3][:, :n]
+    starts = _by_bin(xs, bins, N_BINS, grouped, binned)
+    grouped = grouped[:, : starts[-1]]
     _clipped_rms(grouped, starts, _CLIP_ROUNDS, _CLIP_SIGMAS, ms)
     centres, rho = _by_depth(ms, starts, zmin, zmax, MIN_SAMPLES)
     terraced, step = terraces.result()

@@ -154,6 +154,7 @@ def main(argv=None) -> int:
     d.add_argument(
         "--byte-order", choices=("big", "little"), default=None, help="16-bit PGM samples' order (NYU raw: little)"
     )
+    d.add_argument("--sun-rgbd", action="store_true", help="SUN RGB-D's PNG: millimetres with rotated bits")
     s = sub.add_parser("stereo", help="a rectified pair and its ground-truth disparity")
     s.add_argument("out", type=Path)
     s.add_argument("left", type=Path)
@@ -183,7 +184,11 @@ def main(argv=None) -> int:
         from surfnorm.io.depth import read_depth
 
         depth = read_depth(
-            args.depth, depth_scale=args.depth_scale, kinect_disparity=args.kinect_disparity, byte_order=args.byte_order
+            args.depth,
+            depth_scale=args.depth_scale,
+            kinect_disparity=args.kinect_disparity,
+            byte_order=args.byte_order,
+            sun_rgbd=args.sun_rgbd,
         )
         K = intrinsics(*depth.shape)
         raw = {"raw" + args.depth.suffix: args.depth}

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from surfnorm.errors import DataFileError, InputError, MissingDependencyError
-from surfnorm.io.depth import KINECT_V1_NYU, kinect_disparity_to_depth, read_depth
+from surfnorm.io.depth import KINECT_V1_NYU, kinect_disparity_to_depth, read_depth, sun_rgbd_to_depth
 
 SENSOR_SAMPLE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "sensor-sample"
 
@@ -320,6 +320,86 @@ class TestKinectDisparity:
         z = read_depth(tmp_path / "plane.pgm", kinect_disparity=True, byte_order="little").astype(np.float64)
         step = 351.3 / (1092.5 - d - 1) - 351.3 / (1092.5 - d)  # one disparity step in metres
         assert np.all(np.abs(z - z_true) <= step / 2 + 1e-6)
+
+
+# ---------------------------------------------------------------------------- SUN RGB-D
+
+
+def sun_rgbd_stored(mm: np.ndarray) -> np.ndarray:
+    """Millimetres as SUN RGB-D stores them: 16 bits rotated left by 3 (written here from its description)."""
+    mm = mm.astype(np.uint32)
+    return (((mm << 3) & 0xFFFF) | (mm >> 13)).astype(np.uint16)
+
+
+class TestSunRgbd:
+    def test_rotated_millimetres_come_back_as_metres(self, tmp_path):
+        import cv2
+
+        mm = np.array([[0, 1, 1500, 8191], [8192, 9870, 12000, 65535]], dtype=np.uint16)  # 8.192 m and more wrap
+        cv2.imwrite(str(tmp_path / "0001.png"), sun_rgbd_stored(mm))
+        z = read_depth(tmp_path / "0001.png", sun_rgbd=True)
+        np.testing.assert_array_equal(z, (mm / 1000.0).astype(np.float32))
+        assert z.dtype == np.float32 and z[0, 0] == 0  # no depth stays no depth
+        # read as plain millimetres, the near depth is 8 times too large and the far depth wraps
+        plain = read_depth(tmp_path / "0001.png", depth_scale=1000)
+        assert plain[0, 2] == pytest.approx(12.0) and plain[1, 1] == pytest.approx(13.425)
+        np.testing.assert_array_equal(sun_rgbd_to_depth(sun_rgbd_stored(mm)), z)
+
+    def test_from_other_containers(self, tmp_path):
+        mm = np.array([[700, 2500]], dtype=np.uint16)
+        np.save(tmp_path / "d.npy", sun_rgbd_stored(mm))
+        np.testing.assert_allclose(read_depth(tmp_path / "d.npy", sun_rgbd=True), [[0.7, 2.5]], rtol=1e-6)
+
+    def test_refusals(self, tmp_path):
+        import cv2
+
+        cv2.imwrite(str(tmp_path / "d.png"), np.ones((2, 2), np.uint16))
+        with pytest.raises(InputError, match=r"^depth_scale: expected None with sun_rgbd=True"):
+            read_depth(tmp_path / "d.png", sun_rgbd=True, depth_scale=1000)
+        with pytest.raises(InputError, match=r"^sun_rgbd: expected False with kinect_disparity=True"):
+            read_depth(tmp_path / "d.png", sun_rgbd=True, kinect_disparity=True)
+        with pytest.raises(InputError, match=r"^sun_rgbd: expected True or False, got 'yes'"):
+            read_depth(tmp_path / "d.png", sun_rgbd="yes")
+        np.save(tmp_path / "f.npy", np.ones((2, 2), np.float32))
+        with pytest.raises(
+            DataFileError, match=r"f\.npy: expected SUN RGB-D's 16-bit integer depth, got dtype float32"
+        ):
+            read_depth(tmp_path / "f.npy", sun_rgbd=True)
+        np.save(tmp_path / "w.npy", np.full((2, 2), 70000, np.int32))
+        with pytest.raises(
+            DataFileError, match=r"w\.npy: expected SUN RGB-D's 16-bit depth \(0 to 65535\), got values"
+        ):
+            read_depth(tmp_path / "w.npy", sun_rgbd=True)
+        with pytest.raises(InputError, match=r"^raw: expected 16-bit integers"):
+            sun_rgbd_to_depth(np.ones((2, 2)))
+
+
+def test_cli_and_convert_read_sun_rgbd(tmp_path):
+    import cv2
+    from typer.testing import CliRunner
+
+    from surfnorm.batch import convert
+    from surfnorm.cli import app
+
+    v, u = np.mgrid[0:48, 0:64]
+    mm = np.rint(1000 * (2.0 + 0.01 * u + 0.005 * v)).astype(np.uint16)  # a tilted plane, 2-2.9 m
+    src = tmp_path / "sun"
+    src.mkdir()
+    cv2.imwrite(str(src / "0001.png"), sun_rgbd_stored(mm))
+    result = CliRunner().invoke(app, ["estimate", str(src / "0001.png"), str(tmp_path / "n"), "--sun-rgbd", *CAMERA])
+    assert result.exit_code == 0, result.output
+    import surfnorm
+
+    K = np.array([[580.0, 0, 31.5], [0, 580.0, 23.5], [0, 0, 1]])
+    want = surfnorm.estimate((mm / 1000.0).astype(np.float32), K)
+    np.testing.assert_array_equal(np.load(tmp_path / "n.npy"), want)
+    summary = convert(src, tmp_path / "out", intrinsics=K, sun_rgbd=True)
+    assert summary.ok and summary.written == 1, summary.errors
+    np.testing.assert_array_equal(np.load(tmp_path / "out" / "0001.npy"), want)
+    result = CliRunner().invoke(
+        app, ["convert", str(src), str(tmp_path / "o2"), "--sun-rgbd", "--depth-scale", "1000", *CAMERA]
+    )
+    assert result.exit_code == 2 and "depth_scale: expected None with sun_rgbd=True" in result.output, result.output
 
 
 # ---------------------------------------------------------------------------- the sample's PNG frames

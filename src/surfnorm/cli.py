@@ -136,6 +136,9 @@ FORMAT_HELP = (
     "pixels with a normal: points, normals)."
 )
 KINECT_HELP = "The file holds Kinect v1 raw 11-bit disparity (NYU Depth v2 raw frames): convert to metres, a / (b - d), NYU toolbox constants."
+SUN_RGBD_HELP = (
+    "The file is a SUN RGB-D depth PNG (millimetres, bits rotated left by 3): rotate back, convert to metres."
+)
 BYTE_ORDER_HELP = (
     "Byte order of 16-bit .pgm samples: big (netpbm, default) or little (libfreenect dumps, NYU Depth v2 raw d-*.pgm)."
 )
@@ -202,6 +205,7 @@ def estimate(
     ),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
+    sun_rgbd: bool = typer.Option(False, "--sun-rgbd", help=SUN_RGBD_HELP),
     overwrite: bool = typer.Option(
         False,
         "--overwrite",
@@ -253,7 +257,9 @@ def estimate(
         reads = [depth, mask, intrinsics, color, params_for(depth) if intrinsics is None else None]
         check_outputs(paths + ([sigma_path] if sigma_path is not None else []), reads, overwrite=overwrite)
         cam = _intrinsics(intrinsics, fx, fy, cx, cy, depth)
-        z = read_depth(depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order)
+        z = read_depth(
+            depth, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order, sun_rgbd=sun_rgbd
+        )
         user_mask = read_mask(mask) if mask is not None else None
         rgb = read_colors(color) if color is not None else None
         if rgb is not None and rgb.shape[:2] != z.shape:
@@ -475,6 +481,7 @@ def convert(
     ),
     kinect_disparity: bool = typer.Option(False, "--kinect-disparity", help=KINECT_HELP),
     byte_order: Optional[str] = typer.Option(None, "--byte-order", help=BYTE_ORDER_HELP),
+    sun_rgbd: bool = typer.Option(False, "--sun-rgbd", help=SUN_RGBD_HELP),
 ):
     """Convert many depth files to normal files, in parallel; a re-run skips finished outputs.
 
@@ -508,7 +515,11 @@ def convert(
         method_name, method_options = parse_method(method)
         # the options that go to convert_ as given: how each file is read and written, and how the run goes
         reading: dict[str, Any] = dict(
-            fmt=fmt, depth_scale=depth_scale, kinect_disparity=kinect_disparity, byte_order=byte_order
+            fmt=fmt,
+            depth_scale=depth_scale,
+            kinect_disparity=kinect_disparity,
+            byte_order=byte_order,
+            sun_rgbd=sun_rgbd,
         )
         running: dict[str, Any] = dict(jobs=jobs, shard_size=shard_size, overwrite=overwrite)
         columns = (TextColumn("converting"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())

@@ -39,10 +39,19 @@ def _check_output_dir(output_dir: Path):
 
 
 def _settings(
-    method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity=False, byte_order=None
+    method,
+    fmt,
+    depth_scale,
+    intrinsics,
+    scale_invariant,
+    overwrite,
+    options,
+    kinect_disparity=False,
+    byte_order=None,
+    sun_rgbd=False,
 ) -> ConvertSettings:
     from .._validate import check_bool, check_choice, check_positive
-    from ..io.depth import PGM_BYTE_ORDERS
+    from ..io.depth import PGM_BYTE_ORDERS, _check_raw_options
     from ..io.intrinsics import resolve_intrinsics
     from ..io.normals import OUTPUT_FORMATS
     from ..methods import resolve
@@ -51,13 +60,10 @@ def _settings(
     check_choice("fmt", fmt, OUTPUT_FORMATS)
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
-    kinect_disparity = check_bool("kinect_disparity", kinect_disparity)
     if byte_order is not None:
         check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
-    if kinect_disparity and depth_scale is not None:
-        raise InputError(
-            f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}"
-        )
+    # (byte_order applies to the .pgm files among the inputs: checked against each file's type as it is read)
+    kinect_disparity, sun_rgbd = _check_raw_options(".pgm", depth_scale, kinect_disparity, byte_order, sun_rgbd)
     return ConvertSettings(
         method,
         dict(options),
@@ -68,6 +74,7 @@ def _settings(
         check_bool("overwrite", overwrite),
         kinect_disparity,
         byte_order,
+        sun_rgbd,
     )
 
 
@@ -196,6 +203,7 @@ def convert(
     scale_invariant: bool = False,
     kinect_disparity: bool = False,
     byte_order: str | None = None,
+    sun_rgbd: bool = False,
     **options,
 ) -> ConvertSummary:
     """Convert depth files to normal files; see :func:`plan_tasks` for ``inputs`` and the output names.
@@ -225,10 +233,11 @@ def convert(
         Replace outputs that exist instead of skipping them.
     progress : callable, optional
         Called with each :class:`FileResult` as its file finishes (in this process).
-    kinect_disparity, byte_order
+    kinect_disparity, byte_order, sun_rgbd
         How raw sensor files are stored, as in :func:`surfnorm.io.read_depth`
         (Kinect v1 disparity; little-endian 16-bit PGM such as NYU Depth v2's raw
-        frames; ``byte_order`` applies to the ``.pgm`` files among the inputs).
+        frames; SUN RGB-D's rotated millimetres; ``byte_order`` applies to the
+        ``.pgm`` files among the inputs).
 
     Returns
     -------
@@ -253,7 +262,16 @@ def convert(
     >>> out.cleanup()
     """
     settings = _settings(
-        method, fmt, depth_scale, intrinsics, scale_invariant, overwrite, options, kinect_disparity, byte_order
+        method,
+        fmt,
+        depth_scale,
+        intrinsics,
+        scale_invariant,
+        overwrite,
+        options,
+        kinect_disparity,
+        byte_order,
+        sun_rgbd,
     )
     if client is not None and not (
         callable(getattr(client, "submit", None)) and callable(getattr(client, "nthreads", None))

@@ -67,6 +67,7 @@ class ConvertSettings:
     overwrite: bool = False
     kinect_disparity: bool = False
     byte_order: str | None = None
+    sun_rgbd: bool = False
 
 
 @dataclass(frozen=True)
@@ -294,7 +295,11 @@ def _convert(task: ConvertTask, settings: ConvertSettings) -> str:
         cam = read_params(params)
     byte_order = settings.byte_order if depth_suffix(task.input) == ".pgm" else None  # other files in the folder
     depth = read_depth(
-        task.input, depth_scale=settings.depth_scale, kinect_disparity=settings.kinect_disparity, byte_order=byte_order
+        task.input,
+        depth_scale=settings.depth_scale,
+        kinect_disparity=settings.kinect_disparity,
+        byte_order=byte_order,
+        sun_rgbd=settings.sun_rgbd,
     )
     normals = estimate(
         depth,

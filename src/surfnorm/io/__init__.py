@@ -1,6 +1,6 @@
 """Files: depth and normal images, intrinsics, pictures of normals, point clouds, samples, the 3F2N layout."""
 
-from .depth import disparity_to_depth, kinect_disparity_to_depth, read_depth, read_mask
+from .depth import disparity_to_depth, kinect_disparity_to_depth, read_depth, read_mask, sun_rgbd_to_depth
 from .intrinsics import read_intrinsics, resolve_intrinsics
 from .normals import read_normals, write_normals
 from .pictures import normals_to_rgb
@@ -13,6 +13,7 @@ __all__ = [
     "read_mask",
     "disparity_to_depth",
     "kinect_disparity_to_depth",
+    "sun_rgbd_to_depth",
     "read_intrinsics",
     "resolve_intrinsics",
     "read_normals",

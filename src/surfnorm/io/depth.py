@@ -35,6 +35,14 @@ are little-endian despite the P5 header: the NYU toolbox, Open3D's
 read. Pass ``byte_order="little"`` for them. Their values are not depth but
 the Kinect v1's raw 11-bit disparity ``d``; ``kinect_disparity=True`` turns it
 into metres with :func:`kinect_disparity_to_depth`.
+
+SUN RGB-D
+---------
+SUN RGB-D's depth PNGs hold millimetres with their 16 bits rotated left by 3
+(its toolbox's ``read3dPoints.m`` and Open3D's ``CreateFromSUNFormat`` rotate
+them back): read as millimetres, depth under 8.192 m comes out 8 times too
+large and farther depth wraps to a few metres. ``sun_rgbd=True`` rotates the
+bits back and gives metres (:func:`sun_rgbd_to_depth`).
 """
 
 from __future__ import annotations
@@ -61,6 +69,7 @@ __all__ = [
     "read_mask",
     "disparity_to_depth",
     "kinect_disparity_to_depth",
+    "sun_rgbd_to_depth",
     "depth_suffix",
     "DEPTH_SUFFIXES",
     "KINECT_V1_NYU",
@@ -146,6 +155,7 @@ def read_depth(
     shape=(HEIGHT, WIDTH),
     kinect_disparity: bool = False,
     byte_order: str | None = None,
+    sun_rgbd: bool = False,
 ) -> np.ndarray:
     """Read a depth image as float32 (H, W).
 
@@ -171,16 +181,23 @@ def read_depth(
         Byte order of a 16-bit ``.pgm`` file's samples: None or "big" as the
         netpbm specification says, "little" for libfreenect's dumps such as
         NYU Depth v2's raw ``d-*.pgm`` frames.
+    sun_rgbd : bool
+        The file is a SUN RGB-D depth image: 16-bit millimetres with their bits
+        rotated left by 3; rotate them back and convert to metres with
+        :func:`sun_rgbd_to_depth`. Not with ``depth_scale`` or
+        ``kinect_disparity``.
 
     Raises
     ------
     DataFileError (a ValueError)
         Missing, unreadable, truncated or corrupt file, or not one depth channel;
-        with ``kinect_disparity``, values outside 0 to 2047.
+        with ``kinect_disparity``, values outside 0 to 2047; with ``sun_rgbd``,
+        values that are not 16-bit integers.
     InputError (a ValueError)
         ``path`` not a path, ``shape`` not two positive integers, ``depth_scale``
         not a positive finite number; ``byte_order`` for a file that is not
-        ``.pgm``; ``depth_scale`` with ``kinect_disparity``.
+        ``.pgm``; ``depth_scale`` with ``kinect_disparity`` or ``sun_rgbd``;
+        both of those.
     MissingDependencyError (an ImportError)
         An ``.exr`` file without the OpenEXR package.
 
@@ -198,7 +215,7 @@ def read_depth(
     if path.is_dir():
         raise DataFileError(f"{path}: expected a depth file, got a directory")
     suffix = depth_suffix(path)
-    kinect_disparity = _check_raw_options(suffix, depth_scale, kinect_disparity, byte_order)
+    kinect_disparity, sun_rgbd = _check_raw_options(suffix, depth_scale, kinect_disparity, byte_order, sun_rgbd)
     if suffix in (".bin", ".bin.gz"):
         depth = read_depth_bin(path, shape)
     elif suffix in (".npy", ".npz"):
@@ -215,6 +232,8 @@ def read_depth(
         raise DataFileError(f"{path}: expected real-valued depth (float or integer), got dtype {depth.dtype}")
     if kinect_disparity or byte_order is not None:
         depth = _raw_sensor_values(path, depth, suffix, kinect_disparity=kinect_disparity, byte_order=byte_order)
+    if sun_rgbd:
+        depth = _sun_rgbd_values(path, depth)
     if depth_scale is not None and depth_scale != 1:
         return _scaled(depth, depth_scale)
     return np.ascontiguousarray(depth, dtype=np.float32)
@@ -414,9 +433,19 @@ def _read_exr(path: Path) -> np.ndarray:
 # ---------------------------------------------------------------------------- PGM byte order, Kinect v1 disparity
 
 
-def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order):
-    """The options of :func:`read_depth` that say how raw sensor values are stored; InputError when they do not fit."""
+def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order, sun_rgbd=False):
+    """(kinect_disparity, sun_rgbd): the options of :func:`read_depth` that say how raw sensor values are stored.
+
+    An InputError where they do not fit the file or each other.
+    """
     kinect_disparity = check_bool("kinect_disparity", kinect_disparity)
+    sun_rgbd = check_bool("sun_rgbd", sun_rgbd)
+    if sun_rgbd and kinect_disparity:
+        raise InputError("sun_rgbd: expected False with kinect_disparity=True (one way of storing depth), got True")
+    if sun_rgbd and depth_scale is not None:
+        raise InputError(
+            f"depth_scale: expected None with sun_rgbd=True (the conversion gives metres), got {depth_scale!r}"
+        )
     if byte_order is not None:
         check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
         if suffix != ".pgm":
@@ -427,7 +456,33 @@ def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order):
         raise InputError(
             f"depth_scale: expected None with kinect_disparity=True (the conversion gives metres), got {depth_scale!r}"
         )
-    return kinect_disparity
+    return kinect_disparity, sun_rgbd
+
+
+def _sun_rgbd_values(path: Path, raw: np.ndarray) -> np.ndarray:
+    """SUN RGB-D's rotated millimetres as metres; a DataFileError where the values are not 16-bit integers."""
+    if raw.dtype.kind not in "iu":
+        raise DataFileError(f"{path}: expected SUN RGB-D's 16-bit integer depth, got dtype {raw.dtype}")
+    top = int(raw.max()) if raw.size else 0
+    low = int(raw.min()) if raw.size else 0
+    if low < 0 or top > 65535:
+        raise DataFileError(f"{path}: expected SUN RGB-D's 16-bit depth (0 to 65535), got values from {low} to {top}")
+    return sun_rgbd_to_depth(raw)
+
+
+def sun_rgbd_to_depth(raw) -> np.ndarray:
+    """Depth in metres from SUN RGB-D's stored depth, float32 (H, W).
+
+    SUN RGB-D stores millimetres with their 16 bits rotated left by 3, so millimetres = (raw >> 3) | (raw << 13) in
+    16 bits (its toolbox's ``read3dPoints.m``). 0 stays 0 (no depth). The toolbox also clamps depth beyond 8 m to
+    8 m; here it is kept as measured.
+    """
+    r = np.asarray(raw)
+    if r.dtype.kind not in "iu" or (r.size and (int(r.min()) < 0 or int(r.max()) > 65535)):
+        raise InputError(f"raw: expected 16-bit integers (SUN RGB-D's stored depth), got dtype {r.dtype}")
+    r = r.astype(np.uint16)
+    mm = (r >> np.uint16(3)) | (r << np.uint16(13))
+    return (mm.astype(np.float64) / 1000.0).astype(np.float32)
 
 
 def _raw_sensor_values(path: Path, raw: np.ndarray, suffix: str, *, kinect_disparity: bool, byte_order) -> np.ndarray:

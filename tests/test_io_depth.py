@@ -370,8 +370,10 @@ class TestSunRgbd:
             DataFileError, match=r"w\.npy: expected SUN RGB-D's 16-bit depth \(0 to 65535\), got values"
         ):
             read_depth(tmp_path / "w.npy", sun_rgbd=True)
-        with pytest.raises(InputError, match=r"^raw: expected 16-bit integers"):
+        with pytest.raises(InputError, match=r"^raw: expected 16-bit integers .*, got dtype float64"):
             sun_rgbd_to_depth(np.ones((2, 2)))
+        with pytest.raises(InputError, match=r"^raw: expected 16-bit integers .*, got values from -1 to 70000"):
+            sun_rgbd_to_depth(np.array([[-1, 70000]]))
 
 
 def test_cli_and_convert_read_sun_rgbd(tmp_path):

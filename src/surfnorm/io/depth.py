@@ -478,8 +478,13 @@ def sun_rgbd_to_depth(raw) -> np.ndarray:
     8 m; here it is kept as measured.
     """
     r = np.asarray(raw)
-    if r.dtype.kind not in "iu" or (r.size and (int(r.min()) < 0 or int(r.max()) > 65535)):
+    if r.dtype.kind not in "iu":
         raise InputError(f"raw: expected 16-bit integers (SUN RGB-D's stored depth), got dtype {r.dtype}")
+    if r.size and (int(r.min()) < 0 or int(r.max()) > 65535):
+        raise InputError(
+            f"raw: expected 16-bit integers (SUN RGB-D's stored depth, 0 to 65535), got values from {int(r.min())} "
+            f"to {int(r.max())}"
+        )
     r = r.astype(np.uint16)
     mm = (r >> np.uint16(3)) | (r << np.uint16(13))
     return (mm.astype(np.float64) / 1000.0).astype(np.float32)

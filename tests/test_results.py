@@ -26,6 +26,9 @@ def frame(seed=0, H=480, W=640):
 
 @pytest.fixture(autouse=True)
 def empty_pool():
+    # results that earlier tests left in reference cycles go back to the pool when collected: collect them first, so
+    # that a collection inside a test cannot put a block into the pool that the test did not free
+    gc.collect()
     _results.release()
     yield
     _results.release()

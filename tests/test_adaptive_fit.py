@@ -57,6 +57,25 @@ def test_noise_profile_matches_naive(seed, size):
     assert got.correlation == pytest.approx(correlation, rel=1e-9)
 
 
+@pytest.mark.parametrize("period", [3, 5])
+def test_noise_profile_matches_naive_on_sparse_lines(period):
+    """Depth on every 3rd or 5th row alone (LiDAR-like lines: sparse, fitted at every pixel), where the depth bins take
+    every stencil, not the pixel scale's alone (found along the lines only)."""
+    z, K = scene(period, 120, 160, holes=0.0)
+    lines = np.zeros_like(z)
+    lines[1::period] = z[1::period]
+    valid = lines > 0
+    f = math.sqrt(K[0, 0] * K[1, 1])
+    assert naive.stride_for(valid) == 1
+    got = noise_profile(lines, valid, f)
+    centres, rho, floor, correlation, floor2 = naive.noise_profile(lines.astype(np.float64), valid, f)
+    np.testing.assert_allclose(got.rho, rho, rtol=1e-9, atol=1e-12)
+    assert got.floor == pytest.approx(floor, rel=1e-12)
+    assert got.correlation == pytest.approx(correlation, rel=1e-9)
+    if period == 3:  # stencils across three rows too (gap 3): here the rule shows
+        assert not np.array_equal(got.rho, noise_profile(lines, valid, f, sparse=False).rho)
+
+
 def test_noise_sampling_step_is_a_640x480_frames_on_smaller_frames():
     """Every 5th row and column at 640x480 and below (not denser on smaller frames, so that the measurement's share
     of the call does not grow), at least 3,000 pixels per step squared, about 12,000 samples on larger frames."""

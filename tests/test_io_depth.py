@@ -365,6 +365,9 @@ class TestSunRgbd:
             DataFileError, match=r"f\.npy: expected SUN RGB-D's 16-bit integer depth, got dtype float32"
         ):
             read_depth(tmp_path / "f.npy", sun_rgbd=True)
+        np.save(tmp_path / "b.npy", np.full((2, 2), 80, np.uint8))
+        with pytest.raises(DataFileError, match=r"b\.npy: expected SUN RGB-D's 16-bit integer depth, got dtype uint8"):
+            read_depth(tmp_path / "b.npy", sun_rgbd=True)
         np.save(tmp_path / "w.npy", np.full((2, 2), 70000, np.int32))
         with pytest.raises(
             DataFileError, match=r"w\.npy: expected SUN RGB-D's 16-bit depth \(0 to 65535\), got values"

@@ -282,6 +282,9 @@ class TestAdaptive:
             rng.random(f.depth.shape) < 0.2, 0.0, f.depth * (1.0 + 1e-4 * rng.standard_normal(f.depth.shape))
         )
         yield "3F2N frame, white noise, random holes", holes.astype(np.float32), f.K.matrix, f.mask
+        lines = np.zeros_like(holes)
+        lines[1::3] = holes[1::3]  # LiDAR-like lines: sparse, every stencil in the bins
+        yield "3F2N frame on every third row", lines.astype(np.float32), f.K.matrix, f.mask
         yield "sparse", sparse, K, None
         yield "flat", np.full((40, 50), 2.0, np.float32), K, None  # one depth: no depth range
         yield "tiny", sensor_like(8, 9, seed=2), K, None  # too few samples: no profile, NaN floor

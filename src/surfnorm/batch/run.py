@@ -51,7 +51,7 @@ def _settings(
     sun_rgbd=False,
 ) -> ConvertSettings:
     from .._validate import check_bool, check_choice, check_positive
-    from ..io.depth import PGM_BYTE_ORDERS, _check_raw_options
+    from ..io.depth import _check_raw_options
     from ..io.intrinsics import resolve_intrinsics
     from ..io.normals import OUTPUT_FORMATS
     from ..methods import resolve
@@ -60,9 +60,7 @@ def _settings(
     check_choice("fmt", fmt, OUTPUT_FORMATS)
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
-    if byte_order is not None:
-        check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
-    # (byte_order applies to the .pgm files among the inputs: checked against each file's type as it is read)
+    # (byte_order applies to the .pgm files among the inputs; the others are read without it: checked as for one)
     kinect_disparity, sun_rgbd = _check_raw_options(".pgm", depth_scale, kinect_disparity, byte_order, sun_rgbd)
     return ConvertSettings(
         method,

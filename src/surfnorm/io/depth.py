@@ -41,7 +41,7 @@ SUN RGB-D
 SUN RGB-D's depth PNGs hold millimetres with their 16 bits rotated left by 3
 (its toolbox's ``read3dPoints.m`` and Open3D's ``CreateFromSUNFormat`` rotate
 them back): read as millimetres, depth under 8.192 m comes out 8 times too
-large and farther depth wraps to a few metres. ``sun_rgbd=True`` rotates the
+large and farther depth wraps (8 times the millimetres modulo 65.536 m). ``sun_rgbd=True`` rotates the
 bits back and gives metres (:func:`sun_rgbd_to_depth`).
 """
 
@@ -461,7 +461,7 @@ def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order, s
 
 def _sun_rgbd_values(path: Path, raw: np.ndarray) -> np.ndarray:
     """SUN RGB-D's rotated millimetres as metres; a DataFileError where the values are not 16-bit integers."""
-    if raw.dtype.kind not in "iu":
+    if raw.dtype.kind not in "iu" or raw.dtype.itemsize < 2:
         raise DataFileError(f"{path}: expected SUN RGB-D's 16-bit integer depth, got dtype {raw.dtype}")
     top = int(raw.max()) if raw.size else 0
     low = int(raw.min()) if raw.size else 0
@@ -471,7 +471,7 @@ def _sun_rgbd_values(path: Path, raw: np.ndarray) -> np.ndarray:
 
 
 def sun_rgbd_to_depth(raw) -> np.ndarray:
-    """Depth in metres from SUN RGB-D's stored depth, float32 (H, W).
+    """Depth in metres from SUN RGB-D's stored depth, float32 of ``raw``'s shape.
 
     SUN RGB-D stores millimetres with their 16 bits rotated left by 3, so millimetres = (raw >> 3) | (raw << 13) in
     16 bits (its toolbox's ``read3dPoints.m``). 0 stays 0 (no depth). The toolbox also clamps depth beyond 8 m to

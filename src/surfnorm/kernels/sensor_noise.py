@@ -701,7 +701,9 @@ def noise_profile(
     # bridge random holes and read fine geometry's curvature as noise (the 12 3F2N frames with white noise of 0.005 %
     # of depth and a fifth of their pixels dropped: their median rho over that without holes was 0.8-1.2 on 5 frames
     # from every stencil, on 9 from these; 1.57 and 1.02 in the median). Sparse depth (LiDAR scanlines,
-    # :func:`surfnorm.kernels._schedule.choose_stride`) has stencils at gap 1 along its lines alone.
+    # :func:`surfnorm.kernels._schedule.choose_stride`) has stencils at gap 1 along its lines alone. The choice is the
+    # frame's, not each bin's: where a dense frame's stencils at gap 1 lie in part of its depth range only, the other
+    # bins take the nearest measured bins' rho, as bins with too few samples do.
     binned = _EVERY if sparse else keep
     median = Part(lambda: (_median_abs(xs[0], keep, work[4][:n]), _median_abs(xs[1], keep, work[6][:n])))
     smooth = Part(lambda: _quiet(xs, keep, SMOOTH_SHARE, _SMOOTH_GAUSS, _FOURTH_RMS, _SMOOTH_SAMPLES))

@@ -144,6 +144,8 @@ def write(out: Path, depth, K: dict, planes_from, raw: dict, meta: dict) -> None
 
 
 def main(argv=None) -> int:
+    from surfnorm.io.depth import PGM_BYTE_ORDERS
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="kind", required=True)
     d = sub.add_parser("depth", help="a depth file and its intrinsics")
@@ -152,7 +154,7 @@ def main(argv=None) -> int:
     d.add_argument("--depth-scale", type=float, default=None, help="stored units per metre (1000 mm, 5000 TUM)")
     d.add_argument("--kinect-disparity", action="store_true", help="NYU raw PGM: Kinect disparity")
     d.add_argument(
-        "--byte-order", choices=("big", "little"), default=None, help="16-bit PGM samples' order (NYU raw: little)"
+        "--byte-order", choices=PGM_BYTE_ORDERS, default=None, help="16-bit PGM samples' order (NYU raw: little)"
     )
     d.add_argument("--sun-rgbd", action="store_true", help="SUN RGB-D's PNG: millimetres with rotated bits")
     s = sub.add_parser("stereo", help="a rectified pair and its ground-truth disparity")

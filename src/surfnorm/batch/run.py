@@ -38,41 +38,31 @@ def _check_output_dir(output_dir: Path):
         raise InputError(f"output_dir: cannot write into {output_dir} (Permission denied)")
 
 
-def _settings(
-    method,
-    fmt,
-    depth_scale,
-    intrinsics,
-    scale_invariant,
-    overwrite,
-    options,
-    kinect_disparity=False,
-    byte_order=None,
-    sun_rgbd=False,
-) -> ConvertSettings:
+def _settings(given: ConvertSettings) -> ConvertSettings:
+    """``given`` (the arguments of :func:`convert` as passed) checked, with its intrinsics resolved."""
+    from dataclasses import replace
+
     from .._validate import check_bool, check_choice, check_positive
     from ..io.depth import _check_raw_options
     from ..io.intrinsics import resolve_intrinsics
     from ..io.normals import OUTPUT_FORMATS
     from ..methods import resolve
 
-    resolve(method, dict(options))  # a wrong method or option fails once, here, not once per file
-    check_choice("fmt", fmt, OUTPUT_FORMATS)
+    resolve(given.method, given.options)  # a wrong method or option fails once, here, not once per file
+    check_choice("fmt", given.fmt, OUTPUT_FORMATS)
+    depth_scale = given.depth_scale
     if depth_scale is not None:
         depth_scale = check_positive("depth_scale", depth_scale)
-    # (byte_order applies to the .pgm files among the inputs; the others are read without it: checked as for one)
-    kinect_disparity, sun_rgbd = _check_raw_options(".pgm", depth_scale, kinect_disparity, byte_order, sun_rgbd)
-    return ConvertSettings(
-        method,
-        dict(options),
-        fmt,
-        depth_scale,
-        resolve_intrinsics(intrinsics),
-        check_bool("scale_invariant", scale_invariant),
-        check_bool("overwrite", overwrite),
-        kinect_disparity,
-        byte_order,
-        sun_rgbd,
+    # files of any type: byte_order applies to the .pgm ones among the inputs
+    raw = _check_raw_options(None, depth_scale, given.kinect_disparity, given.byte_order, given.sun_rgbd)
+    return replace(
+        given,
+        depth_scale=depth_scale,
+        intrinsics=resolve_intrinsics(given.intrinsics),
+        scale_invariant=check_bool("scale_invariant", given.scale_invariant),
+        overwrite=check_bool("overwrite", given.overwrite),
+        kinect_disparity=raw[0],
+        sun_rgbd=raw[1],
     )
 
 
@@ -259,18 +249,8 @@ def convert(
     3
     >>> out.cleanup()
     """
-    settings = _settings(
-        method,
-        fmt,
-        depth_scale,
-        intrinsics,
-        scale_invariant,
-        overwrite,
-        options,
-        kinect_disparity,
-        byte_order,
-        sun_rgbd,
-    )
+    given = (method, dict(options), fmt, depth_scale, intrinsics, scale_invariant, overwrite)
+    settings = _settings(ConvertSettings(*given, kinect_disparity, byte_order, sun_rgbd))
     if client is not None and not (
         callable(getattr(client, "submit", None)) and callable(getattr(client, "nthreads", None))
     ):

@@ -433,10 +433,11 @@ def _read_exr(path: Path) -> np.ndarray:
 # ---------------------------------------------------------------------------- PGM byte order, Kinect v1 disparity
 
 
-def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order, sun_rgbd=False):
+def _check_raw_options(suffix: str | None, depth_scale, kinect_disparity, byte_order, sun_rgbd=False):
     """(kinect_disparity, sun_rgbd): the options of :func:`read_depth` that say how raw sensor values are stored.
 
-    An InputError where they do not fit the file or each other.
+    An InputError where they do not fit the file (of depth suffix ``suffix``; None: files of any type, where
+    ``byte_order`` applies to the ``.pgm`` ones) or each other.
     """
     kinect_disparity = check_bool("kinect_disparity", kinect_disparity)
     sun_rgbd = check_bool("sun_rgbd", sun_rgbd)
@@ -448,7 +449,7 @@ def _check_raw_options(suffix: str, depth_scale, kinect_disparity, byte_order, s
         )
     if byte_order is not None:
         check_choice("byte_order", byte_order, PGM_BYTE_ORDERS)
-        if suffix != ".pgm":
+        if suffix not in (None, ".pgm"):
             raise InputError(
                 f"byte_order: applies to 16-bit .pgm files, got byte_order={byte_order!r} for a {suffix} file"
             )
@@ -463,11 +464,25 @@ def _sun_rgbd_values(path: Path, raw: np.ndarray) -> np.ndarray:
     """SUN RGB-D's rotated millimetres as metres; a DataFileError where the values are not 16-bit integers."""
     if raw.dtype.kind not in "iu" or raw.dtype.itemsize < 2:
         raise DataFileError(f"{path}: expected SUN RGB-D's 16-bit integer depth, got dtype {raw.dtype}")
-    top = int(raw.max()) if raw.size else 0
-    low = int(raw.min()) if raw.size else 0
-    if low < 0 or top > 65535:
-        raise DataFileError(f"{path}: expected SUN RGB-D's 16-bit depth (0 to 65535), got values from {low} to {top}")
-    return sun_rgbd_to_depth(raw)
+    outside = _outside_16_bits(raw)
+    if outside is not None:
+        raise DataFileError(f"{path}: expected SUN RGB-D's 16-bit depth (0 to 65535), got values from {outside}")
+    return _unrotated(raw)
+
+
+def _outside_16_bits(raw: np.ndarray) -> str | None:
+    """The range of integers ``raw`` ("LOW to HIGH") where it is not within 0 to 65535, else None (uint16 unread)."""
+    if raw.dtype == np.uint16 or raw.size == 0:
+        return None
+    low, top = int(raw.min()), int(raw.max())
+    return f"{low} to {top}" if low < 0 or top > 65535 else None
+
+
+def _unrotated(raw: np.ndarray) -> np.ndarray:
+    """Metres from 16-bit integers that hold millimetres rotated left by 3 bits (:func:`sun_rgbd_to_depth`)."""
+    r = raw.astype(np.uint16, copy=False)
+    mm = (r >> np.uint16(3)) | (r << np.uint16(13))
+    return (mm.astype(np.float64) / 1000.0).astype(np.float32)
 
 
 def sun_rgbd_to_depth(raw) -> np.ndarray:
@@ -480,14 +495,12 @@ def sun_rgbd_to_depth(raw) -> np.ndarray:
     r = np.asarray(raw)
     if r.dtype.kind not in "iu":
         raise InputError(f"raw: expected 16-bit integers (SUN RGB-D's stored depth), got dtype {r.dtype}")
-    if r.size and (int(r.min()) < 0 or int(r.max()) > 65535):
+    outside = _outside_16_bits(r)
+    if outside is not None:
         raise InputError(
-            f"raw: expected 16-bit integers (SUN RGB-D's stored depth, 0 to 65535), got values from {int(r.min())} "
-            f"to {int(r.max())}"
+            f"raw: expected 16-bit integers (SUN RGB-D's stored depth, 0 to 65535), got values from {outside}"
         )
-    r = r.astype(np.uint16)
-    mm = (r >> np.uint16(3)) | (r << np.uint16(13))
-    return (mm.astype(np.float64) / 1000.0).astype(np.float32)
+    return _unrotated(r)
 
 
 def _raw_sensor_values(path: Path, raw: np.ndarray, suffix: str, *, kinect_disparity: bool, byte_order) -> np.ndarray:

@@ -311,6 +311,55 @@ def test_speed_vs_linemod_without_opencv_says_so_and_exits_2(monkeypatch, capsys
     assert err.startswith("speed_vs_linemod: OpenCV's RgbdNormals is needed") and "cv2 has no RgbdNormals" in err
 
 
+def _benchmark_script(name: str):
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    return script
+
+
+@pytest.mark.parametrize("variant", ["decimated", "binned"])
+def test_decimated_fit_keeps_a_tilted_planes_normal_and_its_holes(variant):
+    """benchmarks/decimated_fit.py: the default on a half-size frame (every other row and column, or 2x2 blocks of
+    mean inverse depth, which is affine on a plane: the block's centre's), intrinsics halved, its normals repeated
+    2x2, gives a plane's own normal at every pixel with depth (a principal point or a focal length left at the
+    frame's would tilt it), and no normal where the frame has no depth."""
+    from surfnorm.camera import Intrinsics
+
+    run = getattr(_benchmark_script("decimated_fit"), variant)
+    H, W = 61, 83  # odd sides: the repeat is cut back to the frame (binned: the last row and column get none)
+    cam = Intrinsics(300.0, 310.0, 47.3, 25.8)
+    n = np.array([0.3, -0.4, -1.0])
+    n /= np.linalg.norm(n)
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    ray = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones_like(u)], axis=-1)
+    z = (-2.0 / (ray @ n)).astype(np.float32)  # the plane n . P = -2 (in front of the camera, facing it)
+    z[10:14, 20:30] = 0.0
+    got = run(z, cam)
+    assert got.shape == (H, W, 3)
+    assert np.all(got[10:14, 20:30] == 0.0)
+    has = z > 0
+    if variant == "binned":
+        assert np.all(got[-1] == 0.0) and np.all(got[:, -1] == 0.0)
+        has[-1], has[:, -1] = False, False
+    cos = got[has] @ n
+    # float32 depth: up to 0.06 degrees; a principal point left at the frame's tilts every normal by 0.32-0.35 degrees
+    # here, a focal length by 18 (a quarter-pixel error of the binned centre shows less than the rounding: not tested)
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.15
+
+
+def test_decimated_fit_refuses_an_unknown_sensor_in_one_line(monkeypatch, capsys):
+    script = _benchmark_script("decimated_fit")
+    monkeypatch.setattr(peers_mod, "single_thread", lambda: {})
+    assert script.main(["--sensors", "kinect_v1,kinect_v9"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert err.startswith("decimated_fit: --sensors: expected some of") and err.endswith("got kinect_v9")
+
+
 def test_entries_parse_options_as_the_command_line_does():
     """The benchmark's ``name:opt=val`` is surfnorm.methods.parse_method, the parser of ``estimate -m``."""
     entries, _ = make_entries(["plane_pca:window=5:fill=nan"])

@@ -21,6 +21,13 @@ written here, the same carrying with the stride-2 planes (the corners 2 apart, p
 reported too: it reads as the kernel does except at the few pixels where the kernel looks further (its 5x5
 fallback). Sparse depth (``choose_stride`` 1: LiDAR) is left out. NumPy, slow: accuracy only, no times.
 
+Times (``--rounds``, on one thread, the noise profile given; dense frames of SENSOR_DIR): the copied kernel at
+stride 2 with its normals (``adaptive_fit``), its fits alone (no normal written: the integral rows, the fits, the
+widening and the edge test), and the fits alone at stride 4, which the same kernel runs once the integral rows'
+columns are ordered by their remainder modulo 4 (checked first: its planes are the stride-2 planes of the pixels
+(4 i, 4 j), to the bit). A stride-4 assembly is not written in Numba here: the last columns add stride 2's cost of
+writing the normals to the stride-4 fits, and the noise profile to both, for the ratio of one call to another.
+
 Reported: on the frames of SENSOR_DIR (default ../shared/data/sensor-sample beside the repository, skipped where
 absent) the plane metric (mean folded angle, coverage) of ``adaptive_fit``, the stride-2 carrying and the stride-4
 one; on the 12 3F2N sample frames through each simulated sensor of --sensors (seed 0) the mean e_A of the three over
@@ -31,6 +38,7 @@ corners of a pixel's cell).
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -49,9 +57,12 @@ _STORE = """        for c in range(n):
 """
 
 
-def _planes_kernel():
-    """A copy of ``_adaptive_fit_kernel`` with an argument ``planes`` ((H / stride, W / stride, 5) float64) that it
-    fills, compiled from the installed module's source (not cached)."""
+def _kernel_copy(*, planes: bool = True, normals: bool = True):
+    """A copy of ``_adaptive_fit_kernel`` compiled from the installed module's source (not cached), with an argument
+    ``planes`` ((H / stride, W / stride, 5) float64) that it fills where ``planes``, and without writing any normal
+    (no assembly: the fits alone, for their time) where not ``normals``."""
+    import re
+
     import surfnorm.kernels.adaptive_fit as af
     from surfnorm._config import njit
 
@@ -61,42 +72,104 @@ def _planes_kernel():
     body = source[start:end]
     if body.count(_HOOK) != 1:
         raise RuntimeError("stride4_assembly: the band kernel changed; its hook line was not found once")
-    body = body.replace("stride, info, gains, has):", "stride, info, gains, has, planes):", 1).replace(
-        _HOOK, _STORE + _HOOK, 1
-    )
+    body = body.replace("stride, info, gains, has):", "stride, info, gains, has, planes):", 1)
+    if planes:
+        body = body.replace(_HOOK, _STORE + _HOOK, 1)
+    if not normals:  # every call that writes normals (row_done, emit_row: one line each) becomes a no-op
+        body, n = re.subn(r"\n( +)(row_done|emit_row)\([^\n]*\)\n", r"\n\1pass\n", body)
+        if n < 3:
+            raise RuntimeError("stride4_assembly: the band kernel changed; its calls that write normals were not found")
     namespace = dict(vars(af))
     exec(compile(body, "<stride4_assembly kernel>", "exec"), namespace)
     return njit(noalias=True, cache=False)(namespace["_adaptive_fit_kernel"])
 
 
-_KERNEL = None
+@functools.lru_cache(maxsize=None)
+def _kernel(planes: bool, normals: bool):
+    return _kernel_copy(planes=planes, normals=normals)
+
+
+def _positions(W: int, stride: int) -> np.ndarray:
+    """The integral rows' column order for any ``stride``: the columns by their remainder modulo ``stride``, so that a
+    window's edge moves one place per fitted pixel (``_windows.integral_positions`` knows strides 1 and 2)."""
+    return np.concatenate([np.arange(k, W + 1, stride) for k in range(stride)]).argsort(kind="stable")
+
+
+def _run(z, cam, stride: int, *, planes: bool, normals: bool, profile=None):
+    """One band of the copied kernel over ``z``; returns (normals, planes)."""
+    from surfnorm._bands import whole
+    from surfnorm.kernels import _schedule
+    from surfnorm.kernels.adaptive_fit import FitPlan
+
+    out = np.empty(z.shape + (3,), np.float32)
+    frame = FitPlan(z, z > 0, cam, out, stride=stride, profile=profile)
+    shape = ((z.shape[0] + stride - 1) // stride, (z.shape[1] + stride - 1) // stride, 5) if planes else (1, 1, 5)
+    fitted = np.zeros(shape)
+    kernel = _kernel(planes, normals)
+
+    def fit(v0, v1, work, tables):
+        kernel(z, frame.valid, tables, frame.steps, frame.cam, frame.options, work, out, v0, v1, stride, frame.info,
+               frame.gains, frame.has, fitted)  # fmt: skip
+
+    frame.fit = fit
+    ordered = _schedule.integral_positions
+    if stride > 2:
+        _schedule.integral_positions = _positions
+    try:
+        _schedule.run_bands(frame, whole)
+    finally:
+        _schedule.integral_positions = ordered
+    return out, fitted
 
 
 def fitted_planes(z: np.ndarray, cam) -> tuple[np.ndarray, np.ndarray, int]:
     """``adaptive_fit``'s normals of ``z`` (one band, its defaults), its fitted pixels' planes and its stride."""
-    global _KERNEL
     import surfnorm
-    from surfnorm._bands import whole
-    from surfnorm.kernels._schedule import run_bands
-    from surfnorm.kernels.adaptive_fit import FitPlan
+    from surfnorm.kernels._schedule import choose_stride
 
-    if _KERNEL is None:
-        _KERNEL = _planes_kernel()
     z = np.ascontiguousarray(z, np.float32)
-    out = np.empty(z.shape + (3,), np.float32)
-    frame = FitPlan(z, z > 0, cam, out)
-    s = frame.stride
-    planes = np.zeros(((z.shape[0] + s - 1) // s, (z.shape[1] + s - 1) // s, 5))
-
-    def fit(v0, v1, work, tables):
-        _KERNEL(z, frame.valid, tables, frame.steps, frame.cam, frame.options, work, out, v0, v1, s, frame.info,
-                frame.gains, frame.has, planes)  # fmt: skip
-
-    frame.fit = fit
-    run_bands(frame, whole)
+    stride = choose_stride(z > 0)
+    out, planes = _run(z, cam, stride, planes=True, normals=True)
     if not np.array_equal(out, surfnorm.estimate(z, cam, method="adaptive_fit", threads=1), equal_nan=True):
         raise RuntimeError("stride4_assembly: the copied kernel's normals differ from adaptive_fit's")
-    return out, planes, s
+    return out, planes, stride
+
+
+def fit_times(z: np.ndarray, cam, rounds: int) -> dict[str, float]:
+    """Median ms on one thread, the noise profile given: ``adaptive_fit`` (the copied kernel at stride 2, its normals
+    included), its fits alone (no normal written) at stride 2 and at stride 4 (the integral rows in :func:`_positions`'
+    order); checked first that the stride-4 fits are the stride-2 fits of the pixels (4 i, 4 j), to the bit."""
+    import math
+    import time
+
+    from surfnorm.kernels.sensor_noise import noise_profile
+
+    z = np.ascontiguousarray(z, np.float32)
+    profile = noise_profile(z, z > 0, math.sqrt(cam.fx * cam.fy))
+    two = _run(z, cam, 2, planes=True, normals=True, profile=profile)[1]
+    four = _run(z, cam, 4, planes=True, normals=False, profile=profile)[1]
+    ok = two[::2, ::2, 3] > 0.0  # (a pixel without a plane holds what its row's scratch held)
+    if not (np.array_equal(ok, four[..., 3] > 0.0) and np.array_equal(two[::2, ::2][ok], four[ok])):
+        raise RuntimeError("stride4_assembly: the stride-4 fits differ from the stride-2 fits of the same pixels")
+    calls = {
+        "stride 2": lambda: _run(z, cam, 2, planes=False, normals=True, profile=profile),
+        "stride 2, fits alone": lambda: _run(z, cam, 2, planes=False, normals=False, profile=profile),
+        "stride 4, fits alone": lambda: _run(z, cam, 4, planes=False, normals=False, profile=profile),
+    }
+    times: dict[str, list] = {k: [] for k in calls}
+    for call in calls.values():
+        call()
+    for r in range(rounds):
+        for k in list(calls) if r % 2 == 0 else list(calls)[::-1]:
+            t0 = time.perf_counter()
+            calls[k]()
+            times[k].append(time.perf_counter() - t0)
+    ms = {k: 1e3 * float(np.median(v)) for k, v in times.items()}
+    t0 = time.perf_counter()
+    for _ in range(rounds):
+        noise_profile(z, z > 0, math.sqrt(cam.fx * cam.fy))
+    ms["noise profile"] = 1e3 * (time.perf_counter() - t0) / rounds
+    return ms
 
 
 def carried(z: np.ndarray, planes: np.ndarray, step: int, cam, *, bilinear: bool) -> np.ndarray:
@@ -153,15 +226,20 @@ def variants(z: np.ndarray, cam) -> dict[str, np.ndarray] | None:
 
 
 def main(argv=None) -> int:
+    from surfnorm.bench.peers import steady_allocator
+
+    steady_allocator()  # the timed calls allocate their output: from memory the process kept, not fresh pages
     from surfnorm.bench.sensor import find_sensor_frames, read_sensor_frame, score_frame
     from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
     from surfnorm.camera import Intrinsics
     from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+    from surfnorm.kernels._schedule import choose_stride
     from surfnorm.metrics import coverage, mean_angular_error
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("sensor_dir", nargs="?", default=str(REPO.parent / "shared" / "data" / "sensor-sample"))
     ap.add_argument("--sensors", default="kinect_v1,primesense,d435,kinect_v1_raw,stereo_sgbm,post_filtered,tof")
+    ap.add_argument("--rounds", type=int, default=11, help="timed calls of each kernel per frame (0: no times)")
     args = ap.parse_args(argv)
     sensors = [s for s in args.sensors.split(",") if s]
     unknown = [s for s in sensors if s not in SENSORS]
@@ -183,6 +261,25 @@ def main(argv=None) -> int:
         cells = [f"{score_frame(got[k], f)[1]:.2f} ({score_frame(got[k], f)[2]:.3f})" for k in names]
         rows.append(f"| {f.name} | " + " | ".join(cells) + " |")
     if folders:
+        print("\n".join(rows) + "\n")
+    if folders and args.rounds > 0:
+        rows = [
+            "| frame | stride 2 | its fits alone | stride 4, fits alone | stride 4 with stride 2's normals' cost "
+            "| noise profile | one call at stride 4 over one at stride 2 |",
+            "|---" * 7 + "|",
+        ]
+        for folder in folders:
+            f = read_sensor_frame(folder)
+            if choose_stride(f.depth > 0) != 2:
+                continue
+            ms = fit_times(f.depth, f.K, args.rounds)
+            normals = ms["stride 2"] - ms["stride 2, fits alone"]
+            four = ms["stride 4, fits alone"] + normals
+            ratio = (four + ms["noise profile"]) / (ms["stride 2"] + ms["noise profile"])
+            rows.append(
+                f"| {f.name} | {ms['stride 2']:.1f} | {ms['stride 2, fits alone']:.1f} | "
+                f"{ms['stride 4, fits alone']:.1f} | {four:.1f} | {ms['noise profile']:.1f} | {ratio:.2f} |"
+            )
         print("\n".join(rows) + "\n")
     root = REPO / "tests" / "data" / "3f2n-sample"
     root = root if root.is_dir() else Path(sample_root())

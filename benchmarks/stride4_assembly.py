@@ -1,11 +1,11 @@
 """A prototype for the speed clause: ``adaptive_fit``'s planes on every fourth row and column, carried to every pixel.
 
-    PYTHONPATH=src python benchmarks/stride4_assembly.py [SENSOR_DIR] [--sensors kinect_v1,primesense,...]
+    PYTHONPATH=src python benchmarks/stride4_assembly.py [SENSOR_DIR] [--sensors kinect_v1,primesense,...] [--rounds 11]
 
 ``adaptive_fit`` (stride 2) fits its windows on the pixels of the even rows and columns, a quarter of them, and the
 other pixels take the planes of the fitted pixels next to them (``surfnorm.kernels._assembly``). On a 2-core machine
 without AVX-512 the default still takes 1.2-1.6x OpenCV LINEMOD's time on 640x480 sensor frames, and fitting a
-sixteenth of the pixels is the change that would close that (``benchmarks/decimated_fit.py``: with one normal per
+sixteenth of the pixels is the largest cut of its work in view (``benchmarks/decimated_fit.py``: with one normal per
 2x2 block it costs up to 1.19x the error). This measures what the error would be if the windows were fitted on
 every fourth row and column only, each with every pixel of the frame in it, and every pixel took the planes of the
 four fitted pixels at the corners of its 4x4 cell, each carried to it (w at the pixel, from the plane's slopes):
@@ -19,7 +19,7 @@ and checked to give ``adaptive_fit``'s normals to the bit; the planes of the pix
 stride-2 fit, so the fits are the same and only what reaches the other pixels differs. As a check of the assembly
 written here, the same carrying with the stride-2 planes (the corners 2 apart, plain means as the kernel takes) is
 reported too: it reads as the kernel does except at the few pixels where the kernel looks further (its 5x5
-fallback). Sparse depth (``choose_stride`` 1: LiDAR) is left out. NumPy, slow: accuracy only, no times.
+fallback). Sparse depth (``choose_stride`` 1: LiDAR) is left out. The carrying is NumPy, slow: its accuracy only.
 
 Times (``--rounds``, on one thread, the noise profile given; dense frames of SENSOR_DIR): the copied kernel at
 stride 2 with its normals (``adaptive_fit``), its fits alone (no normal written: the integral rows, the fits, the

@@ -85,8 +85,9 @@ def main(argv=None) -> int:
         read_sensor_frame,
         score_frame,
     )
-    from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
+    from surfnorm.bench.simulate import frame_seed, sensor_names, simulate
     from surfnorm.camera import Intrinsics
+    from surfnorm.errors import InputError
     from surfnorm.io.threef2n import find_frames, read_frame, sample_root
     from surfnorm.metrics import mean_angular_error
 
@@ -95,13 +96,10 @@ def main(argv=None) -> int:
     ap.add_argument("--sensors", default="kinect_v1,primesense,d435,kinect_v1_raw,post_filtered,tof")
     ap.add_argument("--rounds", type=int, default=9)
     args = ap.parse_args(argv)
-    sensors = [s for s in args.sensors.split(",") if s]
-    unknown = [s for s in sensors if s not in SENSORS]
-    if unknown:
-        print(
-            f"decimated_fit: --sensors: expected some of {', '.join(SENSORS)}, got {', '.join(unknown)}",
-            file=sys.stderr,
-        )
+    try:
+        sensors = sensor_names(args.sensors)
+    except InputError as exc:
+        print(f"decimated_fit: {exc}", file=sys.stderr)
         return 2
     linemod = linemod_entry("decimated_fit")
     if linemod is None:

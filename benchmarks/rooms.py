@@ -77,7 +77,7 @@ def main(argv=None) -> int:
 
     single_thread()  # before any peer library is imported
     from surfnorm.bench.sensor import make_entries
-    from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
+    from surfnorm.bench.simulate import SENSORS, frame_seed, sensor_names, simulate
     from surfnorm.camera import Intrinsics
     from surfnorm.errors import SurfnormError
     from surfnorm.metrics import mean_angular_error
@@ -103,10 +103,7 @@ def main(argv=None) -> int:
                 raise SurfnormError(f"--white: expected percents above 0 and at most 5, got {', '.join(wrong)}")
             sensors = [f"white noise {_number(p):g} %" for p in args.white.split(",")]  # (the seed: 0.01 as 0.010)
         else:
-            sensors = args.sensors.split(",")
-            unknown = [s for s in sensors if s not in SENSORS]
-            if unknown:
-                raise SurfnormError(f"--sensors: expected some of {', '.join(SENSORS)}, got {', '.join(unknown)}")
+            sensors = sensor_names(args.sensors)
     except SurfnormError as exc:
         print(f"rooms: {exc}", file=sys.stderr)
         return 2

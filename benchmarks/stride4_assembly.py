@@ -230,8 +230,9 @@ def main(argv=None) -> int:
 
     steady_allocator()  # the timed calls allocate their output: from memory the process kept, not fresh pages
     from surfnorm.bench.sensor import find_sensor_frames, read_sensor_frame, score_frame
-    from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
+    from surfnorm.bench.simulate import frame_seed, sensor_names, simulate
     from surfnorm.camera import Intrinsics
+    from surfnorm.errors import InputError
     from surfnorm.io.threef2n import find_frames, read_frame, sample_root
     from surfnorm.kernels._schedule import choose_stride
     from surfnorm.metrics import coverage, mean_angular_error
@@ -241,13 +242,10 @@ def main(argv=None) -> int:
     ap.add_argument("--sensors", default="kinect_v1,primesense,d435,kinect_v1_raw,stereo_sgbm,post_filtered,tof")
     ap.add_argument("--rounds", type=int, default=11, help="timed calls of each kernel per frame (0: no times)")
     args = ap.parse_args(argv)
-    sensors = [s for s in args.sensors.split(",") if s]
-    unknown = [s for s in sensors if s not in SENSORS]
-    if unknown:
-        print(
-            f"stride4_assembly: --sensors: expected some of {', '.join(SENSORS)}, got {', '.join(unknown)}",
-            file=sys.stderr,
-        )
+    try:
+        sensors = sensor_names(args.sensors)
+    except InputError as exc:
+        print(f"stride4_assembly: {exc}", file=sys.stderr)
         return 2
     names = ("adaptive_fit", "carried, stride 2", "carried, stride 4")
     folders = find_sensor_frames(args.sensor_dir) if Path(args.sensor_dir).is_dir() else []

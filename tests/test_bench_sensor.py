@@ -311,16 +311,6 @@ def test_speed_vs_linemod_without_opencv_says_so_and_exits_2(monkeypatch, capsys
     assert err.startswith("speed_vs_linemod: OpenCV's RgbdNormals is needed") and "cv2 has no RgbdNormals" in err
 
 
-def _benchmark_script(name: str):
-    import importlib.util
-
-    path = Path(__file__).resolve().parent.parent / "benchmarks" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    return script
-
-
 @pytest.mark.parametrize("variant", ["decimated", "binned"])
 def test_decimated_fit_keeps_a_tilted_planes_normal_and_its_holes(variant):
     """benchmarks/decimated_fit.py: the default on a half-size frame (every other row and column, or 2x2 blocks of
@@ -396,13 +386,15 @@ def test_stride4_assembly_orders_integral_columns_by_remainder():
         np.testing.assert_array_equal(pos[u + 4], pos[u] + 1)
 
 
-def test_decimated_fit_refuses_an_unknown_sensor_in_one_line(monkeypatch, capsys):
-    script = _benchmark_script("decimated_fit")
+@pytest.mark.parametrize("name", ["decimated_fit", "stride4_assembly"])
+def test_benchmark_script_refuses_an_unknown_sensor_in_one_line(name, monkeypatch, capsys):
+    script = _benchmark_script(name)
     monkeypatch.setattr(peers_mod, "single_thread", lambda: {})
+    monkeypatch.setattr(peers_mod, "steady_allocator", lambda: "unchanged")
     assert script.main(["--sensors", "kinect_v1,kinect_v9"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
-    assert err.startswith("decimated_fit: --sensors: expected some of") and err.endswith("got kinect_v9")
+    assert err.startswith(f"{name}: --sensors: expected some of kinect_v1, ") and err.endswith("got kinect_v9")
 
 
 def test_entries_parse_options_as_the_command_line_does():

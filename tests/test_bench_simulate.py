@@ -125,3 +125,12 @@ def test_bad_input_names_the_argument():
         simulate(wall(), K, "tof", seed=0, normals=np.zeros((4, 4, 3)))
     with pytest.raises(InputError, match="scale: expected a positive"):
         simulate(wall(), K, "tof", seed=0, scale=-1.0)
+
+
+def test_sensor_names_skip_empty_items_and_name_every_unknown_one():
+    from surfnorm.bench.simulate import SENSORS, sensor_names
+
+    assert sensor_names("kinect_v1,,tof,") == ["kinect_v1", "tof"]
+    with pytest.raises(InputError) as info:
+        sensor_names("kinect_v1,sonar,kinect_v9")
+    assert str(info.value) == f"--sensors: expected some of {', '.join(SENSORS)}, got sonar, kinect_v9"

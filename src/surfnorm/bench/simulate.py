@@ -79,7 +79,7 @@ from .._validate import as_depth, as_mask
 from ..camera import Intrinsics
 from ..errors import InputError
 
-__all__ = ["Sensor", "SENSORS", "simulate", "metres_per_unit", "frame_seed"]
+__all__ = ["Sensor", "SENSORS", "simulate", "metres_per_unit", "frame_seed", "sensor_names"]
 
 #: Behind the scene, where 3F2N has no depth (background), mixed pixels mix with a wall this many
 #: times deeper than the frame's deepest valid pixel.
@@ -265,6 +265,16 @@ SENSORS: dict[str, Sensor] = {
 def frame_seed(seed: int, *names: str) -> list[int]:
     """A seed for one frame and sensor: the run's seed and a CRC of each name (stable across runs and platforms)."""
     return [int(seed)] + [zlib.crc32(n.encode()) for n in names]
+
+
+def sensor_names(text: str) -> list[str]:
+    """The sensors of a comma-separated ``--sensors`` option of the benchmark scripts (empty items skipped); an
+    InputError naming the option and every unknown name otherwise."""
+    names = [s for s in text.split(",") if s]
+    unknown = [s for s in names if s not in SENSORS]
+    if unknown:
+        raise InputError(f"--sensors: expected some of {', '.join(SENSORS)}, got {', '.join(unknown)}")
+    return names
 
 
 def metres_per_unit(depth, sensor, mask=None) -> float:

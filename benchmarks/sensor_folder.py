@@ -9,6 +9,10 @@
     # OpenCV's SGBM on a rectified pair with ground-truth disparity (reference planes from the ground truth)
     PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2003_teddy im2.png im6.png disp2.png \\
         --gt-scale 4 --fx 450 --baseline 0.16 --source "Middlebury 2003 Teddy (quarter size)"
+    # Middlebury 2014 or later: ground truth in PFM (inf unknown), depth f B / (d + doffs) with calib.txt's doffs
+    PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2014q_motorcycle im0.png im1.png disp0GT.pfm \\
+        --fx 999.421 --cx 294.182 --cy 252.932 --baseline 0.193001 --doffs 32.778 \\
+        --source "Middlebury 2014 Motorcycle (trainingQ)"
     # the same pair through OpenCV's block matcher (another stereo family)
     PYTHONPATH=src python benchmarks/sensor_folder.py stereo OUT/mb2003_teddy_bm9 im2.png im6.png disp2.png \\
         --gt-scale 4 --fx 450 --baseline 0.16 --matcher bm --source "Middlebury 2003 Teddy (quarter size)"
@@ -22,7 +26,9 @@ Reference planes: RANSAC on the back-projected valid points (Open3D's segment_pl
 max(4 mm, 1.2 % of the median depth), 1000 iterations, seed 0), at most 5 planes, each cut to its largest
 4-connected piece after a 5x5 erosion and kept if it has at least 2000 pixels, with its normal from an SVD of the
 piece's points, facing the camera. For a stereo pair they are found on the ground truth's depth and kept where
-SGBM gave depth, so that coverage measures the estimators, not the matcher. Open3D's RANSAC is not bit-stable
+SGBM gave depth, so that coverage measures the estimators, not the matcher. The ground truth is any image OpenCV
+reads (its values divided by ``--gt-scale``), or a PFM file (surfnorm.io.read_depth: Middlebury 2014 and later,
+SceneFlow, ETH3D); 0, negative and non-finite values are unknown. Open3D's RANSAC is not bit-stable
 across runs on every frame: keep the planes.npz a run wrote as the reference.
 
 SGBM (the default matcher): 5x5 blocks, P1 = 8 * 3 * 25, P2 = 32 * 3 * 25, disp12MaxDiff 1, uniqueness 10, speckle
@@ -125,6 +131,14 @@ def stereo_disparity(left: np.ndarray, right: np.ndarray, largest: float, matche
     return sgbm.compute(left, right).astype(np.float64) / 16.0
 
 
+def stereo_depth(disparity: np.ndarray, fx: float, baseline: float, doffs: float = 0.0) -> np.ndarray:
+    """Depth f B / (d + doffs) (float32) where the disparity ``d`` is known (above 0: a matcher's none is -1, a
+    ground truth's 0), 0 elsewhere."""
+    from surfnorm.io import disparity_to_depth
+
+    return disparity_to_depth(np.where(disparity > 0, disparity, np.nan), baseline, fx, doffs=doffs)
+
+
 def write(out: Path, depth, K: dict, planes_from, raw: dict, meta: dict) -> None:
     out.mkdir(parents=True, exist_ok=True)
     for name, src in raw.items():
@@ -164,6 +178,9 @@ def main(argv=None) -> int:
     s.add_argument("gt", type=Path)
     s.add_argument("--gt-scale", type=float, default=1.0, help="stored ground-truth units per pixel of disparity")
     s.add_argument("--baseline", type=float, required=True, help="metres")
+    s.add_argument(
+        "--doffs", type=float, default=0.0, help="x offset of the principal points, pixels: depth f B / (d + doffs)"
+    )
     s.add_argument("--matcher", choices=sorted(BLOCKS), default="sgbm", help="OpenCV's SGBM (default) or block matcher")
     s.add_argument("--block", type=int, default=None, help="the matcher's block side (default: SGBM 5, BM 9)")
     for p in (d, s):
@@ -204,20 +221,31 @@ def main(argv=None) -> int:
         )
         return 2
     left, right = (cv2.imread(str(p), cv2.IMREAD_COLOR) for p in (args.left, args.right))
-    gt = cv2.imread(str(args.gt), cv2.IMREAD_UNCHANGED)
+    if args.gt.suffix.lower() == ".pfm":
+        from surfnorm.errors import DataFileError
+        from surfnorm.io.depth import read_depth
+
+        try:
+            gt = read_depth(args.gt)
+        except DataFileError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    else:
+        gt = cv2.imread(str(args.gt), cv2.IMREAD_UNCHANGED)
     if left is None or right is None or gt is None:
         print("error: could not read the pair or the ground truth", file=sys.stderr)
         return 2
-    gt = (gt[..., 0] if gt.ndim == 3 else gt).astype(np.float64) / args.gt_scale
+    gt = (gt[..., 0] if gt.ndim == 3 else gt).astype(np.float64)
+    gt = np.where(np.isfinite(gt) & (gt > 0), gt, 0.0) / args.gt_scale
     K = intrinsics(*gt.shape)
     block = BLOCKS[args.matcher] if args.block is None else args.block
     disparity = stereo_disparity(left, right, float(gt.max()), args.matcher, block)
-    fb = K["fx"] * args.baseline
-    depth = np.where(disparity > 0, fb / np.where(disparity > 0, disparity, 1.0), 0.0)
-    gt_depth = np.where(gt > 0, fb / np.where(gt > 0, gt, 1.0), 0.0).astype(np.float32)
+    depth = stereo_depth(disparity, K["fx"], args.baseline, args.doffs)
+    gt_depth = stereo_depth(gt, K["fx"], args.baseline, args.doffs)
     raw = {f"raw_{k}{p.suffix}": p for k, p in (("left", args.left), ("right", args.right), ("gt", args.gt))}
     name = {"sgbm": "SGBM", "bm": "StereoBM"}[args.matcher]
-    depth_text = f"OpenCV {name}, {block}x{block} blocks (benchmarks/sensor_folder.py), f B / d"
+    formula = f"f B / (d + {args.doffs:g})" if args.doffs else "f B / d"
+    depth_text = f"OpenCV {name}, {block}x{block} blocks (benchmarks/sensor_folder.py), {formula}"
     meta = {"source": args.source, "depth": depth_text, "K": K}
     write(args.out, depth, K, gt_depth, raw, meta)
     np.save(args.out / "gt_depth.npy", gt_depth)

@@ -520,6 +520,48 @@ def test_sensor_folder_matchers_find_a_known_disparity():
     assert not (maps["bm"][band] > 0).any()
 
 
+def test_sensor_folder_stereo_takes_a_pfm_ground_truth_and_doffs(tmp_path):
+    """A Middlebury-style frame: a textured slanted plane seen by a pair whose principal points differ by doffs,
+    its ground-truth disparity in a PFM file (inf where unknown, rows stored bottom up). The folder's depth is
+    f B / (d + doffs) of the matcher's disparity, its ground truth's the same of the PFM's (inf: none), and its
+    reference plane is the slanted plane."""
+    pytest.importorskip("open3d")
+    import cv2
+
+    from tests.test_io_depth import pfm_bytes
+
+    script = _benchmark_script("sensor_folder")
+    rng = np.random.default_rng(5)
+    H, W, fx, baseline, doffs = 160, 240, 400.0, 0.2, 20.0
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    depth = 1.0 / (0.55 + 0.0006 * (u - W / 2))  # a plane: inverse depth affine in the pixel, 1.4-2.3 m
+    gt = fx * baseline / depth - doffs  # the disparity in the images, 15-37 px
+    texture = cv2.GaussianBlur(rng.integers(0, 256, (H, 2 * W)).astype(np.float64), (0, 0), 1.2)
+    texture = np.clip((texture - texture.mean()) * 2.5 + 128.0, 0, 255)
+    left = texture[:, 40 : 40 + W]
+    # the right image at x holds what the left one holds at the u with u - d(u) = x (d changes along the row)
+    right = np.stack([np.interp(u[i], u[i] - gt[i], left[i]) for i in range(H)])
+    for name, img in (("l.png", left), ("r.png", right)):
+        cv2.imwrite(str(tmp_path / name), np.repeat(np.clip(img, 0, 255).astype(np.uint8)[..., None], 3, axis=2))
+    stored = gt.astype(np.float32)
+    stored[:, :12] = np.inf  # Middlebury's unknown
+    (tmp_path / "gt.pfm").write_bytes(pfm_bytes(stored))
+    out = tmp_path / "frame"
+    argv = ["stereo", str(out), str(tmp_path / "l.png"), str(tmp_path / "r.png"), str(tmp_path / "gt.pfm")]
+    argv += ["--fx", str(fx), "--baseline", str(baseline), "--doffs", str(doffs), "--source", "test"]
+    assert script.main(argv) == 0
+    gt_depth, got = np.load(out / "gt_depth.npy"), np.load(out / "depth.npy")
+    np.testing.assert_allclose(gt_depth[:, 12:], depth[:, 12:], rtol=1e-5)
+    assert not gt_depth[:, :12].any()
+    inner = np.s_[10:-10, 60:-10]
+    assert np.mean(np.abs(got[inner] / depth[inner] - 1.0) < 0.02) > 0.9  # depth, not f B / d (1.5-2.3x off)
+    planes = np.load(out / "planes.npz")
+    n = np.array([0.0006 * fx, 0.0, 0.55 - 0.0006 * (W / 2 - (W - 1) / 2)])  # eq. (2) at the image centre
+    assert planes["masks"].shape[0] >= 1 and planes["masks"][0].sum() > 5000
+    assert np.degrees(np.arccos(abs(planes["normals"][0] @ n) / np.linalg.norm(n))) < 1.0
+    assert "f B / (d + 20)" in json.loads((out / "meta.json").read_text())["depth"]
+
+
 @pytest.mark.parametrize("block", ["4", "3", "0"])
 def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, capsys):
     """An even block, or one under 5 for the block matcher: one line naming --block, what it takes and what it got;

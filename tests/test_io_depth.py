@@ -1,4 +1,4 @@
-"""Depth files as sensors and their tools write them: OpenEXR, 16-bit PGM, Kinect v1 disparity.
+"""Depth files as sensors and their tools write them: OpenEXR, 16-bit PGM, PFM, Kinect v1 disparity.
 
 Files are written here by the OpenEXR package or byte by byte from the
 netpbm specification, and read back with surfnorm.io.read_depth; the real
@@ -7,12 +7,14 @@ when that folder exists.
 """
 
 import json
+import re
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+import surfnorm
 from surfnorm.errors import DataFileError, InputError, MissingDependencyError
 from surfnorm.io.depth import KINECT_V1_NYU, kinect_disparity_to_depth, read_depth, sun_rgbd_to_depth
 
@@ -242,6 +244,95 @@ class TestPgm:
         (tmp_path / "d.pgm").write_bytes(pgm_bytes(np.ones((2, 2), np.uint16)))
         with pytest.raises(InputError, match=r"byte_order: expected one of 'big', 'little', got 'native'"):
             read_depth(tmp_path / "d.pgm", byte_order="native")
+
+
+# ---------------------------------------------------------------------------- PFM
+
+
+def pfm_bytes(values: np.ndarray, *, little: bool = True, header: bytes | None = None, colour: bool = False) -> bytes:
+    """A Portable Float Map written from its description: a header ("Pf", or "PF" for colour; width, height; the
+    scale, negative for little-endian samples), then float32 rows from the bottom row up."""
+    h, w = values.shape[:2]
+    scale = -1.0 / 255 if little else 1.0 / 255  # Middlebury's magnitude, which readers ignore
+    head = header if header is not None else (b"PF" if colour else b"Pf") + f"\n{w} {h}\n{scale}\n".encode()
+    return head + np.ascontiguousarray(values[::-1]).astype("<f4" if little else ">f4").tobytes()
+
+
+class TestPfm:
+    VALUES = np.array([[1.5, 2.25, np.inf], [-3.0, 0.0, 1e-3]], dtype=np.float32)  # inf: Middlebury's unknown
+
+    @pytest.mark.parametrize("little", [True, False])
+    def test_rows_come_back_top_to_bottom_in_either_byte_order(self, tmp_path, little):
+        (tmp_path / "d.pfm").write_bytes(pfm_bytes(self.VALUES, little=little))
+        out = read_depth(tmp_path / "d.pfm")
+        assert out.dtype == np.float32 and out.shape == (2, 3)
+        np.testing.assert_array_equal(out, self.VALUES)  # the scale's magnitude (1/255) not applied
+
+    def test_header_fields_separated_by_any_whitespace(self, tmp_path):
+        # SceneFlow writes a space before each line break ("Pf \n960 540 \n-1.0\n"), which OpenCV's decoder refuses
+        raw = pfm_bytes(self.VALUES, header=b"Pf \n3 2 \n-1.0\n")
+        (tmp_path / "d.pfm").write_bytes(raw)
+        np.testing.assert_array_equal(read_depth(tmp_path / "d.pfm"), self.VALUES)
+
+    def test_depth_scale_and_estimate(self, tmp_path):
+        v = np.full((3, 4), 1500.0, np.float32)
+        (tmp_path / "d.pfm").write_bytes(pfm_bytes(v))
+        np.testing.assert_array_equal(read_depth(tmp_path / "d.pfm", depth_scale=1000), np.float32(1.5))
+
+    def test_truncated_or_longer(self, tmp_path):
+        raw = pfm_bytes(self.VALUES)
+        (tmp_path / "cut.pfm").write_bytes(raw[:-5])
+        with pytest.raises(
+            DataFileError, match=r"cut\.pfm: expected 24 bytes of pixels for 3 x 2, got 19 \(truncated\)"
+        ):
+            read_depth(tmp_path / "cut.pfm")
+        (tmp_path / "long.pfm").write_bytes(raw + b"\0")
+        with pytest.raises(DataFileError, match=r"long\.pfm: expected 24 bytes of pixels .* got 25 \(longer than"):
+            read_depth(tmp_path / "long.pfm")
+
+    def test_colour_map_is_not_depth(self, tmp_path):
+        (tmp_path / "c.pfm").write_bytes(pfm_bytes(np.zeros((2, 3, 3), np.float32), colour=True))
+        with pytest.raises(DataFileError, match=r"c\.pfm: expected a single-channel depth map \('Pf'\), got a 3-chan"):
+            read_depth(tmp_path / "c.pfm")
+
+    @pytest.mark.parametrize(
+        "raw, what",
+        [
+            (b"P5\n3 2\n65535\n" + bytes(12), "expected a PFM file"),
+            (b"Pf\n3 two\n-1.0\n" + bytes(24), "expected a PFM header of width, height and scale, got '3 two -1.0'"),
+            (
+                b"Pf\n0 2\n-1.0\n",
+                "expected a PFM header of a positive width and height and a non-zero scale, got 0 x 2",
+            ),
+            (b"Pf\n3 2\n0\n" + bytes(24), "a positive width and height and a non-zero scale, got 3 x 2, scale 0.0"),
+            (b"Pf\n3 2\n-1.0", "expected a PFM file"),
+            (b"", "expected a PFM file"),
+        ],
+    )
+    def test_not_a_pfm_file(self, tmp_path, raw, what):
+        (tmp_path / "x.pfm").write_bytes(raw)
+        with pytest.raises(DataFileError, match=r"x\.pfm: (expected a PFM header of )?" + re.escape(what)):
+            read_depth(tmp_path / "x.pfm")
+
+    def test_cli_estimate_reads_pfm_disparity(self, tmp_path):
+        """A learned stereo matcher's PFM disparity through the CLI with --disparity: the normals of the depth."""
+        from typer.testing import CliRunner
+
+        from surfnorm.cli import app
+        from surfnorm.io import disparity_to_depth
+
+        v, u = np.mgrid[0:48, 0:64]
+        depth = (1.5 + 0.004 * u + 0.002 * v).astype(np.float32)
+        disparity = (580.0 * 0.1 / depth).astype(np.float32)
+        (tmp_path / "disp.pfm").write_bytes(pfm_bytes(disparity))
+        result = CliRunner().invoke(
+            app, ["estimate", str(tmp_path / "disp.pfm"), str(tmp_path / "n"), "--disparity", *CAMERA]
+        )
+        assert result.exit_code == 0, result.output
+        n = np.load(tmp_path / "n.npy")
+        K = np.array([[580.0, 0, 31.5], [0, 580.0, 23.5], [0, 0, 1]])
+        expected = surfnorm.estimate(disparity_to_depth(disparity, 0.1, 580.0), K, scale_invariant=True)
+        np.testing.assert_allclose(n, expected, atol=1e-4)
 
 
 # ---------------------------------------------------------------------------- Kinect v1 disparity

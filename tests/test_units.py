@@ -152,6 +152,18 @@ def test_disparity_to_depth():
         disparity_to_depth(d, 0.1, -5)
 
 
+def test_disparity_to_depth_with_doffs():
+    """Middlebury's z = f B / (d + doffs): a pixel whose d + doffs is not above 0 gets no depth, and doffs must be
+    a finite number of pixels."""
+    d = np.array([[10.0, 0.0, -30.0, -40.0, np.nan, 30.0]])
+    z = disparity_to_depth(d, 0.1, 500.0, doffs=30.0)
+    np.testing.assert_allclose(z, [[1.25, 50.0 / 30.0, 0, 0, 0, 50.0 / 60.0]], rtol=1e-6)
+    np.testing.assert_array_equal(disparity_to_depth(d, 0.1, 500.0, doffs=0), disparity_to_depth(d, 0.1, 500.0))
+    for bad in (np.inf, np.nan, "3", None, True):
+        with pytest.raises(InputError, match=r"doffs: expected a finite number of pixels, got "):
+            disparity_to_depth(d, 0.1, 500.0, doffs=bad)
+
+
 def test_all_invalid_in_the_scale_invariant_mode():
     n = surfnorm.estimate(np.zeros((5, 5)), K, scale_invariant=True, fill=np.nan)
     assert np.isnan(n).all()

@@ -172,7 +172,7 @@ def _check_format(fmt: str) -> str:
 @app.command()
 def estimate(
     depth: Path = typer.Argument(
-        ..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png or .pgm, float .tif or .exr)."
+        ..., help="Depth file (.bin, .bin.gz, .npy, .npz, 16-bit .png or .pgm, float .tif, .exr or .pfm)."
     ),
     output: Path = typer.Argument(
         ...,

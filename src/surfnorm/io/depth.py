@@ -1,4 +1,4 @@
-"""Depth files: 3F2N .bin, NumPy .npy/.npz, 16-bit PNG (with a depth scale), float TIFF, OpenEXR, 16-bit PGM.
+"""Depth files: 3F2N .bin, NumPy .npy/.npz, 16-bit PNG (with a depth scale), float TIFF, OpenEXR, 16-bit PGM, PFM.
 
 Every reader returns float32 (H, W) and never judges the values: 0, negative,
 NaN and inf stay as they are and are masked as invalid by
@@ -24,6 +24,18 @@ treats as invalid. Needs the ``OpenEXR`` package (``pip install
 'surfnorm[exr]'``): the OpenCV wheels on PyPI are built without OpenEXR
 (``cv2.getBuildInformation()`` says ``OpenEXR: NO`` for OpenCV 5), so
 ``OPENCV_IO_ENABLE_OPENEXR`` cannot help there.
+
+PFM
+---
+``.pfm`` (Portable Float Map) is how stereo benchmarks store ground-truth disparity (Middlebury 2014 and
+later, SceneFlow, ETH3D) and how many learned stereo matchers write their output: float32 rows stored bottom
+to top, little-endian where the header's scale is negative. One channel (``Pf``); a colour map (``PF``) is
+not depth. The scale's magnitude is not applied (Middlebury writes 1/255 there and its disparities as they
+are, and its readers ignore it: OpenCV's decoder divides by it). Unknown pixels are inf (Middlebury), which
+:func:`surfnorm.estimate` treats as invalid. The header's fields may be separated by any whitespace
+(SceneFlow puts a space before each line break, which OpenCV's decoder refuses). Such files usually hold disparity:
+``estimate(..., disparity=True)`` takes it as it is where it is proportional to inverse depth, and
+:func:`disparity_to_depth` turns it into depth, with Middlebury's ``doffs``.
 
 PGM and Kinect v1 disparity
 ---------------------------
@@ -75,7 +87,7 @@ __all__ = [
     "KINECT_V1_NYU",
 ]
 
-DEPTH_SUFFIXES = (".bin", ".bin.gz", ".npy", ".npz", ".png", ".tif", ".tiff", ".exr", ".pgm")
+DEPTH_SUFFIXES = (".bin", ".bin.gz", ".npy", ".npz", ".png", ".tif", ".tiff", ".exr", ".pgm", ".pfm")
 
 #: Kinect v1 raw disparity to metres, depth = a / (b - d), with the NYU Depth v2 toolbox's constants
 #: (camera_params.m: depthParam1 = 351.3, depthParam2 = 1092.5, maxDepth = 10; depth_rel2depth_abs.m).
@@ -166,7 +178,8 @@ def read_depth(
         ``.npy``, ``.npz`` (array ``depth`` or the only array; (H, W) or
         (H, W, 1)), 3F2N ``.bin``
         or ``.bin.gz`` (raw float32 of ``shape``), ``.exr`` (float16 or
-        float32 channel, needs ``surfnorm[exr]``), ``.pgm`` (16-bit P5).
+        float32 channel, needs ``surfnorm[exr]``), ``.pgm`` (16-bit P5),
+        ``.pfm`` (one float channel: often disparity, see the module docstring).
     depth_scale : float, optional
         Raw units per depth unit: the values are divided by it (1000 turns
         millimetres into metres, 5000 is TUM RGB-D's PNG scale). 0 stays 0,
@@ -224,6 +237,8 @@ def read_depth(
         depth = _read_image(path)
     elif suffix == ".exr":
         depth = _read_exr(path)
+    elif suffix == ".pfm":
+        depth = _read_pfm(path)
     else:
         raise DataFileError(f"{path}: unknown depth file type {suffix!r}; expected one of {', '.join(DEPTH_SUFFIXES)}")
     if depth.ndim != 2:
@@ -279,22 +294,71 @@ def read_mask(path) -> np.ndarray:
     return np.ascontiguousarray(arr != 0)
 
 
-def disparity_to_depth(disparity, baseline: float, fx: float) -> np.ndarray:
-    """Depth z = f_x B / d from disparity ``d`` in pixels, float32 (H, W).
+def disparity_to_depth(disparity, baseline: float, fx: float, doffs: float = 0.0) -> np.ndarray:
+    """Depth z = f_x B / (d + doffs) from disparity ``d`` in pixels, float32 (H, W).
 
-    ``baseline`` B is in the depth unit wanted (metres gives metres). Pixels
-    with a disparity that is 0, negative or not finite get depth 0 (invalid).
-    When B is unknown, pass the disparity to ``surfnorm.estimate(...,
-    disparity=True)`` instead: every estimator's normals depend on depth only
-    up to scale there.
+    ``baseline`` B is in the depth unit wanted (metres gives metres). ``doffs``: the difference of the two
+    cameras' principal points along x, in pixels (Middlebury 2014 and later give it in ``calib.txt``; 0 for a
+    pair rectified to one principal point). Pixels whose d + doffs is 0, negative or not finite get depth 0
+    (invalid). When B is unknown and ``doffs`` is 0, pass the disparity to ``surfnorm.estimate(...,
+    disparity=True)`` instead: every estimator's normals depend on depth only up to scale there.
     """
     baseline = check_positive("baseline", baseline)
     fx = check_positive("fx", fx)
-    d = np.asarray(disparity, dtype=np.float64)
+    if isinstance(doffs, (bool, np.bool_)) or not isinstance(doffs, (int, float, np.integer, np.floating)):
+        raise InputError(f"doffs: expected a finite number of pixels, got {doffs!r}")
+    if not np.isfinite(doffs):
+        raise InputError(f"doffs: expected a finite number of pixels, got {doffs!r}")
+    d = np.asarray(disparity, dtype=np.float64) + float(doffs)
     with np.errstate(divide="ignore", invalid="ignore"):
         ok = np.isfinite(d) & (d > 0)
         z = np.where(ok, fx * baseline / np.where(ok, d, 1.0), 0.0)
     return z.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------- PFM
+
+#: The bytes that may separate a PFM header's fields.
+_PFM_SPACE = b" \t\r\n"
+
+
+def _read_pfm(path: Path) -> np.ndarray:
+    """A one-channel Portable Float Map as float32 (H, W), rows top to bottom (see the module docstring)."""
+    data = read_bytes(path, "depth")
+    fields: list[bytes] = []
+    i = 0
+    while len(fields) < 4 and i < min(len(data), 256):  # magic, width, height, scale
+        while i < len(data) and data[i] in _PFM_SPACE:
+            i += 1
+        start = i
+        while i < len(data) and data[i] not in _PFM_SPACE:
+            i += 1
+        if i > start:
+            fields.append(data[start:i])
+    if len(fields) < 4 or fields[0] not in (b"Pf", b"PF") or i >= len(data):
+        raise DataFileError(f"{path}: expected a PFM file (a 'Pf' header, width, height and scale), got another file")
+    if fields[0] == b"PF":
+        raise DataFileError(f"{path}: expected a single-channel depth map ('Pf'), got a 3-channel PFM ('PF')")
+    try:
+        width, height, scale = int(fields[1]), int(fields[2]), float(fields[3])
+    except ValueError:
+        raise DataFileError(
+            f"{path}: expected a PFM header of width, height and scale, got {b' '.join(fields[1:]).decode(errors='replace')!r}"
+        ) from None
+    if width < 1 or height < 1 or not np.isfinite(scale) or scale == 0:
+        raise DataFileError(
+            f"{path}: expected a PFM header of a positive width and height and a non-zero scale, "
+            f"got {width} x {height}, scale {scale}"
+        )
+    pixels = data[i + 1 :]  # after the one whitespace byte that ends the header
+    needed = 4 * width * height
+    if len(pixels) != needed:
+        what = "truncated" if len(pixels) < needed else "longer than its header says"
+        raise DataFileError(
+            f"{path}: expected {needed} bytes of pixels for {width} x {height}, got {len(pixels)} ({what})"
+        )
+    rows = np.frombuffer(pixels, dtype="<f4" if scale < 0 else ">f4").reshape(height, width)
+    return np.ascontiguousarray(rows[::-1], dtype=np.float32)  # stored bottom to top
 
 
 # ---------------------------------------------------------------------------- OpenEXR

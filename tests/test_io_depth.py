@@ -270,9 +270,9 @@ class TestPfm:
 
     def test_header_fields_separated_by_any_whitespace(self, tmp_path):
         # SceneFlow writes a space before each line break ("Pf \n960 540 \n-1.0\n"), which OpenCV's decoder refuses
-        raw = pfm_bytes(self.VALUES, header=b"Pf \n3 2 \n-1.0\n")
-        (tmp_path / "d.pfm").write_bytes(raw)
-        np.testing.assert_array_equal(read_depth(tmp_path / "d.pfm"), self.VALUES)
+        for header in (b"Pf \n3 2 \n-1.0\n", b"Pf\r\n3 2\r\n-1.0\r\n", b"Pf 3\t2 -1.0 "):  # and Windows line breaks
+            (tmp_path / "d.pfm").write_bytes(pfm_bytes(self.VALUES, header=header))
+            np.testing.assert_array_equal(read_depth(tmp_path / "d.pfm"), self.VALUES)
 
     def test_depth_scale_and_estimate(self, tmp_path):
         v = np.full((3, 4), 1500.0, np.float32)

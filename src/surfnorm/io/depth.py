@@ -305,9 +305,8 @@ def disparity_to_depth(disparity, baseline: float, fx: float, doffs: float = 0.0
     """
     baseline = check_positive("baseline", baseline)
     fx = check_positive("fx", fx)
-    if isinstance(doffs, (bool, np.bool_)) or not isinstance(doffs, (int, float, np.integer, np.floating)):
-        raise InputError(f"doffs: expected a finite number of pixels, got {doffs!r}")
-    if not np.isfinite(doffs):
+    number = isinstance(doffs, (int, float, np.integer, np.floating)) and not isinstance(doffs, (bool, np.bool_))
+    if not (number and np.isfinite(doffs)):
         raise InputError(f"doffs: expected a finite number of pixels, got {doffs!r}")
     d = np.asarray(disparity, dtype=np.float64) + float(doffs)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -350,7 +349,8 @@ def _read_pfm(path: Path) -> np.ndarray:
             f"{path}: expected a PFM header of a positive width and height and a non-zero scale, "
             f"got {width} x {height}, scale {scale}"
         )
-    pixels = data[i + 1 :]  # after the one whitespace byte that ends the header
+    # after the whitespace byte that ends the header (two for a Windows line break)
+    pixels = data[i + 2 :] if data[i : i + 2] == b"\r\n" else data[i + 1 :]
     needed = 4 * width * height
     if len(pixels) != needed:
         what = "truncated" if len(pixels) < needed else "longer than its header says"

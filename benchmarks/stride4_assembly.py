@@ -23,9 +23,9 @@ fallback). Sparse depth (``choose_stride`` 1: LiDAR) is left out. The carrying i
 
 Times (``--rounds``, on one thread, the noise profile given; dense frames of SENSOR_DIR): the copied kernel at
 stride 2 with its normals (``adaptive_fit``), its fits alone (no normal written: the integral rows, the fits, the
-widening and the edge test), and the fits alone at stride 4, which the same kernel runs once the integral rows'
-columns are ordered by their remainder modulo 4 (checked first: its planes are the stride-2 planes of the pixels
-(4 i, 4 j), to the bit). A stride-4 assembly is not written in Numba here: the last columns add stride 2's cost of
+widening and the edge test), and the fits alone at stride 4, which the same kernel runs (its integral rows' columns
+ordered by their remainder modulo the stride, ``_windows.integral_positions``; checked first: its planes are the
+stride-2 planes of the pixels (4 i, 4 j), to the bit). A stride-4 assembly is not written in Numba here: the last columns add stride 2's cost of
 writing the normals to the stride-4 fits, and the noise profile to both, for the ratio of one call to another.
 
 Reported: on the frames of SENSOR_DIR (default ../shared/data/sensor-sample beside the repository, skipped where
@@ -89,12 +89,6 @@ def _kernel(planes: bool, normals: bool):
     return _kernel_copy(planes=planes, normals=normals)
 
 
-def _positions(W: int, stride: int) -> np.ndarray:
-    """The integral rows' column order for any ``stride``: the columns by their remainder modulo ``stride``, so that a
-    window's edge moves one place per fitted pixel (``_windows.integral_positions`` knows strides 1 and 2)."""
-    return np.concatenate([np.arange(k, W + 1, stride) for k in range(stride)]).argsort(kind="stable")
-
-
 def _run(z, cam, stride: int, *, planes: bool, normals: bool, profile=None):
     """One band of the copied kernel over ``z``; returns (normals, planes)."""
     from surfnorm._bands import whole
@@ -112,13 +106,7 @@ def _run(z, cam, stride: int, *, planes: bool, normals: bool, profile=None):
                frame.gains, frame.has, fitted)  # fmt: skip
 
     frame.fit = fit
-    ordered = _schedule.integral_positions
-    if stride > 2:
-        _schedule.integral_positions = _positions
-    try:
-        _schedule.run_bands(frame, whole)
-    finally:
-        _schedule.integral_positions = ordered
+    _schedule.run_bands(frame, whole)
     return out, fitted
 
 
@@ -137,8 +125,8 @@ def fitted_planes(z: np.ndarray, cam) -> tuple[np.ndarray, np.ndarray, int]:
 
 def fit_times(z: np.ndarray, cam, rounds: int) -> dict[str, float]:
     """Median ms on one thread, the noise profile given: ``adaptive_fit`` (the copied kernel at stride 2, its normals
-    included), its fits alone (no normal written) at stride 2 and at stride 4 (the integral rows in :func:`_positions`'
-    order); checked first that the stride-4 fits are the stride-2 fits of the pixels (4 i, 4 j), to the bit."""
+    included), its fits alone (no normal written) at stride 2 and at stride 4; checked first that the stride-4 fits
+    are the stride-2 fits of the pixels (4 i, 4 j), to the bit."""
     import math
     import time
 

@@ -370,17 +370,18 @@ def test_stride4_assembly_carries_each_sides_plane_across_a_step():
         assert angle.max() < 0.05, name  # float32 depth: 0.015 degrees
 
 
-def test_stride4_assembly_orders_integral_columns_by_remainder():
-    """stride4_assembly.py times the band kernel at stride 4 with the integral rows' columns ordered by their remainder
-    modulo the stride: the kernel's own order at strides 1 and 2, and a window edge one place further per fitted
-    pixel at stride 4 (what its box sums read)."""
+def test_integral_positions_order_columns_by_remainder():
+    """The integral rows' columns ordered by their remainder modulo the stride (as stride4_assembly.py's timing of
+    the band kernel at stride 4 needs): in order at stride 1, the even columns then the odd ones at stride 2, and a
+    window edge one place further per fitted pixel at stride 4 (what its box sums read)."""
     from surfnorm.kernels._windows import integral_positions
 
-    positions = _benchmark_script("stride4_assembly")._positions
     for W in (7, 8, 640, 641):
         for stride in (1, 2):
-            np.testing.assert_array_equal(positions(W, stride), integral_positions(W, stride))
-        pos = positions(W, 4)
+            by_remainder = np.concatenate([np.arange(k, W + 1, stride) for k in range(stride)])
+            np.testing.assert_array_equal(integral_positions(W, stride), by_remainder.argsort(kind="stable"))
+        np.testing.assert_array_equal(integral_positions(W, 1), np.arange(W + 1))
+        pos = integral_positions(W, 4)
         assert sorted(pos) == list(range(W + 1))
         u = np.arange(W + 1 - 4)
         np.testing.assert_array_equal(pos[u + 4], pos[u] + 1)

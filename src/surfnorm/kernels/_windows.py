@@ -135,20 +135,22 @@ def growth_table(r_max: int) -> np.ndarray:
 # is made from column sums kept beside the ring (:func:`integral_row`), so a band that starts lower down
 # sums the columns of the rows above it and makes only the integral rows that it reads (:func:`make_rows`).
 #
-# ``pos`` (:func:`integral_positions`) places the columns: in order for ``stride`` 1; for ``stride`` 2 the even
-# columns first, then the odd ones. A window centred on an even column u has one edge column of each
-# parity (u - r and u + r + 1), so along a row of fitted pixels (u = 0, 2, 4, ...) both edges move one
-# place at a time: the row's window sums read two contiguous runs (see :func:`box_row`).
+# ``pos`` (:func:`integral_positions`) places the columns by their remainder modulo ``stride``: in order for
+# ``stride`` 1; for ``stride`` 2 the even columns first, then the odd ones. A window centred on a fitted column
+# u (a multiple of the stride) has its edge columns u - r and u + r + 1 at fixed remainders, so along a row of
+# fitted pixels (u = 0, stride, 2 stride, ...) both edges move one place at a time: the row's window sums read
+# two contiguous runs (see :func:`box_row`).
 
 
 @njit
 def integral_positions(W, stride):
     """pos[u] for the integral columns u = 0 .. W (see above)."""
-    pos = np.arange(W + 1, dtype=np.int64)
-    if stride == 2:
-        n_even = W // 2 + 1
-        pos[0::2] = np.arange(n_even)
-        pos[1::2] = n_even + np.arange((W + 1) // 2)
+    pos = np.empty(W + 1, dtype=np.int64)
+    k = 0
+    for remainder in range(stride):
+        for u in range(remainder, W + 1, stride):
+            pos[u] = k
+            k += 1
     return pos
 
 

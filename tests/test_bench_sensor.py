@@ -563,6 +563,18 @@ def test_sensor_folder_stereo_takes_a_pfm_ground_truth_and_doffs(tmp_path):
     assert "f B / (d + 20)" in json.loads((out / "meta.json").read_text())["depth"]
 
 
+def test_sensor_folder_refuses_a_pfm_ground_truth_it_cannot_read(tmp_path, capsys):
+    """A truncated PFM ground truth: one line naming the file and what is wrong, exit 2, nothing written."""
+    script = _benchmark_script("sensor_folder")
+    (tmp_path / "gt.pfm").write_bytes(b"Pf\n3 2\n-1.0\n" + bytes(10))
+    out = tmp_path / "frame"
+    argv = ["stereo", str(out), "l.png", "r.png", str(tmp_path / "gt.pfm"), "--fx", "450", "--baseline", "0.16"]
+    assert script.main(argv + ["--source", "test"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {tmp_path / 'gt.pfm'}: expected 24 bytes of pixels for 3 x 2, got 10 (truncated)"
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("block", ["4", "3", "0"])
 def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, capsys):
     """An even block, or one under 5 for the block matcher: one line naming --block, what it takes and what it got;

@@ -61,6 +61,8 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
+import numbers
 import os
 import sys
 import tempfile
@@ -305,8 +307,7 @@ def disparity_to_depth(disparity, baseline: float, fx: float, doffs: float = 0.0
     """
     baseline = check_positive("baseline", baseline)
     fx = check_positive("fx", fx)
-    number = isinstance(doffs, (int, float, np.integer, np.floating)) and not isinstance(doffs, (bool, np.bool_))
-    if not (number and np.isfinite(doffs)):
+    if isinstance(doffs, bool) or not isinstance(doffs, numbers.Real) or not math.isfinite(doffs):  # as check_positive
         raise InputError(f"doffs: expected a finite number of pixels, got {doffs!r}")
     d = np.asarray(disparity, dtype=np.float64) + float(doffs)
     with np.errstate(divide="ignore", invalid="ignore"):

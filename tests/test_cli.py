@@ -106,6 +106,15 @@ def _one_line_exit_2(args, needle):
     return lines[0]
 
 
+def test_estimate_on_a_truncated_pfm_is_one_line_exit_2(tmp_path):
+    """A PFM file cut short: one line naming it and what is wrong, exit 2, nothing written."""
+    bad = tmp_path / "disp.pfm"
+    bad.write_bytes(b"Pf\n3 2\n-1.0\n" + bytes(10))
+    args = ["estimate", bad, tmp_path / "out", "--disparity", "--fx", "500", "--fy", "500", "--cx", "1", "--cy", "1"]
+    _one_line_exit_2(args, "disp.pfm: expected 24 bytes of pixels for 3 x 2, got 10 (truncated)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["disp.pfm"]
+
+
 @pytest.fixture
 def workdir(tmp_path, monkeypatch):
     depth = tmp_path / "d.bin.gz"

@@ -33,6 +33,20 @@ depth put at 2.5 m median, as the simulator's Kinect v1 does; seed = the frame's
 - ``dropped:H``: white noise of 0.005 % of depth, and H percent of the pixels (above 0, at most 90) dropped at random
   (no depth): holes that the noise measurement's stencils must bridge, on small white noise.
 
+Seven more, written later as a check of the default on families it was not tuned on (none is in the default list):
+
+- ``float16``: the exact depth stored as half floats (metres; a render's or a network's compact output);
+- ``disparity16_mm``: a stereo camera's depth: disparity f B / z (baseline 5 cm) with 0.05 px of noise, in steps of
+  1/16 px, then the depth in whole millimetres (a RealSense-like subpixel matcher's 16-bit output);
+- ``structured_light``: raw structured light: disparity (baseline 7.5 cm) with an error averaged over a 9x9 window
+  (the matcher's correlation window; 0.05 px RMS), in steps of 1/8 px, the depth in float;
+- ``blocks``: a relative error of 0.3 % RMS, constant over each 7x7 block (a codec's block offsets): the shape is
+  exact inside each block, and steps where blocks meet;
+- ``dropped_noisy``: 0.2 % noise and 5 % of the pixels dropped at random;
+- ``bilateral_mm``: 0.2 % noise, whole millimetres, then OpenCV's bilateral filter (5 pixels, 2 cm, 2 pixels): a
+  camera SDK's edge-keeping spatial filter after its millimetre output;
+- ``tof_flying_mm``: 1.5 mm + 0.1 % of depth of noise, mixed pixels at depth edges (as ``flying``), whole millimetres.
+
 The scene's background is no depth (0), as the simulator's sensors see it; every family keeps invalid pixels invalid.
 
 Per family and method: e_A in degrees (mean over the frames of the mean angle to the exact normals over the object's
@@ -66,6 +80,13 @@ FAMILIES = (
     "flying",
     "blurred",
     "dropped",
+    "float16",
+    "disparity16_mm",
+    "structured_light",
+    "blocks",
+    "dropped_noisy",
+    "bilateral_mm",
+    "tof_flying_mm",
 )
 DEFAULT = (
     "upsampled_linear:4,upsampled_linear:5,upsampled_linear:6,upsampled_linear:8,upsampled_linear:12,"
@@ -162,14 +183,59 @@ def _valid_mean(z: np.ndarray, valid: np.ndarray, blur) -> np.ndarray:
     return blur(np.where(valid, z, 0.0).astype(np.float32)) / np.maximum(weight, 1e-6)
 
 
-def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
-    """Depth ``z`` (metres, float32; ``valid``) as ``family`` delivers it (``k``: its factor, see
-    :func:`parse_family`): float32, 0 where it has none."""
+def _disparity(z: np.ndarray, valid: np.ndarray, fb: float, error: np.ndarray, steps: int) -> np.ndarray:
+    """The depth of a disparity matcher: fb / z plus ``error`` (pixels), rounded to 1 / ``steps`` of a pixel, back to
+    depth (fb: focal length times baseline; 0 where invalid or where the disparity is not positive)."""
+    d = np.round((fb / np.where(valid, z, 1.0) + error) * steps) / steps
+    return np.where(valid & (d > 0), fb / np.where(d > 0, d, 1.0), 0.0)
+
+
+def _mixed(z: np.ndarray, valid: np.ndarray, noisy: np.ndarray) -> np.ndarray:
+    """``noisy`` with every pixel at a depth edge (its 3x3 mean off its depth by over 2 %) at that mean."""
     import cv2
 
-    if family.startswith("upsampled"):
+    mean = _valid_mean(z, valid, lambda a: cv2.blur(a, (3, 3)))
+    return np.where(np.abs(mean - z) > 0.02 * z, mean, noisy)
+
+
+def _later(family: str, z: np.ndarray, valid: np.ndarray, rng, f: float) -> np.ndarray:
+    """The seven families written later (see the module docstring), unmasked."""
+    import cv2
+
+    if family == "float16":
+        return z.astype(np.float16)
+    if family == "disparity16_mm":
+        depth = _disparity(z, valid, f * 0.05, 0.05 * rng.standard_normal(z.shape), 16)
+        return np.round(depth * 1000.0) / 1000.0
+    if family == "structured_light":
+        window = cv2.blur(rng.standard_normal(z.shape).astype(np.float32), (9, 9))  # RMS 1/9
+        return _disparity(z, valid, f * 0.075, 0.45 * window, 8)
+    if family == "blocks":
+        H, W = z.shape
+        field = np.kron(rng.standard_normal(((H + 6) // 7, (W + 6) // 7)), np.ones((7, 7)))[:H, :W]
+        return z * (1.0 + 0.003 * field)
+    if family == "dropped_noisy":
+        out = z * (1.0 + 0.002 * rng.standard_normal(z.shape))
+        return np.where(rng.random(z.shape) < 0.05, 0.0, out)
+    if family == "bilateral_mm":
+        noisy = np.round(z * (1.0 + 0.002 * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
+        return cv2.bilateralFilter(np.where(valid, noisy, 0.0).astype(np.float32), 5, 0.02, 2.0)
+    # tof_flying_mm
+    noisy = z + (0.0015 + 0.001 * z) * rng.standard_normal(z.shape)
+    return np.round(_mixed(z, valid, noisy) * 1000.0) / 1000.0
+
+
+def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng, f: float = 500.0) -> np.ndarray:
+    """Depth ``z`` (metres, float32; ``valid``) as ``family`` delivers it (``k``: its factor, see
+    :func:`parse_family`; ``f``: the focal length in pixels, for the disparity families): float32, 0 where it has
+    none."""
+    import cv2
+
+    if family in FAMILIES[FAMILIES.index("float16") :]:
+        out = _later(family, z, valid, rng, f)
+    elif family.startswith("upsampled"):
         return resized(family, low_resolution(np.where(valid, z, 0.0), k, rng), valid)
-    if family == "median_mm":
+    elif family == "median_mm":
         noisy = np.round(z * (1.0 + 0.002 * rng.standard_normal(z.shape)) * 1000.0) / 1000.0
         out = cv2.medianBlur(np.where(valid, noisy, 0.0).astype(np.float32), 5)
     elif family == "tof_mm":
@@ -195,8 +261,7 @@ def degrade(family: str, k: float, z: np.ndarray, valid: np.ndarray, rng) -> np.
         noisy = np.where(valid, z * (1.0 + 0.004 * rng.standard_normal(z.shape)), 0.0).astype(np.float32)
         out = cv2.bilateralFilter(noisy, 7, 0.03, 3.0)
     elif family == "flying":
-        mean = _valid_mean(z, valid, lambda a: cv2.blur(a, (3, 3)))
-        out = np.where(np.abs(mean - z) > 0.02 * z, mean, z * (1.0 + 0.002 * rng.standard_normal(z.shape)))
+        out = _mixed(z, valid, z * (1.0 + 0.002 * rng.standard_normal(z.shape)))
     else:  # blurred (k: the Gaussian's pixels; 0: 1.5)
         out = _valid_mean(z, valid, lambda a: cv2.GaussianBlur(a, (0, 0), k or 1.5))
     return np.where(valid & (out > 0), out, 0.0).astype(np.float32)
@@ -259,7 +324,7 @@ def main(argv=None) -> int:
                 low = low_resolution(z, k, np.random.default_rng(i))
                 got = resized(family, low, valid)
             else:
-                got = degrade(family, k, z, valid, np.random.default_rng(i))
+                got = degrade(family, k, z, valid, np.random.default_rng(i), float(frame.K.matrix[0, 0]))
             scored = frame.mask & (got > 0)
             for e in entries:
                 errors[e.label].append(mean_angular_error(e.normals(got, frame.K, got > 0), frame.normals, scored))

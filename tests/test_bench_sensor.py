@@ -767,6 +767,57 @@ def test_families_of_noise_filters_and_mixed_pixels():
     assert (np.abs(wider[near] / z[near] - 1.0) > np.abs(blurred[near] / z[near] - 1.0) + 1e-3).all()
 
 
+def test_families_written_later_deliver_what_they_say():
+    """The seven families written later, on a plane beside a step: half floats are float16's values; the disparity
+    families lie on their disparity grid (1/16 px then whole millimetres, 1/8 px) within the noise asked for, and the
+    structured light's error is shared by neighbours (terraces); the block offsets are constant over each 7x7 block;
+    5 % dropped with 0.2 % noise; the bilateral filter smooths and keeps the step; mixed pixels at the step only, in
+    whole millimetres; invalid pixels stay invalid."""
+    script = _benchmark_script("families")
+    H, W, f = 84, 105, 100.0
+    v, u = np.mgrid[0:H, 0:W]
+    plane = 2.0 / (1.0 + 0.002 * (u - 50) + 0.001 * (v - 40))
+    z = np.where(u < 49, plane, 1.5 * plane).astype(np.float32)  # a step of half the depth at column 49
+    valid = np.ones(z.shape, bool)
+    valid[:6, :8] = False
+    z = np.where(valid, z, 0.0).astype(np.float32)
+    away = valid & (np.abs(u - 49) > 4) & (v > 8) & (v < H - 4) & (u > 10) & (u < W - 4)
+
+    def got(family):
+        out = script.degrade(family, 0, z, valid, np.random.default_rng(0), f)
+        assert out.dtype == np.float32 and (out[~valid] == 0).all(), family
+        return out.astype(np.float64)
+
+    np.testing.assert_array_equal(got("float16"), z.astype(np.float16).astype(np.float64))
+    stereo = got("disparity16_mm")
+    np.testing.assert_allclose(stereo[valid] * 1000.0, np.round(stereo[valid] * 1000.0), atol=1e-3)
+    moved = f * 0.05 / stereo[valid] - f * 0.05 / z[valid]  # pixels of disparity
+    assert 0.04 < moved.std() < 0.07 and np.abs(moved).max() < 0.35  # 0.05 px of noise and 1/16 px steps
+    light = got("structured_light")
+    disparity = f * 0.075 / light[valid]
+    np.testing.assert_allclose(disparity * 8.0, np.round(disparity * 8.0), atol=1e-3)  # on the 1/8 px grid
+    assert 0.02 < (disparity - f * 0.075 / z[valid]).std() < 0.08
+    # a tilted plane (its disparity changes by about 0.0075 px a column): terraces several pixels wide
+    same = (light[:, 1:] == light[:, :-1])[(away & (u < 45))[:, 1:]]
+    assert same.mean() > 0.6
+    relative = got("blocks") / np.where(valid, z, 1.0) - 1.0
+    block = relative[14:21, 14:21]  # one whole 7x7 block, away from the step and the hole
+    assert np.ptp(block) < 1e-6 and 0.002 < relative[away].std() < 0.004
+    noisy = got("dropped_noisy")
+    kept = valid & (noisy > 0)
+    assert 0.03 < 1.0 - kept.sum() / valid.sum() < 0.07
+    assert 0.0018 < (noisy[kept] / z[kept] - 1.0).std() < 0.0022
+    filtered = got("bilateral_mm")
+    assert (filtered[away] / z[away] - 1.0).std() < 0.5 * 0.002
+    assert filtered[40, 45] < 1.05 * z[40, 45] and filtered[40, 53] > 0.95 * z[40, 53]  # the step kept
+    flying = got("tof_flying_mm")
+    np.testing.assert_allclose(flying[valid] * 1000.0, np.round(flying[valid] * 1000.0), atol=1e-3)
+    mixed = valid & (np.abs(flying / np.where(valid, z, 1.0) - 1.0) > 0.02)
+    assert mixed.any() and (np.abs(u[mixed] - 49) <= 1).all()
+    for family in script.FAMILIES[script.FAMILIES.index("float16") :]:
+        assert script.parse_family(family) == (family, 0)
+
+
 def test_families_refuses_an_unknown_family_or_factor(capsys):
     """One line naming --families, what it takes and what it got; exit 2."""
     script = _benchmark_script("families")

@@ -818,6 +818,27 @@ def test_families_written_later_deliver_what_they_say():
         assert script.parse_family(family) == (family, 0)
 
 
+@pytest.mark.slow
+def test_stereo_matchers_table(capsys):
+    """benchmarks/stereo_matchers.py on one frame: a row per matcher, the default's ratio to the better estimator
+    computed from the row's own cells; a bad matcher is one line naming --matchers, exit 2."""
+    script = _benchmark_script("stereo_matchers")
+    assert script.main(["--matchers", "sgbm:9,bm:9", "--methods", "auto,adaptive_fit,d2nt_v3", "--frames", "1"]) == 0
+    rows = [
+        line.split("|")[1:-1]
+        for line in capsys.readouterr().out.splitlines()
+        if line.startswith("| sgbm") or line.startswith("| bm")
+    ]
+    assert [r[0].strip() for r in rows] == ["sgbm:9", "bm:9"]
+    for r in rows:
+        auto, fit, d2nt = (float(c) for c in r[1:4])
+        assert float(r[4]) == pytest.approx(auto / min(fit, d2nt), abs=2e-3) and r[5].strip() == "-"
+    for arg in ("sgbm:4", "bm:3", "census:5", "sgbm:x", "sgbm:23"):
+        assert script.main(["--matchers", arg]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "--matchers" in err and repr(arg) in err, err
+
+
 def test_families_refuses_an_unknown_family_or_factor(capsys):
     """One line naming --families, what it takes and what it got; exit 2."""
     script = _benchmark_script("families")

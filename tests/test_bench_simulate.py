@@ -134,3 +134,25 @@ def test_sensor_names_skip_empty_items_and_name_every_unknown_one():
     with pytest.raises(InputError) as info:
         sensor_names("kinect_v1,sonar,kinect_v9")
     assert str(info.value) == f"--sensors: expected some of {', '.join(SENSORS)}, got sonar, kinect_v9"
+
+
+def test_the_stereo_preset_through_other_matchers():
+    """The matcher's block and kind (benchmarks/stereo_matchers.py): the preset's own (5x5 SGBM) to the bit when named;
+    another block, or OpenCV's block matcher, another disparity from the same pair, as dense and at the same depth."""
+    from dataclasses import replace
+
+    v, u = np.mgrid[0:96, 0:128].astype(np.float32)
+    z = 10.0 + 0.02 * u + 0.01 * v  # a tilted plane
+    preset = SENSORS["stereo_sgbm"]
+    Kw = [[500.0, 0.0, 63.5], [0.0, 500.0, 47.5], [0.0, 0.0, 1.0]]
+    seed = frame_seed(0, "plane", "stereo_sgbm")
+    base = simulate(z, Kw, "stereo_sgbm", seed=seed)
+    assert preset.matcher_block == 5 and preset.matcher_kind == "sgbm"
+    np.testing.assert_array_equal(simulate(z, Kw, replace(preset, matcher_block=5), seed=seed), base)
+    wide = simulate(z, Kw, replace(preset, matcher_block=9), seed=seed)
+    bm = simulate(z, Kw, replace(preset, matcher_kind="bm", matcher_block=9), seed=seed)
+    inner = np.s_[16:-16, 56:-8]  # away from the left border that the matchers leave empty (disparities to 48)
+    for other in (wide, bm):
+        assert (other[inner] > 0).mean() > 0.9 and not np.array_equal(other, base)
+        np.testing.assert_allclose(np.median(other[inner]), np.median(base[inner]), rtol=0.02)
+    assert not np.array_equal(wide, bm)

@@ -118,6 +118,8 @@ class Sensor:
     row_run: int = 8  # LiDAR: a scanline wanders a row up or down in runs of this many columns
     smooth_px: float = 0.0  # disparity: a spatial filter's width (edge-preserving, in disparity) before the output
     matcher: bool = False  # disparity: depth from OpenCV's SGBM on a rendered, textured stereo pair (see _stereo)
+    matcher_block: int = 5  # matcher: its block's side (odd)
+    matcher_kind: str = "sgbm"  # matcher: "sgbm" (semi-global) or "bm" (OpenCV's block matcher, StereoBM)
 
 
 #: The RealSense D435 model, also behind a spatial filter (``post_filtered``).
@@ -368,12 +370,14 @@ def _texture(rng, shape) -> np.ndarray:
     return np.clip(t, 0, 255).astype(np.uint8)
 
 
-def _stereo(d: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
+def _stereo(d: np.ndarray, valid: np.ndarray, rng, block: int = 5, kind: str = "sgbm") -> np.ndarray:
     """Disparity as OpenCV's semi-global matcher finds it on a rendered pair: the left view is a random
     texture fixed to the surface (:func:`_texture`; no depth: a far wall with its own texture), the right
     view the same surfaces seen ``d`` pixels to the left (each row warped by the disparity, the nearer
     surface winning), and SGBM (5x5 blocks, P1 = 8 * 25, P2 = 32 * 25, uniqueness 10, speckle filter
-    100 px / 2) matches them. Disparities come in 1/16-pixel fixed point; 0 where SGBM found none."""
+    100 px / 2) matches them. Disparities come in 1/16-pixel fixed point; 0 where SGBM found none.
+    ``block``: the blocks' side (P1 and P2 scale with its square); ``kind`` "bm": OpenCV's block matcher instead
+    (the same uniqueness and speckle filter)."""
     H, W = d.shape
     left = _texture(rng, (H, W))
     far = float(np.min(d[valid])) / 1.3 if valid.any() else 1.0
@@ -387,20 +391,27 @@ def _stereo(d: np.ndarray, valid: np.ndarray, rng) -> np.ndarray:
         seen = x <= np.minimum.accumulate(x[::-1])[::-1]
         right[v] = np.interp(u, x[seen], left[v][seen].astype(np.float64)).astype(np.uint8)
     n_disp = int(16 * np.ceil((float(disp.max()) + 8.0) / 16.0))
-    block = 5
-    sgbm = cv2.StereoSGBM.create(
-        minDisparity=0,
-        numDisparities=n_disp,
-        blockSize=block,
-        P1=8 * block * block,
-        P2=32 * block * block,
-        disp12MaxDiff=1,
-        uniquenessRatio=10,
-        speckleWindowSize=100,
-        speckleRange=2,
-        mode=cv2.STEREO_SGBM_MODE_SGBM,
-    )
-    found = sgbm.compute(left, right).astype(np.float64) / 16.0
+    matcher: cv2.StereoMatcher
+    if kind == "bm":
+        bm = cv2.StereoBM.create(numDisparities=n_disp, blockSize=block)
+        bm.setUniquenessRatio(10)
+        bm.setSpeckleWindowSize(100)
+        bm.setSpeckleRange(2)
+        matcher = bm
+    else:
+        matcher = cv2.StereoSGBM.create(
+            minDisparity=0,
+            numDisparities=n_disp,
+            blockSize=block,
+            P1=8 * block * block,
+            P2=32 * block * block,
+            disp12MaxDiff=1,
+            uniquenessRatio=10,
+            speckleWindowSize=100,
+            speckleRange=2,
+            mode=cv2.STEREO_SGBM_MODE_SGBM,
+        )
+    found = matcher.compute(left, right).astype(np.float64) / 16.0
     return np.where(valid & (found > 0), found, 0.0)
 
 
@@ -474,7 +485,7 @@ def simulate(depth, K, sensor, *, seed, mask=None, normals=None, scale: float | 
     if s.kind == "disparity":
         d = np.where(valid, f * s.baseline_m / np.where(valid, z, 1.0), 0.0)
         if s.matcher:
-            d = _stereo(d, valid, rng)
+            d = _stereo(d, valid, rng, s.matcher_block, s.matcher_kind)
         else:
             noise = s.disparity_noise_px * rng.standard_normal((H, W))
             if s.disparity_corr_px > 0:

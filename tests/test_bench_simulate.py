@@ -156,3 +156,8 @@ def test_the_stereo_preset_through_other_matchers():
         assert (other[inner] > 0).mean() > 0.9 and not np.array_equal(other, base)
         np.testing.assert_allclose(np.median(other[inner]), np.median(base[inner]), rtol=0.02)
     assert not np.array_equal(wide, bm)
+    with pytest.raises(InputError, match="matcher_kind: expected 'sgbm' or 'bm', got 'census'"):
+        replace(preset, matcher_kind="census")
+    for kind, block in (("sgbm", 4), ("bm", 3), ("sgbm", 5.0)):
+        with pytest.raises(InputError, match=f"matcher_block: expected an odd number of pixels .* got {block!r}"):
+            replace(preset, matcher_kind=kind, matcher_block=block)

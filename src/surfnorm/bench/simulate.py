@@ -121,6 +121,17 @@ class Sensor:
     matcher_block: int = 5  # matcher: its block's side (odd)
     matcher_kind: str = "sgbm"  # matcher: "sgbm" (semi-global) or "bm" (OpenCV's block matcher, StereoBM)
 
+    def __post_init__(self):
+        if self.matcher_kind not in ("sgbm", "bm"):
+            raise InputError(f"matcher_kind: expected 'sgbm' or 'bm', got {self.matcher_kind!r}")
+        low, high = (5, 255) if self.matcher_kind == "bm" else (1, 255)  # OpenCV's limits
+        block = self.matcher_block
+        if not (isinstance(block, int) and low <= block <= high and block % 2 == 1):
+            raise InputError(
+                f"matcher_block: expected an odd number of pixels from {low} to {high} for {self.matcher_kind!r}, "
+                f"got {block!r}"
+            )
+
 
 #: The RealSense D435 model, also behind a spatial filter (``post_filtered``).
 _D435 = Sensor(

@@ -711,6 +711,17 @@ def test_families_deliver_what_they_say():
     assert 0.0015 < relative.std() < 0.0025
 
 
+def _plane_beside_a_step(H, W, column):
+    """A tilted plane, 1.5 times as deep from ``column`` on (a step of half the depth), float32, with a hole (no
+    depth) in its top-left corner: (z, valid, v, u)."""
+    v, u = np.mgrid[0:H, 0:W]
+    plane = 2.0 / (1.0 + 0.002 * (u - 50) + 0.001 * (v - 40))
+    valid = np.ones((H, W), bool)
+    valid[:6, :8] = False
+    z = np.where(valid, np.where(u < column, plane, 1.5 * plane), 0.0).astype(np.float32)
+    return z, valid, v, u
+
+
 def test_families_of_noise_filters_and_mixed_pixels():
     """The families after the sensor on a plane beside a step: white noise of the percent asked for; whole
     millimetres without noise; 1 % of outliers far beyond the noise; the bilateral filter keeps the step and
@@ -718,12 +729,7 @@ def test_families_of_noise_filters_and_mixed_pixels():
     the plane by nothing beyond rounding away from the step and never mixes an invalid pixel's 0 into a valid one."""
     script = _benchmark_script("families")
     H, W = 80, 100
-    v, u = np.mgrid[0:H, 0:W]
-    plane = 2.0 / (1.0 + 0.002 * (u - 50) + 0.001 * (v - 40))
-    z = np.where(u < 50, plane, 1.5 * plane).astype(np.float32)  # a step of half the depth at column 50
-    valid = np.ones(z.shape, bool)
-    valid[:6, :8] = False
-    z = np.where(valid, z, 0.0).astype(np.float32)
+    z, valid, v, u = _plane_beside_a_step(H, W, 50)
     rng = np.random.default_rng
     for percent in (0.01, 0.2):
         relative = script.degrade("white", percent, z, valid, rng(0))[valid] / z[valid] - 1.0
@@ -775,12 +781,7 @@ def test_families_written_later_deliver_what_they_say():
     whole millimetres; invalid pixels stay invalid."""
     script = _benchmark_script("families")
     H, W, f = 84, 105, 100.0
-    v, u = np.mgrid[0:H, 0:W]
-    plane = 2.0 / (1.0 + 0.002 * (u - 50) + 0.001 * (v - 40))
-    z = np.where(u < 49, plane, 1.5 * plane).astype(np.float32)  # a step of half the depth at column 49
-    valid = np.ones(z.shape, bool)
-    valid[:6, :8] = False
-    z = np.where(valid, z, 0.0).astype(np.float32)
+    z, valid, v, u = _plane_beside_a_step(H, W, 49)
     away = valid & (np.abs(u - 49) > 4) & (v > 8) & (v < H - 4) & (u > 10) & (u < W - 4)
 
     def got(family):

@@ -214,8 +214,15 @@ def check_choice(name: str, value, choices) -> str:
     return value
 
 
+def check_finite(name: str, value, what: str = "a finite number") -> float:
+    """``value`` as a float where it is a finite real number (not a bool), else an InputError: expected ``what``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise InputError(f"{name}: expected {what}, got {value!r}")
+    return float(value)
+
+
 def check_positive(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value <= 0:
+    if check_finite(name, value, "a positive finite number") <= 0:
         raise InputError(f"{name}: expected a positive finite number, got {value!r}")
     return float(value)
 

@@ -61,8 +61,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import math
-import numbers
 import os
 import sys
 import tempfile
@@ -73,7 +71,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validate import check_bool, check_choice, check_positive
+from .._validate import check_bool, check_choice, check_finite, check_positive
 from ..errors import DataFileError, InputError, MissingDependencyError
 from ._files import as_path, check_npy_header, check_shape, decode_image, read_bytes
 from .threef2n import HEIGHT, WIDTH, read_depth_bin
@@ -307,9 +305,8 @@ def disparity_to_depth(disparity, baseline: float, fx: float, doffs: float = 0.0
     """
     baseline = check_positive("baseline", baseline)
     fx = check_positive("fx", fx)
-    if isinstance(doffs, bool) or not isinstance(doffs, numbers.Real) or not math.isfinite(doffs):  # as check_positive
-        raise InputError(f"doffs: expected a finite number of pixels, got {doffs!r}")
-    d = np.asarray(disparity, dtype=np.float64) + float(doffs)
+    doffs = check_finite("doffs", doffs, "a finite number of pixels")
+    d = np.asarray(disparity, dtype=np.float64) + doffs
     with np.errstate(divide="ignore", invalid="ignore"):
         ok = np.isfinite(d) & (d > 0)
         z = np.where(ok, fx * baseline / np.where(ok, d, 1.0), 0.0)

@@ -197,6 +197,7 @@ class NoiseTables(NamedTuple):
     geometry: torch.Tensor  # (B,) sensor_noise.geometry_share
     grid: torch.Tensor  # (B,) NoiseProfile.grid
     white_noise: torch.Tensor  # (B,) sensor_noise.white_noise_share
+    stride2: torch.Tensor  # (B,) bool: the default stride is 2 (choose_stride), found once for the profile and the fit
 
 
 def _samples(z, valid, f, lo, span):
@@ -378,7 +379,8 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     smooth = torch.where(enough, _sqrt(quiet(xs[1].abs()) * quiet(fourth)) / _SMOOTH_GAUSS, torch.zeros_like(lo))
     # the clipped mean squares per depth bin and stride: of the same samples as the floor on dense depth, of every
     # sample on sparse depth (sensor_noise.noise_profile)
-    binned = torch.where(((choose_stride(valid) == 2) & (first.sum(dim=1) >= MIN_SAMPLES)).view(-1, 1), first, taken)
+    stride2 = choose_stride(valid) == 2
+    binned = torch.where((stride2 & (first.sum(dim=1) >= MIN_SAMPLES)).view(-1, 1), first, taken)
     member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & binned.unsqueeze(1)
     # each bin's floor (NoiseProfile.floors): median |x_1| / 0.6745, NaN with fewer than MIN_SAMPLES samples
     floors = torch.stack(
@@ -462,6 +464,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         torch.where(torch.isnan(rho_median), 0.0, _ramp(rho_median, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH)),
         _grid(z, valid, f),
         white_noise_share(floor, floor2, rho_median),
+        stride2,
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * _reading_weight(reading(tables))
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -879,7 +882,8 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables.
 
     ``stride`` 2: the pixels that are not on an even row and column take their planes from those that are
-    (:func:`_between`); None: per frame (:func:`choose_stride`). Every pixel is fitted all the same (the work
+    (:func:`_between`); None: per frame, as the tables found it (``stride2``, :func:`choose_stride` of the same
+    ``valid``). Every pixel is fitted all the same (the work
     is done for all pixels at once)."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
@@ -889,7 +893,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     else:
         a, g_u, g_v = choice.a, choice.g_u, choice.g_v
     ok = (choice.dof > 0.0) & valid.reshape(-1)
-    stride2 = choose_stride(valid) == 2 if stride is None else torch.full((B,), stride == 2, device=z.device)
+    stride2 = tables.stride2 if stride is None else torch.full((B,), stride == 2, device=z.device)
     # (on the CPU, skipped where no frame has stride 2; elsewhere not asked: no host synchronisation)
     if H > 1 and (z.device.type != "cpu" or bool(stride2.any())):
         a3, gu3, gv3, ok3 = (t.view(B, H, W) for t in (a, g_u, g_v, ok))

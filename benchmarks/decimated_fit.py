@@ -78,6 +78,7 @@ def main(argv=None) -> int:
 
     single_thread()  # LINEMOD on one thread, as in the sensor benchmark; the default on every core, as a user calls it
     import surfnorm
+    from surfnorm.bench.scripts import threef2n_root
     from surfnorm.bench.sensor import (
         alternating_medians,
         find_sensor_frames,
@@ -88,7 +89,7 @@ def main(argv=None) -> int:
     from surfnorm.bench.simulate import frame_seed, sensor_names, simulate
     from surfnorm.camera import Intrinsics
     from surfnorm.errors import InputError
-    from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+    from surfnorm.io.threef2n import find_frames, read_frame
     from surfnorm.metrics import mean_angular_error
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -129,8 +130,7 @@ def main(argv=None) -> int:
     if folders:
         print("\n".join(rows) + "\n")
 
-    root = REPO / "tests" / "data" / "3f2n-sample"
-    root = root if root.is_dir() else Path(sample_root())
+    root = threef2n_root(None, REPO)
     names = find_frames(root)
     rows = ["| simulated sensor | default e_A | decimated e_A (ratio) | binned e_A (ratio) |", "|---|---|---|---|"]
     for s in sensors:

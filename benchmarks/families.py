@@ -286,10 +286,9 @@ def main(argv=None) -> int:
     import cv2
 
     from surfnorm import estimate
-    from surfnorm.bench.sensor import make_entries
+    from surfnorm.bench.scripts import script_entries, threef2n_root
     from surfnorm.bench.simulate import SENSORS, metres_per_unit
-    from surfnorm.errors import SurfnormError
-    from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+    from surfnorm.io.threef2n import find_frames, read_frame
     from surfnorm.metrics import mean_angular_error
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -298,16 +297,11 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="auto,adaptive_fit,d2nt_v3,opencv_linemod_w5,opencv_fals_w5,open3d_knn30")
     ap.add_argument("--frames", type=int, default=None, help="the first N frames only")
     args = ap.parse_args(argv)
-    try:
-        families = [parse_family(f) for f in args.families.split(",")]
-        entries, missing = make_entries(args.methods.split(","))
-    except SurfnormError as exc:
-        print(f"families: {exc}", file=sys.stderr)
+    got = script_entries("families", args.methods, lambda: [parse_family(f) for f in args.families.split(",")])
+    if got is None:
         return 2
-    for name, why in missing.items():
-        print(f"(left out: {name}: {why})")
-    shipped = REPO / "tests" / "data" / "3f2n-sample"
-    root = Path(args.root) if args.root else (shipped if shipped.is_dir() else sample_root())
+    families, entries = got
+    root = threef2n_root(args.root, REPO)
     names = find_frames(root)[: args.frames]
     frames = [read_frame(root, name) for name in names]
     print("| family | " + " | ".join(e.label for e in entries) + " | auto (native) |")

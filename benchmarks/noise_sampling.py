@@ -68,6 +68,7 @@ def main(argv=None) -> int:
     single_thread()  # LINEMOD on one thread; surfnorm's own calls use every core
     import surfnorm
     import surfnorm.kernels.sensor_noise as noise
+    from surfnorm.bench.scripts import threef2n_root
     from surfnorm.bench.sensor import (
         SensorFrame,
         alternating_medians,
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
             f"from {moved.min():+.3f} to {moved.max():+.3f} degrees over {moved.size} frames and crops\n"
         )
 
-    root = REPO / "tests" / "data" / "3f2n-sample"
+    root = threef2n_root(None, REPO)
     names = find_frames(root)
     frames = [read_frame(root, n) for n in names]
     print("| simulated sensor (320x240 crops) | e_A shipped | e_A dense | calibration shipped | calibration dense |")

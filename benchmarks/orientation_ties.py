@@ -19,16 +19,16 @@ import numpy as np
 
 import surfnorm
 from surfnorm._choices import ORIENTATION_TIE
-from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+from surfnorm.bench.scripts import threef2n_root
+from surfnorm.io.threef2n import find_frames, read_frame
 from surfnorm.metrics import mean_angular_error
 
-BESIDE = Path(__file__).resolve().parents[1] / "tests" / "data" / "3f2n-sample"
 METHODS = ["3f2n_mean", "3f2n_median", "sne_roadseg", "sda_sne", "plane_svd", "plane_pca", "vector_svd"]
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("root", nargs="?", default=str(BESIDE if BESIDE.is_dir() else sample_root()))
+    ap.add_argument("root", nargs="?", default=str(threef2n_root(None, Path(__file__).resolve().parents[1])))
     args = ap.parse_args(argv)
     frames = [read_frame(args.root, n) for n in find_frames(args.root)]
     print(f"{len(frames)} frames from {args.root}, ORIENTATION_TIE = {ORIENTATION_TIE:g}\n")

@@ -27,17 +27,16 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-SHARED_SAMPLE = REPO / "tests" / "data" / "3f2n-sample"
 
 
 def main(argv=None) -> int:
     from surfnorm.bench.peers import SENSOR_PEERS, single_thread
 
     threads = single_thread()  # before any peer library is imported
+    from surfnorm.bench.scripts import threef2n_root
     from surfnorm.bench.sensor import make_entries, run_simulated, sim_tables
     from surfnorm.bench.simulate import SENSORS
     from surfnorm.errors import SurfnormError
-    from surfnorm.io.threef2n import sample_root
     from surfnorm.methods import methods
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -57,7 +56,7 @@ def main(argv=None) -> int:
         for s in SENSORS.values():
             print(f"sensor {s.name}: {s.summary}")
         return 0
-    root = Path(args.root) if args.root else (SHARED_SAMPLE if SHARED_SAMPLE.is_dir() else sample_root())
+    root = threef2n_root(args.root, REPO)
     split = lambda s: [x.strip() for x in s.split(",") if x.strip()] if s else None
     try:
         entries, absent = make_entries(split(args.methods))

@@ -22,9 +22,8 @@ import numpy as np
 
 import surfnorm
 from surfnorm import metrics
-from surfnorm.io.threef2n import LEVELS, find_frames, read_frame, sample_root
-
-DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "tests" / "data" / "3f2n-sample"
+from surfnorm.bench.scripts import threef2n_root
+from surfnorm.io.threef2n import LEVELS, find_frames, read_frame
 
 
 def band_of(mask: np.ndarray, width: int = 2) -> np.ndarray:
@@ -43,7 +42,7 @@ def per_level(rows, key):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("root", nargs="?", default=str(DEFAULT_ROOT if DEFAULT_ROOT.is_dir() else sample_root()))
+    ap.add_argument("root", nargs="?", default=str(threef2n_root(None, Path(__file__).resolve().parents[1])))
     ap.add_argument("--methods", default=None)
     ap.add_argument("--json", default=None)
     ap.add_argument(

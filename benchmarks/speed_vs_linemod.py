@@ -40,10 +40,11 @@ def main(argv=None) -> int:
     single_thread()  # LINEMOD on one thread, as in the sensor benchmark; surfnorm's entry names its threads
     import numpy as np
 
+    from surfnorm.bench.scripts import threef2n_root
     from surfnorm.bench.sensor import find_sensor_frames, linemod_entry, make_entries, read_sensor_frame
     from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
     from surfnorm.camera import Intrinsics
-    from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+    from surfnorm.io.threef2n import find_frames, read_frame
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("sensor_dir", nargs="?", default=str(REPO.parent / "shared" / "data" / "sensor-sample"))
@@ -55,8 +56,7 @@ def main(argv=None) -> int:
         return 2
     entries = make_entries(["auto:threads=all"])[0] + [linemod]
     records = []
-    root = REPO / "tests" / "data" / "3f2n-sample"
-    root = root if root.is_dir() else Path(sample_root())
+    root = threef2n_root(None, REPO)
     names = find_frames(root)
     rows = [
         "| frames | n | median ratio | range | median ms, `auto` | median ms, LINEMOD |",

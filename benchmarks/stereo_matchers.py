@@ -42,10 +42,9 @@ def main(argv=None) -> int:
     from surfnorm.bench.peers import single_thread
 
     single_thread()  # before any peer library is imported
-    from surfnorm.bench.sensor import make_entries
+    from surfnorm.bench.scripts import script_entries, threef2n_root
     from surfnorm.bench.simulate import SENSORS, frame_seed, simulate
-    from surfnorm.errors import SurfnormError
-    from surfnorm.io.threef2n import find_frames, read_frame, sample_root
+    from surfnorm.io.threef2n import find_frames, read_frame
     from surfnorm.metrics import mean_angular_error
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -54,16 +53,11 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default=DEFAULT_METHODS)
     ap.add_argument("--frames", type=int, default=None, help="the first N frames only")
     args = ap.parse_args(argv)
-    try:
-        matchers = [parse_matcher(m) for m in args.matchers.split(",")]
-        entries, missing = make_entries(args.methods.split(","))
-    except SurfnormError as exc:
-        print(f"stereo_matchers: {exc}", file=sys.stderr)
+    got = script_entries("stereo_matchers", args.methods, lambda: [parse_matcher(m) for m in args.matchers.split(",")])
+    if got is None:
         return 2
-    for name, why in missing.items():
-        print(f"(left out: {name}: {why})")
-    shipped = REPO / "tests" / "data" / "3f2n-sample"
-    root = Path(args.root) if args.root else (shipped if shipped.is_dir() else sample_root())
+    matchers, entries = got
+    root = threef2n_root(args.root, REPO)
     names = find_frames(root)[: args.frames]
     labels = [e.label for e in entries]
     print(

@@ -931,3 +931,27 @@ def test_resized_frames_resize_and_score_every_factor(tmp_path, capsys):
     assert script.parse_factors("4,7.5,8") == [4, 7.5, 8]
     np.testing.assert_array_equal(script._sampled(10, 2.5), [1, 3, 6, 8])
     np.testing.assert_array_equal(script._sampled(97, 4), np.arange(97)[2::4])
+
+
+def test_benchmark_scripts_read_the_checkouts_frames_and_refuse_in_one_line(tmp_path, capsys):
+    """surfnorm.bench.scripts: the 3F2N root a script reads (given; the checkout's 12 sample frames; else the
+    package's), and its own list with its methods, refused in one line naming the script."""
+    from surfnorm.bench.scripts import script_entries, threef2n_root
+    from surfnorm.errors import InputError
+    from surfnorm.io.threef2n import sample_root
+
+    repo = Path(__file__).resolve().parent.parent
+    assert threef2n_root(str(tmp_path), repo) == tmp_path
+    assert threef2n_root(None, repo) == repo / "tests" / "data" / "3f2n-sample"
+    assert threef2n_root(None, tmp_path) == Path(sample_root())  # a folder without tests/data: the package's frames
+    parsed, entries = script_entries("demo_script", "auto,d2nt_v3", lambda: [1, 2])
+    assert parsed == [1, 2] and [e.label for e in entries] == ["auto", "d2nt_v3"]
+    assert script_entries("demo_script", "no_such_method", lambda: [1]) is None
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("demo_script: methods: expected registered methods"), err
+
+    def refused():
+        raise InputError("--things: expected a thing, got 'x'")
+
+    assert script_entries("demo_script", "auto", refused) is None
+    assert capsys.readouterr().err.strip() == "demo_script: --things: expected a thing, got 'x'"

@@ -381,14 +381,14 @@ def _texture(rng, shape) -> np.ndarray:
     return np.clip(t, 0, 255).astype(np.uint8)
 
 
-def _stereo(d: np.ndarray, valid: np.ndarray, rng, block: int = 5, kind: str = "sgbm") -> np.ndarray:
+def _stereo(d: np.ndarray, valid: np.ndarray, rng, block: int, kind: str) -> np.ndarray:
     """Disparity as OpenCV's semi-global matcher finds it on a rendered pair: the left view is a random
     texture fixed to the surface (:func:`_texture`; no depth: a far wall with its own texture), the right
     view the same surfaces seen ``d`` pixels to the left (each row warped by the disparity, the nearer
     surface winning), and SGBM (5x5 blocks, P1 = 8 * 25, P2 = 32 * 25, uniqueness 10, speckle filter
     100 px / 2) matches them. Disparities come in 1/16-pixel fixed point; 0 where SGBM found none.
-    ``block``: the blocks' side (P1 and P2 scale with its square); ``kind`` "bm": OpenCV's block matcher instead
-    (the same uniqueness and speckle filter)."""
+    ``block``: the blocks' side (P1 and P2 scale with its square; ``Sensor.matcher_block``, 5 for the preset);
+    ``kind`` "bm": OpenCV's block matcher instead (the same uniqueness and speckle filter)."""
     H, W = d.shape
     left = _texture(rng, (H, W))
     far = float(np.min(d[valid])) / 1.3 if valid.any() else 1.0

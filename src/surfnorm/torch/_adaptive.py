@@ -883,8 +883,7 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
 
     ``stride`` 2: the pixels that are not on an even row and column take their planes from those that are
     (:func:`_between`); None: per frame, as the tables found it (``stride2``, :func:`choose_stride` of the same
-    ``valid``). Every pixel is fitted all the same (the work
-    is done for all pixels at once)."""
+    ``valid``). Every pixel is fitted all the same (the work is done for all pixels at once)."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
     px, z_p, I_flat, choice, limit = _setup(z, valid, cam, tables, window=window, max_window=max_window)

@@ -47,6 +47,13 @@ Seven more, written later as a check of the default on families it was not tuned
   camera SDK's edge-keeping spatial filter after its millimetre output;
 - ``tof_flying_mm``: 1.5 mm + 0.1 % of depth of noise, mixed pixels at depth edges (as ``flying``), whole millimetres.
 
+Two more, written later still (checks, in no list): depth completed from a LiDAR's samples
+(:func:`surfnorm.bench.completion.scanlines`: every 4th row, half of its pixels, 0.02 % noise):
+
+- ``scan_inpaint``: completed by OpenCV's inpainting (:func:`surfnorm.bench.completion.inpainted`);
+- ``scan_ipbasic``: completed by the classical recipe of Ku et al. (:func:`surfnorm.bench.completion.ipbasic_completed`:
+  dilations, a median and a Gaussian).
+
 The scene's background is no depth (0), as the simulator's sensors see it; every family keeps invalid pixels invalid.
 
 Per family and method: e_A in degrees (mean over the frames of the mean angle to the exact normals over the object's
@@ -87,6 +94,8 @@ FAMILIES = (
     "dropped_noisy",
     "bilateral_mm",
     "tof_flying_mm",
+    "scan_inpaint",
+    "scan_ipbasic",
 )
 DEFAULT = (
     "upsampled_linear:4,upsampled_linear:5,upsampled_linear:6,upsampled_linear:8,upsampled_linear:12,"
@@ -199,9 +208,14 @@ def _mixed(z: np.ndarray, valid: np.ndarray, noisy: np.ndarray) -> np.ndarray:
 
 
 def _later(family: str, z: np.ndarray, valid: np.ndarray, rng, f: float) -> np.ndarray:
-    """The seven families written later (see the module docstring), unmasked."""
+    """The families written later (see the module docstring), unmasked."""
     import cv2
 
+    if family.startswith("scan_"):
+        from surfnorm.bench.completion import inpainted, ipbasic_completed, scanlines
+
+        samples = scanlines(z, valid, rng)
+        return inpainted(samples) if family == "scan_inpaint" else ipbasic_completed(samples)
     if family == "float16":
         return z.astype(np.float16)
     if family == "disparity16_mm":

@@ -575,6 +575,74 @@ def test_sensor_folder_refuses_a_pfm_ground_truth_it_cannot_read(tmp_path, capsy
     assert not out.exists()
 
 
+def test_sensor_variants_fill_quantise_and_complete_a_plane_keeping_its_reference(tmp_path, capsys):
+    """benchmarks/sensor_variants.py on two frames of one tilted plane: a dense one with a square hole and a sparse
+    one (every fourth row, LiDAR-like). Filled, the hole lies within 1 % of the plane, the rest as it was; in 8 bits the depth takes at most 256 values, each within half a level of the true depth; each
+    completion of the sparse frame gives dense depth on the plane, the nearest sample exactly a sample's depth.
+    K.json and planes.npz are the source's; the variants that do not apply are said; a variant it does not know,
+    and wls without OpenCV's contrib modules, one line and exit 2."""
+    import cv2
+
+    script = _benchmark_script("sensor_variants")
+    H, W, f = 120, 160, 300.0
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    plane = (1.0 / (0.5 + 0.0008 * (u - W / 2) + 0.0005 * (v - H / 2))).astype(np.float32)  # 1.6-2.4 m
+    src = tmp_path / "src"
+    dense, sparse = plane.copy(), np.zeros_like(plane)
+    dense[40:60, 60:90] = 0.0
+    sparse[::4] = plane[::4]
+    for name, z in (("dense", dense), ("sparse", sparse)):
+        (src / name).mkdir(parents=True)
+        np.save(src / name / "depth.npy", z)
+        (src / name / "K.json").write_text(json.dumps({"fx": f, "fy": f, "cx": (W - 1) / 2, "cy": (H - 1) / 2}))
+        np.savez_compressed(src / name / "planes.npz", normals=np.array([[0.0, 0.0, -1.0]]), masks=z[None] > 0)
+    out = tmp_path / "out"
+    assert script.main([str(src), str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "dense: completed_inpaint left out: not a sparse frame (97% valid)" in said
+    assert "sparse: filled left out: not a dense frame with holes (25% valid)" in said
+    made = sorted(p.name for p in out.iterdir())
+    assert made == [
+        "dense_8bit",
+        "dense_filled",
+        "sparse_8bit",
+        "sparse_completed_inpaint",
+        "sparse_completed_ipbasic",
+        "sparse_completed_nearest",
+    ]
+    for name in made:
+        source = src / name.split("_")[0]
+        assert (out / name / "K.json").read_text() == (source / "K.json").read_text()
+        assert (out / name / "planes.npz").read_bytes() == (source / "planes.npz").read_bytes()
+        assert "sensor_variants.py" in json.loads((out / name / "meta.json").read_text())["variant"]
+    filled = np.load(out / "dense_filled" / "depth.npy")
+    assert (filled > 0).all()
+    np.testing.assert_array_equal(filled[dense > 0], plane[dense > 0])
+    np.testing.assert_allclose(filled[40:60, 60:90], plane[40:60, 60:90], rtol=1e-2)  # within 2.5 cm at 2 m
+    levels = np.load(out / "dense_8bit" / "depth.npy")
+    assert len(np.unique(levels[levels > 0])) <= 256 and not levels[40:60, 60:90].any()
+    step = (plane.max() - plane.min()) / 255
+    assert np.abs(levels - dense)[dense > 0].max() <= 0.5001 * step
+    nearest = np.load(out / "sparse_completed_nearest" / "depth.npy")
+    assert (nearest > 0).all() and np.isin(nearest, plane[::4]).all()
+    for name in ("sparse_completed_inpaint", "sparse_completed_ipbasic"):
+        z = np.load(out / name / "depth.npy")
+        inner = np.s_[8:-8, 8:-8]
+        assert (z[inner] > 0).all()
+        assert np.median(np.abs(z[inner] / plane[inner] - 1.0)) < 0.01
+    assert script.main([str(src), str(tmp_path / "x"), "--variants", "filled,blurred"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "sensor_variants: --variants: expected some of filled, 8bit, completed_inpaint, completed_nearest, "
+        "completed_ipbasic, wls, got 'blurred'"
+    )
+    if not hasattr(cv2, "ximgproc"):
+        assert script.main([str(src), str(tmp_path / "x"), "--variants", "wls"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == "sensor_variants: wls needs OpenCV's contrib modules (opencv-contrib-python-headless)"
+    assert not (tmp_path / "x").exists()
+
+
 @pytest.mark.parametrize("block", ["4", "3", "0"])
 def test_sensor_folder_refuses_a_block_the_matcher_cannot_take(block, tmp_path, capsys):
     """An even block, or one under 5 for the block matcher: one line naming --block, what it takes and what it got;
@@ -815,8 +883,37 @@ def test_families_written_later_deliver_what_they_say():
     np.testing.assert_allclose(flying[valid] * 1000.0, np.round(flying[valid] * 1000.0), atol=1e-3)
     mixed = valid & (np.abs(flying / np.where(valid, z, 1.0) - 1.0) > 0.02)
     assert mixed.any() and (np.abs(u[mixed] - 49) <= 1).all()
-    for family in script.FAMILIES[script.FAMILIES.index("float16") :]:
+    for family in script.FAMILIES[script.FAMILIES.index("float16") : script.FAMILIES.index("scan_inpaint")]:
         assert script.parse_family(family) == (family, 0)
+
+
+def test_families_of_completed_scanlines():
+    """The two completion families on a plane beside a step: the samples (surfnorm.bench.completion.scanlines) lie on
+    every 4th row only, about half of each row's valid pixels, within the noise asked for of the depth; inpainted,
+    every valid pixel gets depth, within 0.4 % of the plane in the median away from the step (2 % at most); by Ku
+    et al.'s recipe too, with each side of the
+    step kept (dilation of inverse depth keeps the nearer side up to the step); invalid pixels stay invalid."""
+    from surfnorm.bench.completion import scanlines
+
+    script = _benchmark_script("families")
+    H, W = 84, 105
+    z, valid, v, u = _plane_beside_a_step(H, W, 49)
+    samples = scanlines(z, valid, np.random.default_rng(0), every=4, noise=0.01)
+    rows = np.flatnonzero((samples > 0).any(axis=1))
+    assert np.ptp(rows % 4) == 0 and rows.size == H // 4
+    kept = samples > 0
+    assert 0.4 < kept[rows].mean() < 0.6 and not (kept & ~valid).any()
+    assert 0.008 < (samples[kept] / z[kept] - 1.0).std() < 0.012
+    away = valid & (np.abs(u - 49) > 6) & (v > 10) & (v < H - 6) & (u > 12) & (u < W - 6)
+    for family in ("scan_inpaint", "scan_ipbasic"):
+        assert script.parse_family(family) == (family, 0)
+        out = script.degrade(family, 0, z, valid, np.random.default_rng(0))
+        assert out.dtype == np.float32 and (out[~valid] == 0).all() and (out[valid] > 0).all(), family
+        # on the plane away from the step, within about 1 cm at 2 m (the filling's error: the samples' is 0.02 %)
+        assert np.median(np.abs(out[away] / z[away] - 1.0)) < 0.004, family
+        assert np.abs(out[away] / z[away] - 1.0).max() < 0.02, family
+    ipbasic = script.degrade("scan_ipbasic", 0, z, valid, np.random.default_rng(0))
+    assert ipbasic[40, 45] < 1.05 * z[40, 45] and ipbasic[40, 53] > 0.95 * z[40, 53]
 
 
 @pytest.mark.slow

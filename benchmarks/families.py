@@ -48,10 +48,10 @@ Seven more, written later as a check of the default on families it was not tuned
 - ``tof_flying_mm``: 1.5 mm + 0.1 % of depth of noise, mixed pixels at depth edges (as ``flying``), whole millimetres.
 
 Two more, written later still (checks, in no list): depth completed from a LiDAR's samples
-(:func:`surfnorm.bench.completion.scanlines`: every 4th row, half of its pixels, 0.02 % noise):
+(:func:`surfnorm.bench.processing.scanlines`: every 4th row, half of its pixels, 0.02 % noise):
 
-- ``scan_inpaint``: completed by OpenCV's inpainting (:func:`surfnorm.bench.completion.inpainted`);
-- ``scan_ipbasic``: completed by the classical recipe of Ku et al. (:func:`surfnorm.bench.completion.ipbasic_completed`:
+- ``scan_inpaint``: completed by OpenCV's inpainting (:func:`surfnorm.bench.processing.inpainted`);
+- ``scan_ipbasic``: completed by the classical recipe of Ku et al. (:func:`surfnorm.bench.processing.ipbasic_completed`:
   dilations, a median and a Gaussian).
 
 The scene's background is no depth (0), as the simulator's sensors see it; every family keeps invalid pixels invalid.
@@ -212,7 +212,7 @@ def _later(family: str, z: np.ndarray, valid: np.ndarray, rng, f: float) -> np.n
     import cv2
 
     if family.startswith("scan_"):
-        from surfnorm.bench.completion import inpainted, ipbasic_completed, scanlines
+        from surfnorm.bench.processing import inpainted, ipbasic_completed, scanlines
 
         samples = scanlines(z, valid, rng)
         return inpainted(samples) if family == "scan_inpaint" else ipbasic_completed(samples)

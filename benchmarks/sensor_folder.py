@@ -50,6 +50,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+# the matchers (and their default blocks), shared with sensor_variants.py
+from surfnorm.bench.processing import BLOCKS, stereo_disparity
+
 MAX_PLANES = 5
 MIN_PIXELS = 2000
 
@@ -95,40 +98,6 @@ def reference_planes(depth: np.ndarray, fx: float, fy: float, cx: float, cy: flo
     if not normals:
         return np.zeros((0, 3)), np.zeros((0, H, W), bool), threshold
     return np.array(normals), np.array(masks), threshold
-
-
-#: Block sizes the matchers take when ``--block`` is not given.
-BLOCKS = {"sgbm": 5, "bm": 9}
-
-
-def stereo_disparity(left: np.ndarray, right: np.ndarray, largest: float, matcher: str = "sgbm", block=None):
-    """Disparity (pixels, float64; <= 0 where the matcher gave none) of a rectified colour pair (H, W, 3) by OpenCV's
-    semi-global matcher (``"sgbm"``) or its block matcher (``"bm"``, on the grey images: block matching alone,
-    with its fronto-parallel patches and without SGBM's smoothness terms), searching up to the multiple of 16
-    above ``largest`` + 8 (the ground truth's largest disparity); ``block``: the block's side (default
-    :data:`BLOCKS`)."""
-    block = BLOCKS[matcher] if block is None else block
-    n_disp = int(16 * np.ceil((largest + 8.0) / 16.0))
-    if matcher == "bm":
-        bm = cv2.StereoBM.create(numDisparities=n_disp, blockSize=block)
-        bm.setUniquenessRatio(10)
-        bm.setSpeckleWindowSize(100)
-        bm.setSpeckleRange(2)
-        grey = [cv2.cvtColor(x, cv2.COLOR_BGR2GRAY) for x in (left, right)]
-        return bm.compute(*grey).astype(np.float64) / 16.0
-    sgbm = cv2.StereoSGBM.create(
-        minDisparity=0,
-        numDisparities=n_disp,
-        blockSize=block,
-        P1=8 * 3 * block * block,
-        P2=32 * 3 * block * block,
-        disp12MaxDiff=1,
-        uniquenessRatio=10,
-        speckleWindowSize=100,
-        speckleRange=2,
-        mode=cv2.STEREO_SGBM_MODE_SGBM,
-    )
-    return sgbm.compute(left, right).astype(np.float64) / 16.0
 
 
 def stereo_depth(disparity: np.ndarray, fx: float, baseline: float, doffs: float = 0.0) -> np.ndarray:

@@ -35,7 +35,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from surfnorm.bench.completion import inpainted, ipbasic_completed, nearest_filled
+from surfnorm.bench.processing import inpainted, ipbasic_completed, nearest_filled, sgbm_matcher
 
 VARIANTS = ("filled", "8bit", "completed_inpaint", "completed_nearest", "completed_ipbasic", "wls")
 #: A frame with under this share of its pixels valid is sparse (completed), else dense (filled).
@@ -71,19 +71,7 @@ def wls_depth(folder: Path, z: np.ndarray) -> np.ndarray:
     if not hasattr(cv2, "ximgproc"):
         raise RuntimeError("wls: needs OpenCV's contrib modules (pip install opencv-contrib-python-headless)")
     left, right = (cv2.imread(str(folder / f"raw_{side}.png"), cv2.IMREAD_COLOR) for side in ("left", "right"))
-    block = 5
-    sgbm = cv2.StereoSGBM.create(
-        minDisparity=0,
-        numDisparities=16,  # set below
-        blockSize=block,
-        P1=8 * 3 * block * block,
-        P2=32 * 3 * block * block,
-        disp12MaxDiff=1,
-        uniquenessRatio=10,
-        speckleWindowSize=100,
-        speckleRange=2,
-        mode=cv2.STEREO_SGBM_MODE_SGBM,
-    )
+    sgbm = sgbm_matcher(16)  # the range set below
     # f B and the offset from the folder's SGBM depth (1 / z = (d + doffs) / (f B) where the two matchers agree: a
     # first pass over a wide range, :func:`_line`), then the search
     # range from the ground truth's nearest depth, as sensor_folder.py sets it

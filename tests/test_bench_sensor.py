@@ -888,12 +888,12 @@ def test_families_written_later_deliver_what_they_say():
 
 
 def test_families_of_completed_scanlines():
-    """The two completion families on a plane beside a step: the samples (surfnorm.bench.completion.scanlines) lie on
+    """The two completion families on a plane beside a step: the samples (surfnorm.bench.processing.scanlines) lie on
     every 4th row only, about half of each row's valid pixels, within the noise asked for of the depth; inpainted,
     every valid pixel gets depth, within 0.4 % of the plane in the median away from the step (2 % at most); by Ku
     et al.'s recipe too, with each side of the
     step kept (dilation of inverse depth keeps the nearer side up to the step); invalid pixels stay invalid."""
-    from surfnorm.bench.completion import scanlines
+    from surfnorm.bench.processing import scanlines
 
     script = _benchmark_script("families")
     H, W = 84, 105

@@ -1,13 +1,22 @@
-"""Depth made dense after the sensor, as processing does it: holes inpainted, sparse samples (LiDAR scanlines)
-completed. For the benchmark scripts (``benchmarks/sensor_variants.py`` on real frames, ``benchmarks/families.py`` on
-the 3F2N frames); OpenCV does the filling."""
+"""What processing does to depth before normals are asked of it, for the benchmark scripts: holes inpainted, sparse
+samples (LiDAR scanlines) completed, a rectified pair matched by OpenCV's stereo matchers
+(``benchmarks/sensor_folder.py`` and ``benchmarks/sensor_variants.py`` on real frames, ``benchmarks/families.py`` on
+the 3F2N frames). OpenCV does the work."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-__all__ = ["inpainted", "nearest_filled", "ipbasic_completed", "scanlines"]
+__all__ = [
+    "inpainted",
+    "nearest_filled",
+    "ipbasic_completed",
+    "scanlines",
+    "BLOCKS",
+    "sgbm_matcher",
+    "stereo_disparity",
+]
 
 
 def inpainted(z: np.ndarray) -> np.ndarray:
@@ -57,3 +66,43 @@ def scanlines(z: np.ndarray, valid: np.ndarray, rng, every: int = 4, noise: floa
     kept = valid[rows] & (rng.random((rows.size, z.shape[1])) < 0.5)
     out[rows] = np.where(kept, z[rows] * (1.0 + noise * rng.standard_normal(kept.shape)), 0.0)
     return out
+
+
+#: Block sizes the matchers take when none is given.
+BLOCKS = {"sgbm": 5, "bm": 9}
+
+
+def sgbm_matcher(n_disp: int, block: int = 5):
+    """OpenCV's semi-global matcher as the sensor frames' stereo depth is made: ``block`` x ``block`` blocks on colour
+    images, P1 = 8 * 3 * block^2, P2 = 32 * 3 * block^2, disp12MaxDiff 1, uniqueness 10, speckle window 100 and
+    range 2, disparities 0 .. ``n_disp`` - 1 (a multiple of 16)."""
+    return cv2.StereoSGBM.create(
+        minDisparity=0,
+        numDisparities=n_disp,
+        blockSize=block,
+        P1=8 * 3 * block * block,
+        P2=32 * 3 * block * block,
+        disp12MaxDiff=1,
+        uniquenessRatio=10,
+        speckleWindowSize=100,
+        speckleRange=2,
+        mode=cv2.STEREO_SGBM_MODE_SGBM,
+    )
+
+
+def stereo_disparity(left: np.ndarray, right: np.ndarray, largest: float, matcher: str = "sgbm", block=None):
+    """Disparity (pixels, float64; <= 0 where the matcher gave none) of a rectified colour pair (H, W, 3) by OpenCV's
+    semi-global matcher (``"sgbm"``: :func:`sgbm_matcher`) or its block matcher (``"bm"``, on the grey images: block
+    matching alone, with its fronto-parallel patches and without SGBM's smoothness terms; the same uniqueness and
+    speckle filter), searching up to the multiple of 16 above ``largest`` + 8 (the ground truth's largest
+    disparity); ``block``: the block's side (default :data:`BLOCKS`)."""
+    block = BLOCKS[matcher] if block is None else block
+    n_disp = int(16 * np.ceil((largest + 8.0) / 16.0))
+    if matcher == "bm":
+        bm = cv2.StereoBM.create(numDisparities=n_disp, blockSize=block)
+        bm.setUniquenessRatio(10)
+        bm.setSpeckleWindowSize(100)
+        bm.setSpeckleRange(2)
+        grey = [cv2.cvtColor(x, cv2.COLOR_BGR2GRAY) for x in (left, right)]
+        return bm.compute(*grey).astype(np.float64) / 16.0
+    return sgbm_matcher(n_disp, block).compute(left, right).astype(np.float64) / 16.0

@@ -13,15 +13,16 @@ variant's depth.npy (float32 metres, 0 where none), for the variants that apply 
   8-bit image or a visualisation of depth holds it;
 - ``completed_inpaint``, ``completed_nearest``, ``completed_ipbasic``: a sparse frame (under half of its pixels
   valid: LiDAR) completed to dense depth: by the same inpainting, by the nearest valid pixel, or by the classical
-  recipe of Ku et al. (CRV 2018; :func:`surfnorm.bench.completion.ipbasic_completed`);
+  recipe of Ku et al. (CRV 2018; :func:`surfnorm.bench.processing.ipbasic_completed`);
 - ``wls``: a stereo frame (sensor_folder.py's ``stereo``: raw_left.png, raw_right.png and gt_depth.npy) matched
   again by the same SGBM and smoothed by the weighted-least-squares filter of OpenCV's ximgproc (lambda 8000, sigma
   colour 1.5, with the right view's matcher), as OpenCV's stereo tutorial does; the depth from the filtered
   disparity with the frame's own f B and offset (fitted to its SGBM depth: 1 / z is affine in the disparity). Needs
   OpenCV's contrib modules (``pip install opencv-contrib-python-headless``, in place of OpenCV).
 
-The reference planes (or a rendered frame's gt.npy) stay those of the source frame (found on its depth or its stereo ground truth), so the variants
-are scored on the same pixels. A variant that does not apply to a frame is left out, and said.
+The reference planes (or a rendered frame's gt.npy) stay those of the source frame (found on its depth or on its
+stereo ground truth), so the variants are scored on the same pixels. A variant that does not apply to a frame is left
+out, and said.
 """
 
 from __future__ import annotations
@@ -73,8 +74,8 @@ def wls_depth(folder: Path, z: np.ndarray) -> np.ndarray:
     left, right = (cv2.imread(str(folder / f"raw_{side}.png"), cv2.IMREAD_COLOR) for side in ("left", "right"))
     sgbm = sgbm_matcher(16)  # the range set below
     # f B and the offset from the folder's SGBM depth (1 / z = (d + doffs) / (f B) where the two matchers agree: a
-    # first pass over a wide range, :func:`_line`), then the search
-    # range from the ground truth's nearest depth, as sensor_folder.py sets it
+    # first pass over a wide range, then _line), then the search range from the ground truth's nearest depth, as
+    # sensor_folder.py sets it
     gt = np.load(folder / "gt_depth.npy")
     sgbm.setNumDisparities(min(256, 16 * (left.shape[1] // 32)))
     first = sgbm.compute(left, right).astype(np.float64) / 16.0

@@ -50,8 +50,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-# the matchers (and their default blocks), shared with sensor_variants.py
-from surfnorm.bench.processing import BLOCKS, stereo_disparity
+# the matchers (and their default blocks) and depth from disparity, shared with sensor_variants.py
+from surfnorm.bench.processing import BLOCKS, stereo_depth, stereo_disparity
 
 MAX_PLANES = 5
 MIN_PIXELS = 2000
@@ -98,14 +98,6 @@ def reference_planes(depth: np.ndarray, fx: float, fy: float, cx: float, cy: flo
     if not normals:
         return np.zeros((0, 3)), np.zeros((0, H, W), bool), threshold
     return np.array(normals), np.array(masks), threshold
-
-
-def stereo_depth(disparity: np.ndarray, fx: float, baseline: float, doffs: float = 0.0) -> np.ndarray:
-    """Depth f B / (d + doffs) (float32) where the disparity ``d`` is known (above 0: a matcher's none is -1, a
-    ground truth's 0), 0 elsewhere."""
-    from surfnorm.io import disparity_to_depth
-
-    return disparity_to_depth(np.where(disparity > 0, disparity, np.nan), baseline, fx, doffs=doffs)
 
 
 def write(out: Path, depth, K: dict, planes_from, raw: dict, meta: dict) -> None:
@@ -208,14 +200,23 @@ def main(argv=None) -> int:
     gt = np.where(np.isfinite(gt) & (gt > 0), gt, 0.0) / args.gt_scale
     K = intrinsics(*gt.shape)
     block = BLOCKS[args.matcher] if args.block is None else args.block
-    disparity = stereo_disparity(left, right, float(gt.max()), args.matcher, block)
+    largest = float(gt.max())
+    disparity = stereo_disparity(left, right, largest, args.matcher, block)
     depth = stereo_depth(disparity, K["fx"], args.baseline, args.doffs)
     gt_depth = stereo_depth(gt, K["fx"], args.baseline, args.doffs)
     raw = {f"raw_{k}{p.suffix}": p for k, p in (("left", args.left), ("right", args.right), ("gt", args.gt))}
     name = {"sgbm": "SGBM", "bm": "StereoBM"}[args.matcher]
     formula = f"f B / (d + {args.doffs:g})" if args.doffs else "f B / d"
     depth_text = f"OpenCV {name}, {block}x{block} blocks (benchmarks/sensor_folder.py), {formula}"
-    meta = {"source": args.source, "depth": depth_text, "K": K}
+    # what made the depth, for a later matcher on the same pair (sensor_variants.py's WLS variant)
+    stereo = {
+        "matcher": args.matcher,
+        "block": block,
+        "largest": largest,
+        "baseline": args.baseline,
+        "doffs": args.doffs,
+    }
+    meta = {"source": args.source, "depth": depth_text, "K": K, "stereo": stereo}
     write(args.out, depth, K, gt_depth, raw, meta)
     np.save(args.out / "gt_depth.npy", gt_depth)
     return 0

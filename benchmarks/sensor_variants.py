@@ -14,11 +14,11 @@ variant's depth.npy (float32 metres, 0 where none), for the variants that apply 
 - ``completed_inpaint``, ``completed_nearest``, ``completed_ipbasic``: a sparse frame (under half of its pixels
   valid: LiDAR) completed to dense depth: by the same inpainting, by the nearest valid pixel, or by the classical
   recipe of Ku et al. (CRV 2018; :func:`surfnorm.bench.processing.ipbasic_completed`);
-- ``wls``: a stereo frame (sensor_folder.py's ``stereo``: raw_left.png, raw_right.png and gt_depth.npy) matched
-  again by the same SGBM and smoothed by the weighted-least-squares filter of OpenCV's ximgproc (lambda 8000, sigma
-  colour 1.5, with the right view's matcher), as OpenCV's stereo tutorial does; the depth from the filtered
-  disparity with the frame's own f B and offset (fitted to its SGBM depth: 1 / z is affine in the disparity). Needs
-  OpenCV's contrib modules (``pip install opencv-contrib-python-headless``, in place of OpenCV).
+- ``wls``: an SGBM stereo frame (sensor_folder.py's ``stereo``: raw_left.png, raw_right.png, and the matcher, its
+  range, the baseline and the offset in meta.json) matched again by the same SGBM and smoothed by the
+  weighted-least-squares filter of OpenCV's ximgproc (lambda 8000, sigma colour 1.5, with the right view's matcher),
+  as OpenCV's stereo tutorial does; the depth from the filtered disparity as the folder's. Needs OpenCV's contrib
+  modules (``pip install opencv-contrib-python-headless``, in place of OpenCV).
 
 The reference planes (or a rendered frame's gt.npy) stay those of the source frame (found on its depth or on its
 stereo ground truth), so the variants are scored on the same pixels. A variant that does not apply to a frame is left
@@ -36,7 +36,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from surfnorm.bench.processing import inpainted, ipbasic_completed, nearest_filled, sgbm_matcher
+from surfnorm.bench.processing import (
+    inpainted,
+    ipbasic_completed,
+    nearest_filled,
+    search_range,
+    sgbm_matcher,
+    stereo_depth,
+)
 
 VARIANTS = ("filled", "8bit", "completed_inpaint", "completed_nearest", "completed_ipbasic", "wls")
 #: A frame with under this share of its pixels valid is sparse (completed), else dense (filled).
@@ -51,47 +58,19 @@ def levels_8bit(z: np.ndarray) -> np.ndarray:
     return np.where(ok, lo + q * (hi - lo) / 255.0, 0.0).astype(np.float32)
 
 
-def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """(a, b) of y = a x + b on the pairs that lie on one line, to 0.1 % of y, among others that do not: the line
-    through two of them that most pairs lie on (200 draws, seed 0), then least squares on those."""
-    rng = np.random.default_rng(0)
-    best = np.zeros(x.shape, bool)
-    for i, j in rng.integers(0, x.size, (200, 2)):
-        if x[i] == x[j]:
-            continue
-        a = (y[i] - y[j]) / (x[i] - x[j])
-        on = np.abs(a * x + (y[i] - a * x[i]) - y) <= 1e-3 * y
-        if on.sum() > best.sum():
-            best = on
-    (a, b), *_ = np.linalg.lstsq(np.stack([x[best], np.ones(best.sum())], 1), y[best], rcond=None)
-    return float(a), float(b)
-
-
-def wls_depth(folder: Path, z: np.ndarray) -> np.ndarray:
-    """The ``wls`` variant of a stereo frame folder (see the module docstring)."""
-    if not hasattr(cv2, "ximgproc"):
-        raise RuntimeError("wls: needs OpenCV's contrib modules (pip install opencv-contrib-python-headless)")
+def wls_depth(folder: Path, stereo: dict, fx: float) -> np.ndarray:
+    """The ``wls`` variant of an SGBM stereo frame folder: its pair matched again by the SGBM that made it
+    (``stereo``: meta.json's record of it; ``fx``: K.json's), smoothed by the WLS filter (see the module docstring),
+    the depth as the folder's."""
     left, right = (cv2.imread(str(folder / f"raw_{side}.png"), cv2.IMREAD_COLOR) for side in ("left", "right"))
-    sgbm = sgbm_matcher(16)  # the range set below
-    # f B and the offset from the folder's SGBM depth (1 / z = (d + doffs) / (f B) where the two matchers agree: a
-    # first pass over a wide range, then _line), then the search range from the ground truth's nearest depth, as
-    # sensor_folder.py sets it
-    gt = np.load(folder / "gt_depth.npy")
-    sgbm.setNumDisparities(min(256, 16 * (left.shape[1] // 32)))
-    first = sgbm.compute(left, right).astype(np.float64) / 16.0
-    ok = (z > 0) & (first > 0)
-    d_ok, w_ok = first[ok], 1.0 / z[ok].astype(np.float64)
-    a, b = _line(d_ok, w_ok)
-    fb, doffs = 1.0 / a, b / a
-    largest = fb / float(gt[np.isfinite(gt) & (gt > 0)].min()) - doffs
-    sgbm.setNumDisparities(int(16 * np.ceil((largest + 8.0) / 16.0)))
+    sgbm = sgbm_matcher(search_range(stereo["largest"]), stereo["block"])
     d_left = sgbm.compute(left, right)
     d_right = cv2.ximgproc.createRightMatcher(sgbm).compute(right, left)
     wls = cv2.ximgproc.createDisparityWLSFilter(sgbm)
     wls.setLambda(8000.0)
     wls.setSigmaColor(1.5)
     d = wls.filter(d_left, left, disparity_map_right=d_right).astype(np.float64) / 16.0
-    return np.where(d > 0, fb / np.where(d > 0, d + doffs, 1.0), 0.0).astype(np.float32)
+    return stereo_depth(d, fx, stereo["baseline"], stereo["doffs"])
 
 
 def variant(name: str, folder: Path, z: np.ndarray) -> np.ndarray | str:
@@ -108,9 +87,11 @@ def variant(name: str, folder: Path, z: np.ndarray) -> np.ndarray | str:
             return f"not a sparse frame ({share:.0%} valid)"
         fill = {"completed_inpaint": inpainted, "completed_nearest": nearest_filled}.get(name, ipbasic_completed)
         return fill(z)
-    if not all((folder / f).is_file() for f in ("raw_left.png", "raw_right.png", "gt_depth.npy")):
-        return "not a stereo frame (raw_left.png, raw_right.png, gt_depth.npy)"
-    return wls_depth(folder, z)
+    meta = json.loads((folder / "meta.json").read_text()) if (folder / "meta.json").is_file() else {}
+    stereo = meta.get("stereo", {})
+    if stereo.get("matcher") != "sgbm" or not all((folder / f).is_file() for f in ("raw_left.png", "raw_right.png")):
+        return "not an SGBM stereo frame of sensor_folder.py (raw_left.png, raw_right.png, meta.json's stereo)"
+    return wls_depth(folder, stereo, float(json.loads((folder / "K.json").read_text())["fx"]))
 
 
 def main(argv=None) -> int:

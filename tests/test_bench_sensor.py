@@ -560,7 +560,16 @@ def test_sensor_folder_stereo_takes_a_pfm_ground_truth_and_doffs(tmp_path):
     n = np.array([0.0006 * fx, 0.0, 0.55 - 0.0006 * (W / 2 - (W - 1) / 2)])  # eq. (2) at the image centre
     assert planes["masks"].shape[0] >= 1 and planes["masks"][0].sum() > 5000
     assert np.degrees(np.arccos(abs(planes["normals"][0] @ n) / np.linalg.norm(n))) < 1.0
-    assert "f B / (d + 20)" in json.loads((out / "meta.json").read_text())["depth"]
+    meta = json.loads((out / "meta.json").read_text())
+    assert "f B / (d + 20)" in meta["depth"]
+    # what made the depth, for a later matcher on the pair (sensor_variants.py's wls)
+    assert meta["stereo"] == {
+        "matcher": "sgbm",
+        "block": 5,
+        "largest": float(stored[:, 12:].max()),
+        "baseline": 0.2,
+        "doffs": 20.0,
+    }
 
 
 def test_sensor_folder_refuses_a_pfm_ground_truth_it_cannot_read(tmp_path, capsys):
@@ -579,8 +588,9 @@ def test_sensor_variants_fill_quantise_and_complete_a_plane_keeping_its_referenc
     """benchmarks/sensor_variants.py on two frames of one tilted plane: a dense one with a square hole and a sparse
     one (every fourth row, LiDAR-like). Filled, the hole lies within 1 % of the plane, the rest as it was; in 8 bits the depth takes at most 256 values, each within half a level of the true depth; each
     completion of the sparse frame gives dense depth on the plane, the nearest sample exactly a sample's depth.
-    K.json and planes.npz are the source's; the variants that do not apply are said; a variant it does not know,
-    and wls without OpenCV's contrib modules, one line and exit 2."""
+    K.json and planes.npz are the source's; the variants that do not apply are said (wls: on a frame that is not an
+    SGBM stereo folder); a variant it does not know, wls without OpenCV's contrib modules and a folder without frames,
+    one line and exit 2."""
     import cv2
 
     script = _benchmark_script("sensor_variants")
@@ -640,6 +650,13 @@ def test_sensor_variants_fill_quantise_and_complete_a_plane_keeping_its_referenc
         assert script.main([str(src), str(tmp_path / "x"), "--variants", "wls"]) == 2
         err = capsys.readouterr().err.strip()
         assert err == "sensor_variants: wls needs OpenCV's contrib modules (opencv-contrib-python-headless)"
+    assert script.variant("wls", src / "dense", dense) == (
+        "not an SGBM stereo frame of sensor_folder.py (raw_left.png, raw_right.png, meta.json's stereo)"
+    )
+    assert script.main([str(tmp_path / "none"), str(tmp_path / "x"), "--variants", "8bit"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("sensor_variants: sensor dataset: expected a folder of frame folders") and "\n" not in err
+    assert err.endswith(f"got {tmp_path / 'none'}")
     assert not (tmp_path / "x").exists()
 
 

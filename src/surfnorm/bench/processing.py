@@ -14,8 +14,10 @@ __all__ = [
     "ipbasic_completed",
     "scanlines",
     "BLOCKS",
+    "search_range",
     "sgbm_matcher",
     "stereo_disparity",
+    "stereo_depth",
 ]
 
 
@@ -90,14 +92,20 @@ def sgbm_matcher(n_disp: int, block: int = 5):
     )
 
 
+def search_range(largest: float) -> int:
+    """The matchers' number of disparities: the multiple of 16 above ``largest`` + 8 (the ground truth's largest
+    disparity)."""
+    return int(16 * np.ceil((largest + 8.0) / 16.0))
+
+
 def stereo_disparity(left: np.ndarray, right: np.ndarray, largest: float, matcher: str = "sgbm", block=None):
     """Disparity (pixels, float64; <= 0 where the matcher gave none) of a rectified colour pair (H, W, 3) by OpenCV's
     semi-global matcher (``"sgbm"``: :func:`sgbm_matcher`) or its block matcher (``"bm"``, on the grey images: block
     matching alone, with its fronto-parallel patches and without SGBM's smoothness terms; the same uniqueness and
-    speckle filter), searching up to the multiple of 16 above ``largest`` + 8 (the ground truth's largest
-    disparity); ``block``: the block's side (default :data:`BLOCKS`)."""
+    speckle filter), over :func:`search_range` of ``largest``; ``block``: the block's side (default
+    :data:`BLOCKS`)."""
     block = BLOCKS[matcher] if block is None else block
-    n_disp = int(16 * np.ceil((largest + 8.0) / 16.0))
+    n_disp = search_range(largest)
     if matcher == "bm":
         bm = cv2.StereoBM.create(numDisparities=n_disp, blockSize=block)
         bm.setUniquenessRatio(10)
@@ -106,3 +114,11 @@ def stereo_disparity(left: np.ndarray, right: np.ndarray, largest: float, matche
         grey = [cv2.cvtColor(x, cv2.COLOR_BGR2GRAY) for x in (left, right)]
         return bm.compute(*grey).astype(np.float64) / 16.0
     return sgbm_matcher(n_disp, block).compute(left, right).astype(np.float64) / 16.0
+
+
+def stereo_depth(disparity: np.ndarray, fx: float, baseline: float, doffs: float = 0.0) -> np.ndarray:
+    """Depth f B / (d + doffs) (float32) where the disparity ``d`` is known (above 0: a matcher's none is -1, a
+    ground truth's 0), 0 elsewhere."""
+    from ..io import disparity_to_depth
+
+    return disparity_to_depth(np.where(disparity > 0, disparity, np.nan), baseline, fx, doffs=doffs)

@@ -3,7 +3,8 @@
 Written from the module docstring of surfnorm.kernels.adaptive_fit, not from its kernels: the
 noise profile from the second differences of inverse depth at strides a, 2a, 4a, the
 radius ladder, the sparse growth, the noise test, the widening, the quadrant windows, and the pixels
-between the fitted ones (stride 2: fits on the even rows and columns only).
+between the fitted ones (stride 2: fits on the even rows and columns only; stride 4: on every fourth row and
+column, each pixel taking the planes of its 4x4 cell's corners).
 """
 
 from __future__ import annotations
@@ -35,9 +36,9 @@ def noise_profile(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_sampl
 
 
 def binned_first(valid, first, min_samples):
-    """Whether the depth bins take the stencils at gap 1 alone, as the floor: on dense depth (the fit's stride 2)
-    where there are min_samples of them; on sparse depth (stride 1: LiDAR lines) every stencil."""
-    return stride_for(valid) == 2 and first.sum() >= min_samples
+    """Whether the depth bins take the stencils at gap 1 alone, as the floor: on dense depth (the fit's stride 2 or
+    4) where there are min_samples of them; on sparse depth (stride 1: LiDAR lines) every stencil."""
+    return stride_for(valid) > 1 and first.sum() >= min_samples
 
 
 def bin_floors(z, valid, f, *, n_bins=8, samples=12_000, max_gap=4, min_samples=64):
@@ -204,11 +205,25 @@ def _fit(z, valid, v, u, vc, uc, r):
 
 
 def stride_for(valid, max_unreached=0.01):
-    """2 unless more than ``max_unreached`` of the valid pixels off the even rows and columns have no valid
-    pixel of an even row and column within two rows and two columns of them."""
+    """4 unless more than ``max_unreached`` of the valid pixels off every fourth row and column have no valid pixel
+    among the four fitted pixels at the corners of their 4x4 cell; else 2 unless more than ``max_unreached`` of the
+    valid pixels off the even rows and columns have no valid pixel of an even row and column within two rows and
+    two columns of them."""
     H, W = valid.shape
     if H < 2 or W < 2:
         return 1
+    total = unreached = 0
+    for v in range(H):
+        for u in range(W):
+            if not valid[v, u] or (v % 4 == 0 and u % 4 == 0):
+                continue
+            total += 1
+            r0, c0 = v - v % 4, u - u % 4
+            corners = [(r0, c0), (r0, c0 + 4), (r0 + 4, c0), (r0 + 4, c0 + 4)]
+            if not any(p < H and q < W and valid[p, q] for p, q in corners):
+                unreached += 1
+    if unreached <= max_unreached * max(total, 1):
+        return 4
     total = unreached = 0
     for v in range(H):
         for u in range(W):
@@ -300,7 +315,12 @@ def adaptive_fit(
         for u in range(W):
             if not valid[v, u]:
                 continue
-            if v % stride == 0 and u % stride == 0:
+            if stride == 4:
+                pick = cell_plane(planes, v, u, 1.0 / z32[v, u])
+                if pick is None:
+                    continue
+                a, gu, gv = pick
+            elif v % stride == 0 and u % stride == 0:
                 if (v, u) not in planes:
                     continue
                 a, gu, gv, _ = planes[v, u]
@@ -344,6 +364,39 @@ def adaptive_fit(
             nvec = np.array([fx * gu, fy * gv, a - gu * (u - cx) - gv * (v - cy)])
             out[v, u] = -nvec / np.linalg.norm(nvec)
     return out
+
+
+def cell_plane(planes, v, u, wp):
+    """Stride 4: the plane at pixel (v, u) from the fitted pixels at the corners of its 4x4 cell (rows v - v % 4 and
+    4 below, columns likewise), each weighted by the pixel's bilinear place in the cell, each carried to the pixel:
+    the weighted mean of those of weight above 0 whose plane predicts wp within their noise limit; else the one of
+    weight above 0 that predicts it closest (a tie, to a thousandth, goes to the earlier, in reading order); else the
+    closest of the four; None where none of the four has a plane."""
+    r0, c0 = v - v % 4, u - u % 4
+    fv, fu = (v - r0) / 4, (u - c0) / 4
+    corners = [
+        (r0, c0, (1 - fu) * (1 - fv)),
+        (r0, c0 + 4, fu * (1 - fv)),
+        (r0 + 4, c0, (1 - fu) * fv),
+        (r0 + 4, c0 + 4, fu * fv),
+    ]
+    found = []
+    for p, q, weight in corners:
+        if (p, q) in planes:
+            ac, guc, gvc, lim = planes[p, q]
+            found.append((ac + guc * (u - q) + gvc * (v - p), guc, gvc, lim, weight))
+    within = [f for f in found if f[4] > 0 and (f[0] - wp) ** 2 <= f[3]]
+    if within:
+        total = sum(f[4] for f in within)
+        return tuple(sum(f[4] * f[i] for f in within) / total for i in range(3))
+    for group in ([f for f in found if f[4] > 0], found):
+        best, pick = np.inf, None
+        for ap, guc, gvc, _, _ in group:
+            if (ap - wp) ** 2 < best * (1 - 1e-3):
+                best, pick = (ap - wp) ** 2, (ap, guc, gvc)
+        if pick is not None:
+            return pick
+    return None
 
 
 def blend(a, b, t, fill):

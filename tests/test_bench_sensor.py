@@ -341,39 +341,10 @@ def test_decimated_fit_keeps_a_tilted_planes_normal_and_its_holes(variant):
     assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.15
 
 
-@pytest.mark.slow  # compiles a copy of the band kernel (about 20 s)
-def test_stride4_assembly_carries_each_sides_plane_across_a_step():
-    """benchmarks/stride4_assembly.py: two tilted planes meeting at a depth step off the fitted grid, and a hole. The
-    copied kernel gives adaptive_fit's normals (checked to the bit inside), and both carryings give every pixel with
-    depth its own plane's normal: the corners across the step fail the noise test (without it, 183 pixels take a
-    mean across the step, up to 44 degrees off), and the hole gets none."""
-    from surfnorm.camera import Intrinsics
-
-    script = _benchmark_script("stride4_assembly")
-    H, W = 61, 83
-    cam = Intrinsics(300.0, 310.0, 47.3, 25.8)
-    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
-    ray = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones_like(u)], axis=-1)
-    n_a, n_b = np.array([0.3, -0.4, -1.0]), np.array([-0.5, 0.2, -1.0])
-    n_a, n_b = n_a / np.linalg.norm(n_a), n_b / np.linalg.norm(n_b)
-    right = u >= 41  # not a fitted column of either stride
-    z = np.where(right, -3.0 / (ray @ n_b), -2.0 / (ray @ n_a)).astype(np.float32)
-    z[10:14, 20:30] = 0.0
-    truth = np.where(right[..., None], n_b, n_a)
-    got = script.variants(z, cam)
-    assert set(got) == {"adaptive_fit", "carried, stride 2", "carried, stride 4"}
-    for name, n in got.items():
-        assert np.all(n[10:14, 20:30] == 0.0), name
-        has = z > 0
-        assert np.all(np.any(n[has] != 0.0, axis=-1)), name
-        angle = np.degrees(np.arccos(np.clip(np.sum(n[has] * truth[has], axis=-1), -1.0, 1.0)))
-        assert angle.max() < 0.05, name  # float32 depth: 0.015 degrees
-
-
 def test_integral_positions_order_columns_by_remainder():
-    """The integral rows' columns ordered by their remainder modulo the stride (as stride4_assembly.py's timing of
-    the band kernel at stride 4 needs): in order at stride 1, the even columns then the odd ones at stride 2, and a
-    window edge one place further per fitted pixel at stride 4 (what its box sums read)."""
+    """The integral rows' columns ordered by their remainder modulo the stride: in order at stride 1, the even columns
+    then the odd ones at stride 2, and a window edge one place further per fitted pixel at stride 4 (what the box sums
+    of its rows read)."""
     from surfnorm.kernels._windows import integral_positions
 
     for W in (7, 8, 640, 641):
@@ -387,7 +358,7 @@ def test_integral_positions_order_columns_by_remainder():
         np.testing.assert_array_equal(pos[u + 4], pos[u] + 1)
 
 
-@pytest.mark.parametrize("name", ["decimated_fit", "stride4_assembly"])
+@pytest.mark.parametrize("name", ["decimated_fit"])
 def test_benchmark_script_refuses_an_unknown_sensor_in_one_line(name, monkeypatch, capsys):
     script = _benchmark_script(name)
     monkeypatch.setattr(peers_mod, "single_thread", lambda: {})

@@ -200,15 +200,16 @@ def test_mirroring_mirrors_n_x(method, scene):
         if 0.0 < t < 1.0:
             return
         method = "d2nt_v3" if t == 0.0 else "adaptive_fit"
-    if method == "adaptive_fit" and w % 2 == 0:
-        # stride 2 fits the even columns: mirrored, an even width makes them odd ones, which take the planes of
-        # their neighbours instead (the same normals to within that interpolation, not to the bit); and the
-        # choice of stride counts the pixels that no fitted one reaches, which differ between the two (one may
-        # take stride 1, the other 2)
+    if method == "adaptive_fit":
+        # stride s fits every s-th column from the first: mirrored, they are the fitted columns again only where
+        # s divides w - 1; elsewhere the mirrored frame's fitted columns take the planes of their neighbours
+        # instead (the same normals to within that interpolation, not to the bit); and the choice of stride counts
+        # the pixels that no fitted one reaches, which differ between the two (one may take 4, the other 2 or 1)
         from surfnorm.kernels._schedule import choose_stride
 
         valid = np.isfinite(z) & (z > 0) & (np.ones(z.shape, bool) if mask is None else mask)
-        if choose_stride(valid) == 2 or choose_stride(valid[:, ::-1].copy()) == 2:
+        strides = {choose_stride(valid), choose_stride(valid[:, ::-1].copy())}
+        if len(strides) > 1 or any((w - 1) % s for s in strides):
             n = surfnorm.estimate(z, cam, method=method, mask=mask, fill=np.nan, stride=1)
             m = surfnorm.estimate(
                 z[:, ::-1], cam.flipped_lr(w), method=method, mask=mask[:, ::-1], fill=np.nan, stride=1

@@ -393,13 +393,14 @@ class TestAdaptive:
         masks = np.random.default_rng(seed).random(depth.shape) > 0.1
         assert_parity(depth, masks, Ks, method + "+mnr", {"fill": -3.0}, names)
 
-    @pytest.mark.parametrize("stride", [1, 2])
+    @pytest.mark.parametrize("stride", [1, 2, 4])
     def test_strides(self, stride):
         # every frame at the same stride, whatever its density (the default chooses per frame: above)
         from surfnorm.kernels._schedule import choose_stride
 
         depth = np.stack([sensor_like(seed=5), sensor_like(seed=6, holes=0.5), sensor_like(seed=7, holes=0.2)])
-        assert [choose_stride(d > 0) for d in depth] == [2, 1, 2]  # otherwise the default shows nothing new
+        depth[2][::4, ::4] = 0.0  # no cell has a valid corner; the even rows and columns have valid pixels near all
+        assert [choose_stride(d > 0) for d in depth] == [4, 1, 2]  # otherwise the default shows nothing new
         assert_parity(depth, None, np.stack([K, K, K]), "adaptive_fit", {"stride": stride}, ["a", "sparse", "b"])
 
     def test_auto_chooses_per_frame(self):
@@ -523,16 +524,17 @@ class TestAdaptiveGradients:
 
     def test_gradient_only_from_the_chosen_window(self):
         # a pixel's normal depends on the depths of its window only: a finite window, not the whole frame
-        depth = sensor_like(seed=1).astype(np.float64)
+        depth = sensor_like(h=112, w=144, seed=1).astype(np.float64)
         z = torch.from_numpy(depth).requires_grad_()
-        n = st.estimate(z, K, method="adaptive_fit")
-        v, u = 30, 15
-        (g,) = torch.autograd.grad(n[0, 2, v, u], z)
-        rows, cols = torch.nonzero(g, as_tuple=True)
-        assert len(rows) > 8
-        # within max_window // 2 of the fitted pixels it takes its plane from (stride 2: up to two rows and
-        # columns away), not the whole frame
-        assert (rows - v).abs().max() <= 15 + 2 and (cols - u).abs().max() <= 15 + 2
+        n = st.estimate(z, np.array([[100.0, 0, 71.5], [0, 100.0, 55.5], [0, 0, 1]]), method="adaptive_fit")
+        far = 2 * 15 + 4  # a window of radius up to max_window // 2, shifted by its radius (the edge test's
+        # quadrants), about a fitted pixel up to four rows and columns away (stride 4: its cell's corners)
+        for v, u in ((56, 72), (60, 30), (40, 101)):
+            (g,) = torch.autograd.grad(n[0, 2, v, u], z, retain_graph=True)
+            # window sums are differences of integral images: elsewhere their gradients cancel, to rounding (1e-17)
+            rows, cols = torch.nonzero(g.abs() > 1e-12 * g.abs().max(), as_tuple=True)
+            assert len(rows) > 8
+            assert (rows - v).abs().max() <= far and (cols - u).abs().max() <= far, (v, u)
 
     @pytest.mark.parametrize("seed,expected", [(1, "adaptive_fit"), (11, "d2nt_v3")])
     def test_auto_gradient_is_its_choice(self, seed, expected):

@@ -88,17 +88,24 @@ def test_sigma_of_an_exact_plane_with_known_noise_is_the_analytic_one(r, sigma_w
     assert _one_fit_sigma(r, sigma_w) == pytest.approx(_analytic_sigma_deg(PLANE, r, sigma_w, u, v), rel=0.10)
 
 
-def test_on_a_plane_with_white_noise_sigma_is_the_rms_error():
+@pytest.mark.parametrize("stride", [2, None])
+def test_on_a_plane_with_white_noise_sigma_is_the_rms_error(stride):
     """End to end: adaptive_fit's normals on a tilted plane with white noise in inverse depth, against the
-    plane's exact normals; sigma without its floor predicts their RMS error within 10 %."""
+    plane's exact normals; sigma without its floor predicts their RMS error within 10 % at stride 2. The default
+    here, stride 4, spreads the corners' variances over each cell as its planes are, and its bilinear means of
+    neighbouring planes (whose windows overlap, so their errors are correlated) are more accurate than that mean
+    of variances says: sigma is 1.16 times the RMS error, on the safe side, and not more than 1.25 times."""
     z, K = _noisy_plane(3e-3, shape=(240, 320))
     exact = surfnorm.estimate(_noisy_plane(0.0, shape=(240, 320))[0], K, method="adaptive_fit")
-    n, sigma = surfnorm.estimate(z, K, method="adaptive_fit", uncertainty=True)
+    n, sigma = surfnorm.estimate(z, K, method="adaptive_fit", uncertainty=True, stride=stride)
     inner = (slice(20, -20), slice(20, -20))
     error = np.degrees(np.arccos(np.clip(np.sum(n * exact, -1), -1.0, 1.0)))[inner]
     rms_error = math.sqrt(np.mean(np.square(error.astype(np.float64))))
     rms_sigma = math.sqrt(np.mean(np.square(_core(sigma[inner]))))
-    assert rms_sigma == pytest.approx(rms_error, rel=0.10)
+    if stride == 2:
+        assert rms_sigma == pytest.approx(rms_error, rel=0.10)
+    else:
+        assert 1.0 <= rms_sigma / rms_error <= 1.25, (rms_sigma, rms_error)
 
 
 def test_a_quadrant_window_is_less_certain_at_its_corner():
@@ -283,6 +290,52 @@ def _naive_spread(has, var, floor):
                 continue
             out[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * np.mean(near) + floor**2), U.MAX_DEG)
     return out
+
+
+def _naive_spread_cells(has, var, floor):
+    """sigma from the fitted pixels' variances (stride 4), written from the docstring: the mean of the variances of
+    the pixel's 4x4 cell's corners of weight above 0 that have one, weighted bilinearly by its place in the cell (a
+    fitted pixel its own); where none of those has one, the plain mean of the four corners' that have one."""
+    H, W = has.shape
+    out = np.full((H, W), np.nan)
+    for v in range(H):
+        for u in range(W):
+            if not has[v, u]:
+                continue
+            fv, fu = (v % 4) / 4, (u % 4) / 4
+            corners = []
+            for di, wv in ((0, 1 - fv), (1, fv)):
+                for dj, wu in ((0, 1 - fu), (1, fu)):
+                    i, j = v // 4 + di, u // 4 + dj
+                    if i < var.shape[0] and j < var.shape[1] and not np.isnan(var[i, j]):
+                        corners.append((wv * wu, var[i, j]))
+            weighted = [(w, x) for w, x in corners if w > 0]
+            if weighted:
+                mean = sum(w * x for w, x in weighted) / sum(w for w, _ in weighted)
+            elif corners:
+                mean = np.mean([x for _, x in corners])
+            else:
+                out[v, u] = U.NO_FIT_DEG
+                continue
+            out[v, u] = min(math.sqrt(math.degrees(1.0) ** 2 * mean + floor**2), U.MAX_DEG)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(9, 11), (10, 12), (7, 6), (13, 17)])
+def test_spread_of_cells_against_a_naive_reference(shape):
+    rng = np.random.default_rng(sum(shape))
+    H, W = shape
+    var = rng.uniform(0, 0.01, ((H + 3) // 4, (W + 3) // 4))
+    var[rng.random(var.shape) < 0.4] = np.nan
+    has = rng.random(shape) < 0.8
+    normals = np.zeros(shape + (3,), np.float32)
+    normals[has] = (0.0, 0.6, -0.8)
+    out = U.sigma_from_fits(np.ones(shape, bool), normals, var, 4, floor=1.5)
+    np.testing.assert_allclose(out, _naive_spread_cells(has, var, 1.5), rtol=1e-6)
+    out_bands = U.sigma_from_fits(
+        np.ones(shape, bool), normals, var, 4, floor=1.5, bands=lambda f, n: [f(0, 3), f(3, n)]
+    )
+    np.testing.assert_array_equal(out, out_bands)
 
 
 @pytest.mark.parametrize("shape", [(9, 11), (10, 12), (7, 6)])
@@ -609,7 +662,7 @@ def test_the_noise_correlation_leaves_the_curvature_out():
     assert S.noise_profile(z, valid, f).correlation > 2.0
 
 
-@pytest.mark.parametrize("stride", [1, 2])
+@pytest.mark.parametrize("stride", [1, 2, 4])
 @pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("fill", [0.0, np.nan])
 def test_the_fit_records_which_pixels_hold_a_normal(stride, threads, fill):

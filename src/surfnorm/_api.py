@@ -211,7 +211,8 @@ def estimate(
         (``sigma``), from the estimator's own fit: its residual, its support
         and the frame's noise (see :mod:`surfnorm.kernels.uncertainty`). For
         ``auto`` (whatever it runs on the frame), ``adaptive_fit`` and
-        ``d2nt_v3``; other methods raise InputError.
+        ``d2nt_v3``; other methods raise InputError. The normals are the
+        same bits with and without it.
     **options
         The method's options (see ``surfnorm.methods()[name].options``), e.g.
         ``dlf``, ``tau``, ``truncate``, ``mnr_dlf``, ``fill``.

@@ -111,6 +111,9 @@ _SMOOTH_SAMPLES = 4096
 #: sensor benchmark have 0-0.16 % (NYU's Kinect v1 frame the most), 3F2N frames through the simulated
 #: cameras at most 0.6 %; LiDAR 7.5 % (the KITTI frame) and 40-60 % (simulated).
 MAX_UNREACHED = 0.01
+#: The side of the cells of ``adaptive_fit``'s ``stride`` 4, its default on dense depth (surfnorm.kernels._assembly.cell_row):
+#: windows on every CELL-th row and column, each pixel taking the planes of its cell's four corners.
+CELL = 4
 #: Entries of the depth -> (radius, rho) look-up table, linear in depth between the nearest and farthest.
 _TABLE = 512
 #: The shifted windows of the edge test: the four quadrants (Kuwahara), each with the pixel at a corner, (dv, du) / r.

@@ -556,9 +556,9 @@ def _check_window_or_none(name, value):
 def _check_stride(name, value):
     if value is None:
         return None
-    if isinstance(value, int) and not isinstance(value, bool) and value in (1, 2):
+    if isinstance(value, int) and not isinstance(value, bool) and value in (1, 2, 4):
         return value
-    raise InputError(f"{name}: expected 1, 2 or None, got {value!r}")
+    raise InputError(f"{name}: expected 1, 2, 4 or None, got {value!r}")
 
 
 ADAPTIVE_OPTIONS = {
@@ -580,8 +580,11 @@ ADAPTIVE_OPTIONS = {
         _check_stride,
         "1: every pixel's own window; 2: windows on every other row and column, the pixels between taking the "
         "planes of the fitted pixels next to them (their mean, or the closest at an edge; a quarter of the fits); "
-        "None: 2 unless the depth is sparse",
-        "1, 2, or None",
+        "4: windows on every fourth row and column, each pixel taking the planes of its 4x4 cell's corners (their "
+        "bilinear mean, or the closest at an edge; a sixteenth of the fits); None: 4 where every pixel but a few has a "
+        "valid fitted pixel at a corner of its cell, else 2 unless the depth is sparse (LiDAR: 1); with "
+        "uncertainty=True at most 2, the stride its sigma is calibrated at",
+        "1, 2, 4, or None",
     ),
 }
 
@@ -618,7 +621,13 @@ register(
                 DAG_OPTIONS["tau"].check,
                 "softness tau of d2nt_v3's softmin (eq. 13), where auto picks d2nt_v3",
                 DAG_OPTIONS["tau"].allowed,
-            )
+            ),
+            "stride": Option(
+                None,
+                _check_stride,
+                "adaptive_fit's stride where auto runs it (see adaptive_fit); None: adaptive_fit's default",
+                "1, 2, 4, or None",
+            ),
         },
         ties=True,
         relative=True,

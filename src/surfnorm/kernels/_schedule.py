@@ -20,7 +20,7 @@ from .._aot import ahead_of_time
 from .._bands import Offers, Part, whole
 from .._config import njit
 from .._constants import MAX_UNREACHED
-from ._assembly import first_fitted_row
+from ._assembly import CELL, first_fitted_row
 from ._spare import Spares
 from ._windows import _N_COLUMNS, _N_MOMENTS, integral_positions, prime
 
@@ -72,6 +72,39 @@ def _unreached(valid):
 
 @ahead_of_time
 @njit
+def _unreached_cells(valid):
+    """(pixels that no valid fitted pixel reaches, valid pixels that are not fitted) with ``stride`` ``CELL``: a pixel
+    reaches the four corners of its cell (:func:`surfnorm.kernels._assembly.cell_row`). Row by row, branch-free."""
+    H, W = valid.shape
+    n_cols = (W + CELL - 1) // CELL
+    top = np.zeros(n_cols + 1, np.uint8)  # the cell's corners valid: the fitted pixels of the rows above and below
+    bottom = np.zeros(n_cols + 1, np.uint8)
+    either = np.zeros(W, np.uint8)  # per pixel of a row: any of its cell's corners valid
+    not_fitted = np.ones(W, np.uint8)
+    not_fitted[::CELL] = 0
+    unreached = 0
+    others = 0
+    for v in range(H):
+        if v % CELL == 0:
+            t = v
+            b = v + CELL
+            for j in range(n_cols):
+                top[j] = valid[t, CELL * j]
+                bottom[j] = valid[b, CELL * j] if b < H else 0
+            for u in range(W):
+                j = u // CELL
+                either[u] = top[j] | top[j + 1] | bottom[j] | bottom[j + 1]
+        row = valid[v]
+        fitted_row = v % CELL == 0
+        for u in range(W):
+            other = row[u] & (not_fitted[u] | ~fitted_row & 1)
+            others += other
+            unreached += other & ~either[u] & 1
+    return unreached, others
+
+
+@ahead_of_time
+@njit
 def _band_weights(valid, stride, factors):
     """Each row's cost on several threads (see :func:`adaptive_fit`): a quarter of the width, plus its valid
     pixels over ``stride`` on the fitted rows (every ``stride``-th), times its ``factors`` (:class:`Balance`)."""
@@ -105,13 +138,18 @@ def _balanced(factors, weights, edges, spent):
 
 
 def choose_stride(valid: np.ndarray) -> int:
-    """The default ``stride``: 2, unless more than MAX_UNREACHED of the valid pixels that are not fitted (not
-    on an even row and column) have no valid fitted pixel in their 5x5 neighbourhood (sparse depth: LiDAR),
-    then 1."""
+    """The default ``stride``: 4 (``CELL``), unless more than MAX_UNREACHED of the valid pixels that are not fitted
+    (not on every fourth row and column) have no valid fitted pixel at the corners of their 4x4 cell; then 2,
+    unless more than MAX_UNREACHED of the valid pixels that are not fitted (not on an even row and column) have
+    no valid fitted pixel in their 5x5 neighbourhood (sparse depth: LiDAR); then 1."""
     H, W = valid.shape
     if H < 2 or W < 2:
         return 1
-    unreached, others = _unreached(np.ascontiguousarray(valid, dtype=np.bool_))
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    unreached, others = _unreached_cells(valid)
+    if unreached <= MAX_UNREACHED * max(others, 1):
+        return CELL
+    unreached, others = _unreached(valid)
     return 2 if unreached <= MAX_UNREACHED * max(others, 1) else 1
 
 

@@ -459,6 +459,7 @@ def auto(
     tie_tol: float = 0.0,
     relative: float = 0.0,
     record: dict | None = None,
+    stride: int | None = None,
     **bands,
 ) -> np.ndarray:
     """``d2nt_v3`` (its defaults, and ``tau``) on clean depth, ``adaptive_fit`` on sensor depth, and their
@@ -466,6 +467,7 @@ def auto(
 
     ``tau`` is d2nt_v3's (in depth units, as there), an option so that the paper-faithful mode's range rescale
     of extreme depth (:mod:`surfnorm.units`) scales it with the depth.
+    ``stride`` is ``adaptive_fit``'s (None: its default).
     ``tie_tol`` and ``relative`` are the scale-invariant mode's, passed on to ``d2nt_v3``
     (``adaptive_fit`` does not depend on the unit of depth); the row ``bands`` of one frame on several
     threads go to both, and to their blend or check. ``record``: as ``adaptive_fit``'s, and ``"weight"``,
@@ -476,7 +478,7 @@ def auto(
 
     # adaptive_fit first: its bands make their integral rows while the calling thread measures the noise; the
     # decision, once it is known: fit (sensor depth, and the blend's share), or nothing written (d2nt_v3 alone).
-    frame = FitPlan(z, valid, cam, out, fill=fill, record=record)
+    frame = FitPlan(z, valid, cam, out, fill=fill, record=record, stride=stride)
     measured: list[NoiseProfile] = []
     checked: list = []
 

@@ -82,7 +82,7 @@ import numpy as np
 from .._bands import whole
 from .._config import njit, pixel, select
 from .._constants import CORRELATION_WIDTH, KAPPA, RHO_FLOOR
-from ._assembly import holds_normal, mark_row
+from ._assembly import CELL, holds_normal, mark_row
 from ._rows import valid_span
 from ._windows import noise_limit, radius_table, table_entry
 from .sensor_noise import adaptive_weight, noise_profile, stride_gain
@@ -269,6 +269,50 @@ def _pair_sums(var, i, W, total, count):
 
 
 @njit(nogil=True)
+def _spread_cells(has, var, floor2, no_fit, out, v0, v1):
+    """:func:`_spread` with ``stride`` ``CELL``: a pixel with a normal the mean of the variances of its 4x4 cell's
+    corners of weight above 0 that have one, weighted bilinearly as its plane was (:func:`_assembly.cell_row`; a
+    fitted pixel its own); where none of those has one, the plain mean of the four corners' that have one; else
+    ``no_fit``."""
+    Hf, Wf = var.shape
+    W = has.shape[1]
+    s = float(CELL)
+    for v in range(v0, v1):
+        i = v // CELL
+        f_v = (v % CELL) / s
+        row = out[v]
+        has_row = has[v]
+        for u in range(W):
+            if not has_row[u]:
+                row[u] = np.nan
+                continue
+            j = u // CELL
+            f_u = (u % CELL) / s
+            total = 0.0
+            weights = 0.0
+            near = 0.0
+            k = 0
+            for di in range(2):
+                for dj in range(2):
+                    if i + di >= Hf or j + dj >= Wf:
+                        continue
+                    x = var[i + di, j + dj]
+                    if not x == x:
+                        continue
+                    w = (f_v if di else 1.0 - f_v) * (f_u if dj else 1.0 - f_u)
+                    total += w * x
+                    weights += w
+                    near += x
+                    k += 1
+            if weights > 0.0:
+                row[u] = _degrees(total / weights, floor2)
+            elif k > 0:
+                row[u] = _degrees(near / k, floor2)
+            else:
+                row[u] = no_fit
+
+
+@njit(nogil=True)
 def _spread(has, var, stride, floor2, no_fit, out, v0, v1):
     """Rows v0 .. v1 - 1 of sigma: a fitted pixel's own variance; every other pixel with a normal the mean of those
     of the fitted pixels whose planes it may have taken (with ``stride`` 2: left and right, above and below, or
@@ -358,6 +402,10 @@ def sigma_from_fits(
         normals = np.ascontiguousarray(normals, np.float32)
         bands(lambda a, b: _marks(valid, normals, np.float32(fill), has, a, b), valid.shape[0])
     floor2 = float(FLOOR_DEG if floor is None else floor) ** 2
+    if int(stride) == CELL:
+        cells = (has, variance, floor2, float(NO_FIT_DEG), out)
+        bands(lambda a, b: _spread_cells(*cells, a, b), valid.shape[0])
+        return out
     args = (has, variance, int(stride), floor2, float(NO_FIT_DEG), out)
     bands(lambda a, b: _spread(*args, a, b), valid.shape[0])
     return out

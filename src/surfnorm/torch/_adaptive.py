@@ -59,6 +59,7 @@ from .._constants import (
     _STRIDES_SOLVE,
     _TABLE,
     ALPHA,
+    CELL,
     CLEAN_FLOOR,
     CONSISTENT,
     CONSISTENT_MAX,
@@ -197,7 +198,7 @@ class NoiseTables(NamedTuple):
     geometry: torch.Tensor  # (B,) sensor_noise.geometry_share
     grid: torch.Tensor  # (B,) NoiseProfile.grid
     white_noise: torch.Tensor  # (B,) sensor_noise.white_noise_share
-    stride2: torch.Tensor  # (B,) bool: the default stride is 2 (choose_stride), found once for the profile and the fit
+    stride: torch.Tensor  # (B,) int64: the default stride, 1, 2 or CELL (choose_stride), for the profile and the fit
 
 
 def _samples(z, valid, f, lo, span):
@@ -379,8 +380,8 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
     smooth = torch.where(enough, _sqrt(quiet(xs[1].abs()) * quiet(fourth)) / _SMOOTH_GAUSS, torch.zeros_like(lo))
     # the clipped mean squares per depth bin and stride: of the same samples as the floor on dense depth, of every
     # sample on sparse depth (sensor_noise.noise_profile)
-    stride2 = choose_stride(valid) == 2
-    binned = torch.where((stride2 & (first.sum(dim=1) >= MIN_SAMPLES)).view(-1, 1), first, taken)
+    stride = choose_stride(valid)
+    binned = torch.where(((stride > 1) & (first.sum(dim=1) >= MIN_SAMPLES)).view(-1, 1), first, taken)
     member = (bins.unsqueeze(1) == torch.arange(N_BINS, device=dev).view(1, N_BINS, 1)) & binned.unsqueeze(1)
     # each bin's floor (NoiseProfile.floors): median |x_1| / 0.6745, NaN with fewer than MIN_SAMPLES samples
     floors = torch.stack(
@@ -464,7 +465,7 @@ def noise_tables(z: torch.Tensor, valid: torch.Tensor, f: torch.Tensor, *, windo
         torch.where(torch.isnan(rho_median), 0.0, _ramp(rho_median, GEOMETRY_RHO_LOW, GEOMETRY_RHO_HIGH)),
         _grid(z, valid, f),
         white_noise_share(floor, floor2, rho_median),
-        stride2,
+        stride,
     )
     share = correlated * torch.clamp(noise, 0.0, 1.0) * _reading_weight(reading(tables))
     gain = 1.0 + (CORRELATED_KAPPA_GAIN - 1.0) * share
@@ -753,19 +754,31 @@ def choices(z, valid, cam, *, window=None, max_window: int = MAX_WINDOW) -> tupl
 
 
 def choose_stride(valid: torch.Tensor) -> torch.Tensor:
-    """``_schedule.choose_stride`` per frame of valid (B, H, W): 2 unless more than MAX_UNREACHED of the
-    valid pixels that are not fitted (not on an even row and column) have no valid fitted pixel in their 5x5
-    neighbourhood; (B,) int64."""
+    """``_schedule.choose_stride`` per frame of valid (B, H, W): CELL unless more than MAX_UNREACHED of the valid
+    pixels that are not fitted (not on every CELL-th row and column) have no valid fitted pixel at the corners of
+    their cell; else 2 unless more than MAX_UNREACHED of the valid pixels that are not fitted (not on an even row
+    and column) have no valid fitted pixel in their 5x5 neighbourhood; else 1. (B,) int64."""
     B, H, W = valid.shape
     if H < 2 or W < 2:
         return torch.ones(B, dtype=torch.int64, device=valid.device)
+    # the cells' corners: the fitted pixels, padded by one without depth below and to the right
+    corners = F.pad(valid[:, ::CELL, ::CELL].to(torch.float32), (0, 1, 0, 1))
+    near = F.max_pool2d(corners.unsqueeze(1), 2, stride=1).squeeze(1) > 0.0  # (B, rows, cols): any of its corners
+    reached_cells = near.repeat_interleave(CELL, dim=1).repeat_interleave(CELL, dim=2)[:, :H, :W]
+    on_grid = torch.zeros_like(valid)
+    on_grid[:, ::CELL, ::CELL] = True
+    cell_others = valid & ~on_grid
+    cell_unreached = (cell_others & ~reached_cells).sum(dim=(1, 2)).to(_F64)
+    cell_total = torch.clamp_min(cell_others.sum(dim=(1, 2)), 1).to(_F64)
     fitted = torch.zeros_like(valid)
     fitted[:, ::2, ::2] = valid[:, ::2, ::2]
     reached = F.max_pool2d(fitted.unsqueeze(1).to(torch.float32), 5, stride=1, padding=2).squeeze(1) > 0.0
     others = valid & ~fitted
     unreached = (others & ~reached).sum(dim=(1, 2)).to(_F64)
     total = torch.clamp_min(others.sum(dim=(1, 2)), 1).to(_F64)
-    return torch.where(unreached <= MAX_UNREACHED * total, 2, 1)
+    return torch.where(
+        cell_unreached <= MAX_UNREACHED * cell_total, CELL, torch.where(unreached <= MAX_UNREACHED * total, 2, 1)
+    )
 
 
 def _carried(c, du, dv, w_p):
@@ -878,11 +891,94 @@ def _between(a, g_u, g_v, ok, w, limit, valid, stride2):
     )
 
 
+def _cells(a, g_u, g_v, ok, z, limit, valid, cell, z0):
+    """``_assembly.cell_row`` for the frames where ``cell``: every pixel takes the planes of the fitted pixels at the
+    corners of its CELL x CELL cell (rows v - v % CELL and CELL below, columns likewise; none past the frame): the
+    mean of those of weight above 0 that predict its w within their noise limit, weighted bilinearly by its place in
+    the cell; else the one of weight above 0 that predicts it closest; else the closest of the four. The tests and
+    the choice in single precision, in the NumPy kernel's order of operations (the same decisions); the mean plane
+    in double, inverse depth in units of 1 / ``_assembly.cell_scale`` of each frame's ``z0`` (B,) as there. a, g_u,
+    g_v, limit (B, H, W) float64, z the depth (B, H, W), ok (B, H, W) where a pixel has a plane. Returns (a, g_u,
+    g_v, ok) with every pixel of those frames replaced."""
+    B, H, W = a.shape
+    dev = a.device
+    f32 = torch.float32
+    rows = torch.arange(H, device=dev)
+    cols = torch.arange(W, device=dev)
+    on_grid = ((rows % CELL == 0).view(H, 1) & (cols % CELL == 0).view(1, W)).unsqueeze(0)
+    fitted = ok & on_grid
+    a0, gu0, gv0 = (torch.where(fitted, t, torch.zeros_like(t)) for t in (a, g_u, g_v))  # zeros where no plane
+    z0 = z0.to(_F64)
+    scale = torch.where(z0 > 0.0, torch.ldexp(torch.ones_like(z0), torch.frexp(z0).exponent), 1.0).view(B, 1, 1)
+    planes = [a0, gu0, gv0, *((t * scale).to(f32) for t in (a0, gu0, gv0)), fitted, (limit * (scale * scale)).to(f32)]
+    planes = [F.pad(t.unsqueeze(1), (0, CELL, 0, CELL)).squeeze(1) for t in planes[:6]] + [
+        F.pad(planes[6].unsqueeze(1).to(f32), (0, CELL, 0, CELL)).squeeze(1) > 0.0,
+        F.pad(planes[7].unsqueeze(1), (0, CELL, 0, CELL)).squeeze(1),
+    ]
+    r0 = rows - rows % CELL
+    c0 = cols - cols % CELL
+    s = torch.tensor(float(CELL), dtype=f32, device=dev)
+    one = torch.ones((), dtype=f32, device=dev)
+    zero = torch.zeros((), dtype=f32, device=dev)
+    inf = torch.full((), math.inf, dtype=f32, device=dev)
+    dv = (rows % CELL).to(f32).view(1, H, 1)
+    du = (cols % CELL).to(f32).view(1, 1, W)
+    f_v = dv * (1.0 / CELL)
+    f_u = du * (1.0 / CELL)
+    w_p = one / (z * (1.0 / scale)).to(f32)
+    corners = []
+    for dr, dc, weight in (
+        (0, 0, (one - f_u) * (one - f_v)),
+        (0, CELL, f_u * (one - f_v)),
+        (CELL, 0, (one - f_u) * f_v),
+        (CELL, CELL, f_u * f_v),
+    ):
+        a64, gu64, gv64, a32, gu32, gv32, has, lim = (t[:, r0 + dr][:, :, c0 + dc] for t in planes)
+        du_k, dv_k = du - (s if dc else zero), dv - (s if dr else zero)
+        p32 = a32 + gu32 * du_k + gv32 * dv_k
+        e = torch.where(has, (p32 - w_p) * (p32 - w_p), inf)
+        lim = torch.where(has, lim, -one)
+        p64 = a64 + gu64 * du_k.to(_F64) + gv64 * dv_k.to(_F64)
+        corners.append((weight.expand(B, H, W), e, lim, p64, gu64, gv64))
+    k = [torch.where((w > 0.0) & (e <= lim), w, zero) for w, e, lim, _, _, _ in corners]
+    total = k[0] + k[1] + k[2] + k[3]
+    tie = torch.tensor(1.0 - TIE, dtype=f32, device=dev)
+
+    def closest(keys):
+        best, pick = keys[0], torch.zeros_like(total, dtype=torch.int64)
+        for j in range(1, 4):
+            c = keys[j] < best * tie
+            best, pick = torch.where(c, keys[j], best), torch.where(c, j, pick)
+        return best, pick
+
+    best, pick = closest([torch.where(w > 0.0, e, inf) for w, e, _, _, _, _ in corners])
+    any_best, any_pick = closest([e for _, e, _, _, _, _ in corners])
+    pick = torch.where(best < inf, pick, any_pick)
+    found = any_best < inf
+    mean = total > 0.0
+    inv = 1.0 / torch.where(mean, total, one).to(_F64)
+    out = []
+    for j in (3, 4, 5):  # a, g_u, g_v
+        m = (k[0].to(_F64) * corners[0][j] + k[1].to(_F64) * corners[1][j]) + (
+            k[2].to(_F64) * corners[2][j] + k[3].to(_F64) * corners[3][j]
+        )
+        near = torch.stack([c[j] for c in corners]).gather(0, pick.unsqueeze(0)).squeeze(0)
+        out.append(torch.where(mean, m * inv, near))
+    c4 = cell.view(B, 1, 1)
+    return (
+        torch.where(c4, out[0], a),
+        torch.where(c4, out[1], g_u),
+        torch.where(c4, out[2], g_v),
+        torch.where(c4, valid & found, ok),
+    )
+
+
 def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fill: float, out_dtype, stride=None):
     """The normals (B, 3, H, W) of the frames z (B, H, W) float64 (invalid: 1) with their tables.
 
     ``stride`` 2: the pixels that are not on an even row and column take their planes from those that are
-    (:func:`_between`); None: per frame, as the tables found it (``stride2``, :func:`choose_stride` of the same
+    (:func:`_between`); CELL: every pixel from the corners of its cell (:func:`_cells`); None: per frame, as the
+    tables found it (``stride``, :func:`choose_stride` of the same
     ``valid``). Every pixel is fitted all the same (the work is done for all pixels at once)."""
     B, H, W = z.shape
     fx, fy, cx, cy = (c.reshape(B) for c in cam)
@@ -892,12 +988,19 @@ def _normals(z, valid, cam, tables: NoiseTables, *, window, max_window: int, fil
     else:
         a, g_u, g_v = choice.a, choice.g_u, choice.g_v
     ok = (choice.dof > 0.0) & valid.reshape(-1)
-    stride2 = tables.stride2 if stride is None else torch.full((B,), stride == 2, device=z.device)
-    # (on the CPU, skipped where no frame has stride 2; elsewhere not asked: no host synchronisation)
-    if H > 1 and (z.device.type != "cpu" or bool(stride2.any())):
+    strides = tables.stride if stride is None else torch.full((B,), stride, device=z.device)
+    stride2, cell = strides == 2, strides == CELL
+    # (on the CPU, skipped where no frame has that stride; elsewhere not asked: no host synchronisation)
+    on_cpu = z.device.type == "cpu"
+    if H > 1 and (not on_cpu or bool(stride2.any())):
         a3, gu3, gv3, ok3 = (t.view(B, H, W) for t in (a, g_u, g_v, ok))
         w3, lim3 = torch.reciprocal(z_p).view(B, H, W), limit.view(B, H, W)
         a3, gu3, gv3, ok3 = _between(a3, gu3, gv3, ok3, w3, lim3, valid, stride2)
+        a, g_u, g_v, ok = a3.reshape(-1), gu3.reshape(-1), gv3.reshape(-1), ok3.reshape(-1)
+        ok = ok & valid.reshape(-1)
+    if H > 1 and (not on_cpu or bool(cell.any())):
+        a3, gu3, gv3, ok3 = (t.view(B, H, W) for t in (a, g_u, g_v, ok))
+        a3, gu3, gv3, ok3 = _cells(a3, gu3, gv3, ok3, z_p.view(B, H, W), limit.view(B, H, W), valid, cell, tables.z0)
         a, g_u, g_v, ok = a3.reshape(-1), gu3.reshape(-1), gv3.reshape(-1), ok3.reshape(-1)
         ok = ok & valid.reshape(-1)
     a = torch.where(a > 0.0, a, torch.reciprocal(z_p))  # a fit that passes behind the camera: the pixel's own w
@@ -1189,7 +1292,7 @@ def blend(a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, fill: float) -> tor
     return torch.where(have_a | have_b, m, torch.full_like(m, fill))
 
 
-def auto(g: Grid, cam, *, tau: float, fill: float):
+def auto(g: Grid, cam, *, tau: float, fill: float, stride=None):
     """``surfnorm.kernels.auto``: per frame, ``d2nt_v3`` where ``adaptive_fit``'s weight (:func:`adaptive_weight`: from
     the noise reading, CLEAN_FLOOR to NOISY_FLOOR, or the grid's or the white noise's share) is 0, ``adaptive_fit``
     where it is 1, their blend between, and ``adaptive_fit`` with windows of at least
@@ -1227,13 +1330,29 @@ def auto(g: Grid, cam, *, tau: float, fill: float):
 
     def fit(grid, z_f, c, tab, fill_value):
         return _normals(
-            z_f, grid.valid, c, tab, window=None, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
+            z_f,
+            grid.valid,
+            c,
+            tab,
+            window=None,
+            max_window=MAX_WINDOW,
+            fill=fill_value,
+            out_dtype=grid.z.dtype,
+            stride=stride,
         )
 
     def fit_upsampled(grid, z_f, c, tab, window, fill_value):
         tab = tab._replace(radius=torch.full_like(tab.radius, (window - 1) // 2))
         return _normals(
-            z_f, grid.valid, c, tab, window=window, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype
+            z_f,
+            grid.valid,
+            c,
+            tab,
+            window=window,
+            max_window=MAX_WINDOW,
+            fill=fill_value,
+            out_dtype=grid.z.dtype,
+            stride=stride,
         )
 
     checked = consistency_limits(tables)[0] & (t > 0.0) & ~upsampled

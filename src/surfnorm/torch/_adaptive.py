@@ -1328,32 +1328,13 @@ def auto(g: Grid, cam, *, tau: float, fill: float, stride=None):
         n = _ops.d2nt_dag(grid, c, dlf="1d", tau=tau, truncate=True, fill=fill_value)
         return _ops.mnr(grid, n, dlf="alpha", fill=fill_value)
 
-    def fit(grid, z_f, c, tab, fill_value):
-        return _normals(
-            z_f,
-            grid.valid,
-            c,
-            tab,
-            window=None,
-            max_window=MAX_WINDOW,
-            fill=fill_value,
-            out_dtype=grid.z.dtype,
-            stride=stride,
-        )
+    def fit(grid, z_f, c, tab, fill_value, window=None):
+        opts = dict(window=window, max_window=MAX_WINDOW, fill=fill_value, out_dtype=grid.z.dtype, stride=stride)
+        return _normals(z_f, grid.valid, c, tab, **opts)
 
     def fit_upsampled(grid, z_f, c, tab, window, fill_value):
         tab = tab._replace(radius=torch.full_like(tab.radius, (window - 1) // 2))
-        return _normals(
-            z_f,
-            grid.valid,
-            c,
-            tab,
-            window=window,
-            max_window=MAX_WINDOW,
-            fill=fill_value,
-            out_dtype=grid.z.dtype,
-            stride=stride,
-        )
+        return fit(grid, z_f, c, tab, fill_value, window)
 
     checked = consistency_limits(tables)[0] & (t > 0.0) & ~upsampled
     if g.z.device.type != "cpu" or not _GATHER_ON_CPU:
